@@ -1,0 +1,40 @@
+"""One exception hierarchy for reflexarm.
+
+Every error a user can see derives from :class:`ReflexArmError`. Messages name the value received,
+the value expected and, where there is a finite set, the valid choices.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "ConfigError",
+    "DataError",
+    "IdentificationError",
+    "ModelError",
+    "ReflexArmError",
+    "SimulationError",
+]
+
+
+class ReflexArmError(Exception):
+    """Base class of every error raised by reflexarm."""
+
+
+class ModelError(ReflexArmError):
+    """A robot description cannot be loaded or does not fit (unknown robot, malformed file, missing frame)."""
+
+
+class ConfigError(ReflexArmError, ValueError):
+    """A parameter has the wrong shape, sign or value (gains, switches, levels, addresses)."""
+
+
+class DataError(ReflexArmError, ValueError):
+    """A log or time series is malformed (missing columns, NaN/inf, time going backwards)."""
+
+
+class IdentificationError(ReflexArmError):
+    """An identification problem cannot be solved as posed."""
+
+
+class SimulationError(ReflexArmError):
+    """The simulated plant failed (diverged, unknown scene, bad scene parameters)."""

@@ -1,0 +1,370 @@
+"""RobotModel: what the controller *knows* about an arm, eq. (1), over Pinocchio."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+import pinocchio as pin
+
+from reflexarm.errors import ModelError
+from reflexarm.robots.friction import CoulombViscousFriction
+
+__all__ = ["RobotModel", "builtin_robots", "load_robot"]
+
+ASSETS = Path(__file__).resolve().parent / "assets"
+
+#: Inertial parameters per link, in Pinocchio's order (about the joint frame origin):
+#: m, m*c_x, m*c_y, m*c_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz.
+INERTIAL_PARAMETER_NAMES = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
+
+
+@dataclass(frozen=True)
+class BuiltinRobot:
+    """A robot shipped with reflexarm."""
+
+    name: str
+    file: str
+    ee_frame: str
+    sensor_frame: str
+    home: tuple[float, ...]
+    description: str
+
+    @property
+    def path(self) -> Path:
+        return ASSETS / self.file
+
+
+_BUILTINS: dict[str, BuiltinRobot] = {
+    "atlas_v5_left_arm": BuiltinRobot(
+        name="atlas_v5_left_arm",
+        file="atlas_v5_left_arm.xml",
+        ee_frame="ee",
+        sensor_frame="wrist_ft",
+        home=(-0.3, -1.1, 1.6, 1.2, 0.0, 0.2, 0.0),
+        description="Atlas v5 left arm (4 hydraulic + 3 electric joints), torso fixed upright, "
+        "true friction from Table I of the paper",
+    ),
+    "panda": BuiltinRobot(
+        name="panda",
+        file="panda.xml",
+        ee_frame="ee",
+        sensor_frame="wrist_ft",
+        home=(0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785),
+        description="Franka Emika Panda (no hand), kinematics of the Franka description, "
+        "inertial values of Gaz et al. 2019",
+    ),
+}
+
+
+def builtin_robots() -> dict[str, BuiltinRobot]:
+    """The robots shipped with reflexarm, by name."""
+    return dict(_BUILTINS)
+
+
+def load_robot(
+    name_or_path: str | os.PathLike[str],
+    *,
+    ee_frame: str | None = None,
+    sensor_frame: str | None = None,
+    friction: CoulombViscousFriction | None = None,
+) -> RobotModel:
+    """Load a built-in robot by name, or a user's URDF/MJCF file by path.
+
+    Args:
+        name_or_path: a name from :func:`builtin_robots` or a path to a ``.urdf`` or ``.xml`` (MJCF) file.
+        ee_frame: end-effector frame (required for user files; built-ins default to ``"ee"``).
+        sensor_frame: wrist force/torque sensor frame; defaults to ``ee_frame``.
+        friction: the model's friction; defaults to the file's joint ``frictionloss``/``damping``
+            (MJCF) or ``<dynamics friction damping>`` (URDF).
+
+    Raises:
+        ModelError: unknown robot name, unreadable or malformed file, missing frame, non-serial arm.
+    """
+    key = str(name_or_path)
+    if key in _BUILTINS:
+        b = _BUILTINS[key]
+        return RobotModel.from_file(
+            b.path,
+            ee_frame=ee_frame or b.ee_frame,
+            sensor_frame=sensor_frame or b.sensor_frame,
+            friction=friction,
+            name=b.name,
+            home=b.home,
+        )
+    path = Path(key)
+    if path.suffix.lower() not in (".urdf", ".xml", ".mjcf") and not path.exists():
+        raise ModelError(
+            f"unknown robot {key!r}; built-in robots are: {', '.join(sorted(_BUILTINS))} "
+            "(or give a path to a .urdf or MJCF .xml file)"
+        )
+    if ee_frame is None:
+        raise ModelError(f"loading {key!r}: name the end-effector frame (ee_frame=...)")
+    return RobotModel.from_file(path, ee_frame=ee_frame, sensor_frame=sensor_frame, friction=friction)
+
+
+def _build_pinocchio_model(path: Path) -> pin.Model:
+    if not path.is_file():
+        raise ModelError(f"robot file {str(path)!r} does not exist")
+    suffix = path.suffix.lower()
+    try:
+        if suffix == ".urdf":
+            return pin.buildModelFromUrdf(str(path))
+        if suffix in (".xml", ".mjcf"):
+            return pin.buildModelFromMJCF(str(path))
+    except Exception as e:  # pinocchio raises RuntimeError/ValueError/IndexError with terse text
+        raise ModelError(f"cannot parse robot file {str(path)!r}: {e}") from e
+    raise ModelError(f"robot file {str(path)!r}: unknown format {suffix!r}; use .urdf or MJCF .xml")
+
+
+class RobotModel:
+    """Rigid-joint arm model (1): M(q), C(q, dq), g(q), frame Jacobians, friction tau_f(dq), regressor.
+
+    A fixed-base serial chain of 1-DoF (revolute or prismatic) joints. The joint order is the model's.
+    All quantities are SI. The object owns its Pinocchio model and data; use :meth:`copy` for a second
+    independent instance (e.g. for another thread).
+    """
+
+    def __init__(
+        self,
+        model: pin.Model,
+        *,
+        ee_frame: str,
+        sensor_frame: str | None = None,
+        friction: CoulombViscousFriction | None = None,
+        name: str = "",
+        source: Path | None = None,
+        home: npt.ArrayLike | None = None,
+    ) -> None:
+        where = f" in {str(source)!r}" if source else ""
+        if model.nq != model.nv:
+            raise ModelError(
+                f"robot{where} has nq={model.nq} != nv={model.nv}: only fixed-base arms with 1-DoF "
+                "joints are supported (remove the free/ball joints)"
+            )
+        if model.nv == 0:
+            raise ModelError(f"robot{where} has no joints")
+        for j in range(1, model.njoints):
+            if model.nvs[j] != 1:
+                raise ModelError(
+                    f"joint {model.names[j]!r}{where} has {model.nvs[j]} DoF; only 1-DoF joints are supported"
+                )
+            if model.parents[j] != j - 1:
+                raise ModelError(
+                    f"robot{where} is not a serial chain: joint {model.names[j]!r} hangs off "
+                    f"{model.names[model.parents[j]]!r}"
+                )
+        self._model = model
+        self._data = model.createData()
+        self.name = name or model.name
+        self.source = source
+        frames = [f.name for f in model.frames]
+        self.ee_frame = ee_frame
+        self.sensor_frame = sensor_frame or ee_frame
+        for label, f in (("end-effector", self.ee_frame), ("sensor", self.sensor_frame)):
+            if not model.existFrame(f):
+                raise ModelError(f"unknown {label} frame {f!r}{where}; frames are: {', '.join(frames)}")
+        self.ee_frame_id = model.getFrameId(self.ee_frame)
+        self.sensor_frame_id = model.getFrameId(self.sensor_frame)
+        n = model.nv
+        if friction is None:
+            friction = CoulombViscousFriction(
+                np.maximum(np.asarray(model.friction, dtype=float), 0.0),
+                np.maximum(np.asarray(model.damping, dtype=float), 0.0),
+            )
+        if friction.n != n:
+            raise ModelError(f"friction model has {friction.n} joints; robot{where} has {n}")
+        self.friction = friction
+        self.home = np.zeros(n) if home is None else np.asarray(home, dtype=float).copy()
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_file(
+        cls,
+        path: str | os.PathLike[str],
+        *,
+        ee_frame: str,
+        sensor_frame: str | None = None,
+        friction: CoulombViscousFriction | None = None,
+        name: str = "",
+        home: npt.ArrayLike | None = None,
+    ) -> RobotModel:
+        """Load a URDF or MJCF file (see :func:`load_robot`)."""
+        p = Path(path)
+        return cls(
+            _build_pinocchio_model(p),
+            ee_frame=ee_frame,
+            sensor_frame=sensor_frame,
+            friction=friction,
+            name=name or p.stem,
+            source=p,
+            home=home,
+        )
+
+    def copy(self) -> RobotModel:
+        """An independent copy (own Pinocchio model and data)."""
+        return RobotModel(
+            self._model.copy(),
+            ee_frame=self.ee_frame,
+            sensor_frame=self.sensor_frame,
+            friction=self.friction,
+            name=self.name,
+            source=self.source,
+            home=self.home,
+        )
+
+    def with_friction(self, friction: CoulombViscousFriction) -> RobotModel:
+        """A copy with another friction model."""
+        out = self.copy()
+        if friction.n != self.n:
+            raise ModelError(f"friction model has {friction.n} joints; robot has {self.n}")
+        out.friction = friction
+        return out
+
+    def with_inertial_parameters(self, parameters: npt.ArrayLike) -> RobotModel:
+        """A copy whose link inertias are set from a (10 n,) vector (see :meth:`inertial_parameters`)."""
+        pi = np.asarray(parameters, dtype=float).reshape(-1)
+        if pi.size != 10 * self.n:
+            raise ModelError(f"expected {10 * self.n} inertial parameters (10 per joint); got {pi.size}")
+        out = self.copy()
+        for j in range(1, self._model.njoints):
+            out._model.inertias[j] = pin.Inertia.FromDynamicParameters(pi[10 * (j - 1) : 10 * j])
+        out._data = out._model.createData()
+        return out
+
+    # ------------------------------------------------------------------ facts
+    @property
+    def pin_model(self) -> pin.Model:
+        """The underlying Pinocchio model (do not modify in place; use the ``with_*`` methods)."""
+        return self._model
+
+    @property
+    def n(self) -> int:
+        """Number of joints n_j."""
+        return int(self._model.nv)
+
+    @property
+    def joint_names(self) -> list[str]:
+        return list(self._model.names)[1:]
+
+    @property
+    def frame_names(self) -> list[str]:
+        return [f.name for f in self._model.frames]
+
+    @property
+    def lower_limit(self) -> np.ndarray:
+        """Joint position lower limits [rad]."""
+        return np.asarray(self._model.lowerPositionLimit, dtype=float).copy()
+
+    @property
+    def upper_limit(self) -> np.ndarray:
+        """Joint position upper limits [rad]."""
+        return np.asarray(self._model.upperPositionLimit, dtype=float).copy()
+
+    @property
+    def velocity_limit(self) -> np.ndarray:
+        """Joint velocity limits [rad/s]."""
+        return np.asarray(self._model.velocityLimit, dtype=float).copy()
+
+    @property
+    def effort_limit(self) -> np.ndarray:
+        """Joint torque limits [Nm]."""
+        return np.asarray(self._model.effortLimit, dtype=float).copy()
+
+    @property
+    def gravity(self) -> np.ndarray:
+        """Gravity vector in the base frame [m/s^2]."""
+        return np.asarray(self._model.gravity.linear, dtype=float).copy()
+
+    @gravity.setter
+    def gravity(self, value: npt.ArrayLike) -> None:
+        g = np.asarray(value, dtype=float)
+        if g.shape != (3,) or not np.all(np.isfinite(g)):
+            raise ModelError(f"gravity must be a finite 3-vector; got {value!r}")
+        self._model.gravity.linear = g
+
+    def frame_id(self, frame: str) -> int:
+        """Index of a named frame; raises :class:`ModelError` listing the frames if unknown."""
+        if not self._model.existFrame(frame):
+            raise ModelError(f"unknown frame {frame!r}; frames are: {', '.join(self.frame_names)}")
+        return int(self._model.getFrameId(frame))
+
+    # ------------------------------------------------------------------ dynamics (1)
+    def _check_q(self, q: npt.ArrayLike, name: str = "q") -> np.ndarray:
+        arr = np.asarray(q, dtype=float)
+        if arr.shape != (self.n,):
+            raise ModelError(f"{name} must have shape ({self.n},); got {arr.shape}")
+        return arr
+
+    def compute_mass_matrix(self, q: npt.ArrayLike) -> np.ndarray:
+        """M(q), symmetric positive definite (n, n) [kg m^2]."""
+        M = pin.crba(self._model, self._data, self._check_q(q))
+        return np.triu(M) + np.triu(M, 1).T
+
+    def compute_coriolis_matrix(self, q: npt.ArrayLike, dq: npt.ArrayLike) -> np.ndarray:
+        """C(q, dq) with M_dot - 2 C skew-symmetric (n, n)."""
+        return np.array(pin.computeCoriolisMatrix(self._model, self._data, self._check_q(q), self._check_q(dq, "dq")))
+
+    def compute_gravity(self, q: npt.ArrayLike) -> np.ndarray:
+        """g(q) [Nm]."""
+        return np.array(pin.computeGeneralizedGravity(self._model, self._data, self._check_q(q)))
+
+    def compute_nonlinear_effects(self, q: npt.ArrayLike, dq: npt.ArrayLike) -> np.ndarray:
+        """C(q, dq) dq + g(q) [Nm]."""
+        return np.array(pin.nonLinearEffects(self._model, self._data, self._check_q(q), self._check_q(dq, "dq")))
+
+    def compute_inverse_dynamics(self, q: npt.ArrayLike, dq: npt.ArrayLike, ddq: npt.ArrayLike) -> np.ndarray:
+        """M ddq + C dq + g (rigid body only, no friction) [Nm]."""
+        return np.array(
+            pin.rnea(self._model, self._data, self._check_q(q), self._check_q(dq, "dq"), self._check_q(ddq, "ddq"))
+        )
+
+    def compute_motor_torque(self, q: npt.ArrayLike, dq: npt.ArrayLike, ddq: npt.ArrayLike) -> np.ndarray:
+        """tau_m of (1) with tau_ext = 0: M ddq + C dq + g + tau_f(dq) [Nm]."""
+        return self.compute_inverse_dynamics(q, dq, ddq) + self.friction.compute_torque(dq)
+
+    def compute_frame_jacobian(
+        self, q: npt.ArrayLike, frame: str | None = None, *, world_aligned: bool = False
+    ) -> np.ndarray:
+        """6 x n Jacobian (linear; angular) of ``frame`` (default: the sensor frame).
+
+        With ``world_aligned=False`` the twist is expressed in the frame itself (LOCAL), so that
+        ``J.T @ wrench`` maps a wrench measured in that frame, about its origin, to joint torques.
+        """
+        fid = self.sensor_frame_id if frame is None else self.frame_id(frame)
+        ref = pin.LOCAL_WORLD_ALIGNED if world_aligned else pin.LOCAL
+        return np.array(pin.computeFrameJacobian(self._model, self._data, self._check_q(q), fid, ref))
+
+    def compute_frame_pose(self, q: npt.ArrayLike, frame: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(R, p) of ``frame`` (default: the end effector) in the base frame."""
+        fid = self.ee_frame_id if frame is None else self.frame_id(frame)
+        pin.framesForwardKinematics(self._model, self._data, self._check_q(q))
+        M = self._data.oMf[fid]
+        return np.array(M.rotation), np.array(M.translation)
+
+    # ------------------------------------------------------------------ parameters / regressor
+    def inertial_parameters(self) -> np.ndarray:
+        """The 10 n inertial parameters (see ``INERTIAL_PARAMETER_NAMES``), link by link."""
+        return np.concatenate(
+            [np.asarray(self._model.inertias[j].toDynamicParameters()) for j in range(1, self._model.njoints)]
+        )
+
+    def inertial_parameter_names(self) -> list[str]:
+        return [f"{p}_{j}" for j in self.joint_names for p in INERTIAL_PARAMETER_NAMES]
+
+    def compute_regressor(self, q: npt.ArrayLike, dq: npt.ArrayLike, ddq: npt.ArrayLike) -> np.ndarray:
+        """Joint-torque regressor Y(q, dq, ddq), (n, 10 n): ``Y @ inertial_parameters() == rnea``."""
+        return np.array(
+            pin.computeJointTorqueRegressor(
+                self._model, self._data, self._check_q(q), self._check_q(dq, "dq"), self._check_q(ddq, "ddq")
+            )
+        )
+
+    def __repr__(self) -> str:
+        return (
+            f"RobotModel({self.name!r}, n={self.n}, ee_frame={self.ee_frame!r}, "
+            f"sensor_frame={self.sensor_frame!r})"
+        )

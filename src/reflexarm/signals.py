@@ -1,0 +1,68 @@
+"""The data that crosses the control boundary each tick: Measurement in, Reference in, Command out.
+
+These are the contract between a robot (real, or the simulated plant in :mod:`reflexarm.sim`) and the
+:class:`reflexarm.control.Controller`. Arrays are float64, SI units, the model's joint order.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+__all__ = ["Command", "Measurement", "Reference"]
+
+
+class Measurement(NamedTuple):
+    """What a torque-controlled arm reports each tick.
+
+    Attributes:
+        t: time [s].
+        q: joint positions (n,) [rad].
+        dq: joint velocities (n,) [rad/s].
+        tau_m: measured actuator (motor) torques (n,) [Nm].
+        wrench: load-compensated wrist wrench (f_x, f_y, f_z, m_x, m_y, m_z) acting on the arm beyond the
+            sensor, in the sensor frame, about its origin (6,) [N, Nm]; zeros if there is no sensor.
+        gravity: gravity vector in the base frame (3,) [m/s^2].
+    """
+
+    t: float
+    q: np.ndarray
+    dq: np.ndarray
+    tau_m: np.ndarray
+    wrench: np.ndarray
+    gravity: np.ndarray
+
+
+class Reference(NamedTuple):
+    """Desired joint trajectory sample: q_d [rad], dq_d [rad/s], ddq_d [rad/s^2], each (n,)."""
+
+    q_d: np.ndarray
+    dq_d: np.ndarray
+    ddq_d: np.ndarray
+
+    @classmethod
+    def hold(cls, q_d: np.ndarray) -> Reference:
+        """Hold a position (zero velocity and acceleration)."""
+        q = np.asarray(q_d, dtype=float)
+        return cls(q, np.zeros_like(q), np.zeros_like(q))
+
+
+class Command(NamedTuple):
+    """What :meth:`Controller.step` returns.
+
+    Attributes:
+        tau: commanded motor torque tau_d (n,) [Nm]; always finite.
+        residual: observer output tau_eps_hat (n,) [Nm] (before the compensation cut-off).
+        collision: True once a collision has been detected (latched until ``reset``).
+        collided_joints: indices of joints whose |residual| exceeded the threshold this tick.
+        mode: active control mode name (see :mod:`reflexarm.control.modes`).
+        fault: non-empty when the measurement was unusable (NaN/inf) and a safe command was sent.
+    """
+
+    tau: np.ndarray
+    residual: np.ndarray
+    collision: bool
+    collided_joints: tuple[int, ...]
+    mode: str
+    fault: str
