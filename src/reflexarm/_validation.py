@@ -32,9 +32,7 @@ def as_vector(
             raise ConfigError(f"{name} must be diagonal; got a full {n}x{n} matrix")
         arr = np.diag(arr).copy()
     if arr.shape != (n,):
-        raise ConfigError(
-            f"{name} must have shape ({n},) (one value per joint) or be a scalar; got shape {arr.shape}"
-        )
+        raise ConfigError(f"{name} must have shape ({n},) (one value per joint) or be a scalar; got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise ConfigError(f"{name} must be finite; got {arr.tolist()}")
     if positive and np.any(arr <= 0.0):

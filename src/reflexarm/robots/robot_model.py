@@ -364,7 +364,4 @@ class RobotModel:
         )
 
     def __repr__(self) -> str:
-        return (
-            f"RobotModel({self.name!r}, n={self.n}, ee_frame={self.ee_frame!r}, "
-            f"sensor_frame={self.sensor_frame!r})"
-        )
+        return f"RobotModel({self.name!r}, n={self.n}, ee_frame={self.ee_frame!r}, sensor_frame={self.sensor_frame!r})"

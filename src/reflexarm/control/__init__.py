@@ -1,0 +1,20 @@
+"""The real-time part: impedance control (2), momentum observer (4)-(6), collision detection (12),
+reaction (13) and the composed :class:`Controller`. Never imports :mod:`reflexarm.sim`."""
+
+from reflexarm.control.collision import CollisionDetector
+from reflexarm.control.controller import MODES, REACTIONS, Controller
+from reflexarm.control.impedance import ImpedanceGains, JointImpedanceController, modal_damping
+from reflexarm.control.momentum_observer import MomentumObserver
+from reflexarm.control.observer import DisturbanceObserver
+
+__all__ = [
+    "MODES",
+    "REACTIONS",
+    "CollisionDetector",
+    "Controller",
+    "DisturbanceObserver",
+    "ImpedanceGains",
+    "JointImpedanceController",
+    "MomentumObserver",
+    "modal_damping",
+]
