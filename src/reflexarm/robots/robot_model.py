@@ -114,10 +114,65 @@ def _build_pinocchio_model(path: Path) -> pin.Model:
         if suffix == ".urdf":
             return pin.buildModelFromUrdf(str(path))
         if suffix in (".xml", ".mjcf"):
-            return pin.buildModelFromMJCF(str(path))
+            model = pin.buildModelFromMJCF(str(path))
     except Exception as e:  # pinocchio raises RuntimeError/ValueError/IndexError with terse text
         raise ModelError(f"cannot parse robot file {str(path)!r}: {e}") from e
+    if suffix in (".xml", ".mjcf"):
+        _align_mjcf_root(model, path)
+        return model
     raise ModelError(f"robot file {str(path)!r}: unknown format {suffix!r}; use .urdf or MJCF .xml")
+
+
+def _align_mjcf_root(model: pin.Model, path: Path) -> None:
+    """Restore the placement of a fixed (joint-less) root body that Pinocchio's MJCF parser drops.
+
+    ``pin.buildModelFromMJCF`` ignores ``pos``/``quat`` of a joint-less body directly under
+    ``<worldbody>``: a torso mounted at a height or tilted would silently get wrong frame poses and,
+    if rotated, wrong gravity torques. MuJoCo compiles the same file (resolving defaults, angle units
+    and every orientation syntax); its world pose of the first moving body is the reference. The
+    correction is applied to the first joint and every frame attached to the universe, then all body
+    frames are checked against MuJoCo at q = 0.
+    """
+    import mujoco  # local: only needed for MJCF files
+
+    try:
+        mj = mujoco.MjModel.from_xml_path(str(path))
+    except Exception as e:
+        raise ModelError(f"cannot parse robot file {str(path)!r}: {e}") from e
+    mj_data = mujoco.MjData(mj)
+    mujoco.mj_kinematics(mj, mj_data)
+    data = model.createData()
+    q0 = pin.neutral(model)
+    pin.framesForwardKinematics(model, data, q0)
+
+    def mj_pose(name: str) -> pin.SE3 | None:
+        bid = mujoco.mj_name2id(mj, mujoco.mjtObj.mjOBJ_BODY, name)
+        if bid < 0:
+            return None
+        return pin.SE3(mj_data.xmat[bid].reshape(3, 3).copy(), mj_data.xpos[bid].copy())
+
+    if model.njoints > 1:
+        first_body = next((f for f in model.frames if f.type == pin.FrameType.BODY and f.parentJoint == 1), None)
+        ref = mj_pose(first_body.name) if first_body is not None else None
+        if ref is not None:
+            fid = model.getFrameId(first_body.name)
+            correction = ref * data.oMf[fid].inverse()
+            if not correction.isIdentity(1e-12):
+                model.jointPlacements[1] = correction * model.jointPlacements[1]
+                for f in model.frames:
+                    if f.parentJoint == 0 and f.name != "universe":
+                        f.placement = correction * f.placement
+                data = model.createData()
+                pin.framesForwardKinematics(model, data, q0)
+    for i, f in enumerate(model.frames):
+        if f.type != pin.FrameType.BODY:
+            continue
+        ref = mj_pose(f.name)
+        if ref is not None and not ref.isApprox(data.oMf[i], 1e-9):
+            raise ModelError(
+                f"robot file {str(path)!r}: Pinocchio and MuJoCo place body {f.name!r} differently "
+                f"({data.oMf[i].translation.tolist()} vs {ref.translation.tolist()}); unsupported MJCF construct"
+            )
 
 
 class RobotModel:
