@@ -202,7 +202,11 @@ def test_observer_equals_obvious_implementation():
 
 def measurement(robot, **over):
     base = dict(
-        t=0.0, q=robot.home.copy(), dq=np.zeros(robot.n), tau_m=np.zeros(robot.n), wrench=np.zeros(6),
+        t=0.0,
+        q=robot.home.copy(),
+        dq=np.zeros(robot.n),
+        tau_m=np.zeros(robot.n),
+        wrench=np.zeros(6),
         gravity=np.array([0.0, 0.0, -9.81]),
     )
     base.update(over)
@@ -282,3 +286,43 @@ def test_impedance_alone_matches_composed_controller(atlas):
         ctrl.reset()
         b = ctrl.step(measurement(atlas, q=q, dq=dq), ref).tau
         np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-10)
+
+
+@pytest.mark.parametrize("kappa_f, kappa_ext", [(0, 0), (1, 0), (0, 1), (1, 1)])
+def test_compiled_tick_matches_numpy_reference(atlas, kappa_f, kappa_ext):
+    # the fused compiled tick against the readable pieces: MomentumObserver + JointImpedanceController
+    rng = np.random.default_rng(11)
+    kw = dict(stiffness=250, damping_ratio=0.6)
+    ctrl = Controller(
+        atlas,
+        **kw,
+        observer_gain=8,
+        threshold=None,
+        kappa_f=kappa_f,
+        kappa_ext=kappa_ext,
+        kappa_eps=1,
+        switch_time=0.0,
+        damping_update_period=1,
+        residual_limit=0.5,
+    )
+    imp = JointImpedanceController(atlas, **kw, kappa_f=kappa_f, damping_update_period=1)
+    obs = MomentumObserver(atlas.n, 8, 1e-3)
+    for k in range(20):
+        q = atlas.home + rng.normal(scale=0.2, size=atlas.n)
+        dq = rng.normal(size=atlas.n) * 0.05  # partly inside the friction velocity band
+        m = measurement(
+            atlas, t=k * 1e-3, q=q, dq=dq, tau_m=rng.normal(scale=5, size=atlas.n), wrench=rng.normal(scale=3, size=6)
+        )
+        ref = Reference(atlas.home, rng.normal(size=atlas.n), rng.normal(size=atlas.n))
+        p = atlas.compute_mass_matrix(q) @ dq
+        gamma = atlas.compute_gravity(q) - atlas.compute_coriolis_matrix(q, dq).T @ dq
+        alpha = kappa_f * atlas.friction.compute_torque(dq) - kappa_ext * atlas.compute_frame_jacobian(q).T @ m.wrench
+        if k == 0:
+            obs.reset(p)
+            r = np.zeros(atlas.n)
+        else:
+            r = obs.compute_residual(p, m.tau_m, gamma, alpha).copy()
+        cmd = ctrl.step(m, ref)
+        np.testing.assert_allclose(cmd.residual, r, rtol=1e-9, atol=1e-9)
+        expected = imp.compute_torque(q, dq, ref, disturbance=np.clip(r, -0.5, 0.5))
+        np.testing.assert_allclose(cmd.tau, expected, rtol=1e-9, atol=1e-9)

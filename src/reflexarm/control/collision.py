@@ -40,10 +40,13 @@ class CollisionDetector:
         joints = tuple(
             i for i, (r, z) in enumerate(zip(residual.tolist(), self._threshold_list, strict=True)) if r > z or -r > z
         )
-        if not joints:
-            return ()
+        if joints:
+            self.record(joints, t)
+        return joints
+
+    def record(self, joints: tuple[int, ...], t: float) -> None:
+        """Register a threshold crossing of ``joints`` at time ``t`` (latches the detection)."""
         if not self.detected:
             self.detected = True
             self.first_time = float(t)
             self.first_joints = joints
-        return joints

@@ -13,6 +13,7 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from reflexarm._validation import as_positive_scalar, as_switch
+from reflexarm.control import _kernels as _k
 from reflexarm.control.collision import CollisionDetector
 from reflexarm.control.impedance import JointImpedanceController
 from reflexarm.control.momentum_observer import MomentumObserver
@@ -115,18 +116,35 @@ class Controller:
         self._model0 = model.copy()
         self._model0.gravity.linear = np.zeros(3)
         self._data_p = self._model0.createData()
+        self._data_ff = self._model0.createData()
         self._sensor_id = self.robot.sensor_frame_id
-        self._friction = self.robot.friction
-        self._K = self.impedance.gains.stiffness
+        # parameters and state of the compiled tick, see control/_kernels.py
+        self._gains = np.zeros((6, n))
+        self._gains[_k.K_ROW] = self.impedance.gains.stiffness
+        self._gains[_k.KO_ROW] = self.observer.observer_gain
+        if self.detection_observer is not None:
+            self._gains[_k.KO_DET_ROW] = self.detection_observer.observer_gain
+        self._gains[_k.THRESHOLD_ROW] = np.inf if self.detector is None else self.detector.threshold
+        self._gains[_k.COULOMB_ROW] = self.robot.friction.coulomb
+        self._gains[_k.VISCOUS_ROW] = self.robot.friction.viscous
+        self._obs = np.zeros((6, n))
+        self.observer = MomentumObserver(n, self.observer.observer_gain, self.dt, _state=self._obs[0:3])
+        if self.detection_observer is not None:
+            self.detection_observer = MomentumObserver(
+                n, self.detection_observer.observer_gain, self.dt, _state=self._obs[3:6]
+            )
+        self._flags = np.zeros(_k.N_FLAGS)
+        self._flags[_k.DT] = self.dt
+        self._flags[_k.INV_BAND] = 1.0 / self.robot.friction.velocity_band
+        self._flags[_k.LIMIT] = self.residual_limit
+        self._flags[_k.USE_DET] = float(self.detection_observer is not None)
         self._zeros = np.zeros(n)
+        self._zeros6n = np.zeros((6, n))
         self._tau = np.zeros(n)
-        self._tau_f = np.zeros(n)
-        self._alpha = np.zeros(n)
-        self._gamma = np.zeros(n)
-        self._comp = np.zeros(n)
-        self._e = np.zeros(n)
+        self._over = np.zeros(n, dtype=np.bool_)
         self._gravity = np.asarray(model.gravity.linear, dtype=float).copy()
-        self._last_q: np.ndarray | None = None
+        self._last_q = np.zeros(n)
+        self._has_last_q = False
         self._started = False
         self.reacted = False
         self.last_fault = ""
@@ -180,7 +198,7 @@ class Controller:
     def _safe_command(self, fault: str) -> Command:
         """Gravity compensation at the last valid state, or zero torque if there is none."""
         self.last_fault = fault
-        if self._last_q is None:
+        if not self._has_last_q:
             tau = np.zeros(self.n)
         else:
             self._model.gravity.linear = self._gravity
@@ -200,99 +218,81 @@ class Controller:
         """
         t, q, dq, tau_m, wrench, gravity = measurement
         q_d, dq_d, ddq_d = reference
-        # one cheap finiteness test over everything (NaN/inf propagate through the dot products)
-        # (sums of Python floats: cheaper than numpy reductions on a few elements)
-        if not math.isfinite(
-            sum(q.tolist()) + sum(dq.tolist()) + sum(tau_m.tolist()) + sum(wrench.tolist()) + sum(gravity.tolist())
-        ):
-            bad = [
-                name
-                for name, v in (("q", q), ("dq", dq), ("tau_m", tau_m), ("wrench", wrench), ("gravity", gravity))
-                if not np.all(np.isfinite(v))
-            ]
-            return self._safe_command("non-finite measurement: " + ", ".join(bad))
-        if not math.isfinite(sum(q_d.tolist()) + sum(dq_d.tolist()) + sum(ddq_d.tolist())):
-            return self._safe_command("non-finite reference")
-        if q.shape != (self.n,):
-            raise ConfigError(f"measurement q must have shape ({self.n},); got {np.shape(q)}")
-
+        if q.shape != (self.n,) or dq.shape != (self.n,) or tau_m.shape != (self.n,) or wrench.shape != (6,):
+            raise ConfigError(
+                f"measurement shapes must be q, dq, tau_m ({self.n},) and wrench (6,); got "
+                f"{np.shape(q)}, {np.shape(dq)}, {np.shape(tau_m)}, {np.shape(wrench)}"
+            )
         model = self._model
-        if gravity[0] != self._gravity[0] or gravity[1] != self._gravity[1] or gravity[2] != self._gravity[2]:
-            self._gravity[:] = gravity
-            model.gravity.linear = self._gravity
+        gv = self._gravity
+        if gravity[0] != gv[0] or gravity[1] != gv[1] or gravity[2] != gv[2]:
+            if not math.isfinite(gravity[0] + gravity[1] + gravity[2]):
+                return self._fault(measurement, reference)
+            gv[:] = gravity
+            model.gravity.linear = gv
 
         g = pin.computeGeneralizedGravity(model, self._data_g, q)
         C = pin.computeCoriolisMatrix(model, self._data_c, q, dq)
         p = pin.rnea(self._model0, self._data_p, q, self._zeros, dq)  # M(q) dq
-        first_tick = not self._started
-        if first_tick:  # p(0): the integral of (4) starts here; nothing to integrate yet
+        ff = pin.rnea(self._model0, self._data_ff, q_d, self._zeros, ddq_d)  # M(q_d) ddq_d
+        J = (
+            pin.computeFrameJacobian(model, self._data_j, q, self._sensor_id, pin.LOCAL)
+            if self.kappa_ext
+            else self._zeros6n
+        )
+        flags = self._flags
+        if not self._started:  # p(0): the integral of (4) starts here, nothing to integrate yet
+            if not math.isfinite(sum(p.tolist())):
+                return self._fault(measurement, reference)
             self.observer.reset(p)
             if self.detection_observer is not None:
                 self.detection_observer.reset(p)
-            self._started = True
-
-        # observer inputs: gamma = g - C^T dq (5); alpha = kappa_f tau_f - kappa_ext J^T F (6)
-        gamma = self._gamma
-        np.subtract(g, dq @ C, out=gamma)
-        alpha: np.ndarray | None = None
-        if self.kappa_f:
-            alpha = self._friction.compute_torque_into(dq, self._tau_f)
-        if self.kappa_ext:
-            J = pin.computeFrameJacobian(model, self._data_j, q, self._sensor_id, pin.LOCAL)
-            if alpha is None:
-                alpha = np.negative(wrench @ J, out=self._alpha)
-            else:
-                alpha = np.subtract(alpha, wrench @ J, out=self._alpha)
-        if first_tick:
-            r = self.observer.residual
-            r_det = self.detection_residual
+            flags[_k.INTEGRATE] = 0.0
         else:
-            r = self.observer.compute_residual(p, tau_m, gamma, alpha)
-            if self.detection_observer is not None:
-                r_det = self.detection_observer.compute_residual(p, tau_m, gamma, alpha)
-            else:
-                r_det = r
+            flags[_k.INTEGRATE] = 1.0
+        # bumpless kappa_eps ramp
+        w = self._eps_weight
+        if w != self.kappa_eps:
+            inc = self.dt / self.switch_time
+            w = min(w + inc, 1.0) if self.kappa_eps > w else max(w - inc, 0.0)
+            self._eps_weight = w
+        flags[_k.EPS_WEIGHT] = w
+        flags[_k.KAPPA_F] = self.kappa_f
+        flags[_k.KAPPA_EXT] = self.kappa_ext
+        gravity_mode = self.reacted and self.reaction == "gravity"
+        flags[_k.GRAVITY_MODE] = gravity_mode
+        if not gravity_mode:
+            self.impedance.maybe_update_damping(q)
+        tau = self._tau
+        status = _k.controller_tick(
+            q, dq, tau_m, wrench, q_d, dq_d, g, C, p, ff, J, self.impedance.damping,
+            self._gains, self._obs, flags, tau, self._over,
+        )  # fmt: skip
+        if status < 0:
+            return self._fault(measurement, reference)
+        self._started = True
 
         collided: tuple[int, ...] = ()
+        detected = False
         if self.detector is not None:
-            collided = self.detector.update(r_det, t)
-            if self.detector.detected and not self.reacted and self.reaction != "none":
-                self.reacted = True
-                if self.reaction == "compliant":
-                    self.set_switches(kappa_eps=0)
-
-        tau = self._tau
-        if self.reacted and self.reaction == "gravity":
-            tau[:] = g  # reaction (13)
-        else:
-            imp = self.impedance
-            imp.maybe_update_damping(q)
-            e = self._e
-            np.subtract(q_d, q, out=e)
-            np.multiply(self._K, e, out=tau)
-            np.subtract(dq_d, dq, out=e)
-            tau += imp.damping @ e
-            tau += g
-            tau += C @ dq
-            tau += imp.compute_feedforward(q_d, ddq_d)
-            if self.kappa_f:
-                tau += self._tau_f
-            # disturbance compensation with the output cut-off and the bumpless kappa_eps ramp
-            w = self._eps_weight
-            if w != self.kappa_eps:
-                step = self.dt / self.switch_time
-                w = min(w + step, 1.0) if self.kappa_eps > w else max(w - step, 0.0)
-                self._eps_weight = w
-            if w > 0.0:
-                comp = self._comp
-                np.clip(r, -self.residual_limit, self.residual_limit, out=comp)
-                comp *= w
-                tau -= comp
-
-        if not math.isfinite(sum(tau.tolist())):
-            return self._safe_command("controller produced a non-finite torque")
-        self._last_q = q
+            if status > 0:
+                collided = tuple(np.flatnonzero(self._over).tolist())
+                self.detector.record(collided, t)
+                if not self.reacted and self.reaction != "none":
+                    self.reacted = True
+                    if self.reaction == "compliant":
+                        self.set_switches(kappa_eps=0)
+            detected = self.detector.detected
+        self._last_q[:] = q
+        self._has_last_q = True
         self.last_fault = ""
-        return Command(
-            tau.copy(), r_det.copy(), self.detector.detected if self.detector else False, collided, self.mode, ""
-        )
+        return Command(tau.copy(), self.detection_residual.copy(), detected, collided, self.mode, "")
+
+    def _fault(self, measurement: Measurement, reference: Reference) -> Command:
+        """Name what is wrong with this tick's inputs and return the safe command."""
+        named = [
+            (f"measurement {name}", v)
+            for name, v in zip(("q", "dq", "tau_m", "wrench", "gravity"), measurement[1:], strict=True)
+        ] + [(f"reference {name}", v) for name, v in zip(("q_d", "dq_d", "ddq_d"), reference, strict=True)]
+        bad = [name for name, v in named if not np.all(np.isfinite(v))]
+        return self._safe_command("non-finite " + ", ".join(bad) if bad else "non-finite model terms")

@@ -154,7 +154,7 @@ def _align_mjcf_root(model: pin.Model, path: Path) -> None:
     if model.njoints > 1:
         first_body = next((f for f in model.frames if f.type == pin.FrameType.BODY and f.parentJoint == 1), None)
         ref = mj_pose(first_body.name) if first_body is not None else None
-        if ref is not None:
+        if ref is not None and first_body is not None:
             fid = model.getFrameId(first_body.name)
             correction = ref * data.oMf[fid].inverse()
             if not correction.isIdentity(1e-12):
