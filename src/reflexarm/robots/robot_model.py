@@ -32,6 +32,7 @@ class BuiltinRobot:
     sensor_frame: str
     home: tuple[float, ...]
     description: str
+    velocity_limit: tuple[float, ...] = ()  # MJCF has no joint velocity limits: given here [rad/s]
 
     @property
     def path(self) -> Path:
@@ -47,6 +48,7 @@ _BUILTINS: dict[str, BuiltinRobot] = {
         home=(-0.3, -1.1, 1.6, 1.2, 0.0, 0.2, 0.0),
         description="Atlas v5 left arm (4 hydraulic + 3 electric joints), torso fixed upright, "
         "true friction from Table I of the paper",
+        velocity_limit=(12.0, 12.0, 12.0, 12.0, 10.0, 10.0, 10.0),
     ),
     "panda": BuiltinRobot(
         name="panda",
@@ -56,6 +58,7 @@ _BUILTINS: dict[str, BuiltinRobot] = {
         home=(0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785),
         description="Franka Emika Panda (no hand), kinematics of the Franka description, "
         "inertial values of Gaz et al. 2019",
+        velocity_limit=(2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61),
     ),
 }
 
@@ -87,7 +90,7 @@ def load_robot(
     key = str(name_or_path)
     if key in _BUILTINS:
         b = _BUILTINS[key]
-        return RobotModel.from_file(
+        robot = RobotModel.from_file(
             b.path,
             ee_frame=ee_frame or b.ee_frame,
             sensor_frame=sensor_frame or b.sensor_frame,
@@ -95,6 +98,9 @@ def load_robot(
             name=b.name,
             home=b.home,
         )
+        if b.velocity_limit:
+            robot.pin_model.velocityLimit = np.asarray(b.velocity_limit, dtype=float)
+        return robot
     path = Path(key)
     if path.suffix.lower() not in (".urdf", ".xml", ".mjcf") and not path.exists():
         raise ModelError(
