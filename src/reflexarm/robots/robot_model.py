@@ -107,6 +107,8 @@ def load_robot(
             f"unknown robot {key!r}; built-in robots are: {', '.join(sorted(_BUILTINS))} "
             "(or give a path to a .urdf or MJCF .xml file)"
         )
+    if not path.is_file():
+        raise ModelError(f"robot file {key!r} does not exist")
     if ee_frame is None:
         raise ModelError(f"loading {key!r}: name the end-effector frame (ee_frame=...)")
     return RobotModel.from_file(path, ee_frame=ee_frame, sensor_frame=sensor_frame, friction=friction)
@@ -216,7 +218,7 @@ class RobotModel:
             if model.parents[j] != j - 1:
                 raise ModelError(
                     f"robot{where} is not a serial chain: joint {model.names[j]!r} hangs off "
-                    f"{model.names[model.parents[j]]!r}"
+                    f"{model.names[model.parents[j]]!r}, not off the previous joint {model.names[j - 1]!r}"
                 )
         self._model = model
         self._data = model.createData()
