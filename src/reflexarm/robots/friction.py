@@ -8,6 +8,7 @@ import numpy as np
 import numpy.typing as npt
 
 from reflexarm._validation import as_positive_scalar, as_vector
+from reflexarm.errors import ConfigError
 
 __all__ = ["CoulombViscousFriction"]
 
@@ -17,7 +18,7 @@ __all__ = ["CoulombViscousFriction"]
 DEFAULT_VELOCITY_BAND = 0.02
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class CoulombViscousFriction:
     """tau_f(dq) = mu_C * sgn_band(dq) + d_v * dq, per joint.
 
@@ -26,6 +27,9 @@ class CoulombViscousFriction:
         viscous: d_v, viscous friction per joint [Nms/rad], non-negative.
         velocity_band: half-width of the linear zone of the smooth sign [rad/s]; ``sgn_band(x) =
             clip(x / velocity_band, -1, 1)``. The identification regressor (15) uses the exact sign.
+
+    The coefficient arrays are read-only (one friction model is shared by copies of a robot); use
+    :meth:`scaled` or build a new model to change them.
     """
 
     coulomb: np.ndarray
@@ -35,11 +39,27 @@ class CoulombViscousFriction:
 
     def __post_init__(self) -> None:
         n = np.asarray(self.coulomb).size
-        object.__setattr__(self, "coulomb", as_vector(self.coulomb, n, "coulomb", nonnegative=True))
-        object.__setattr__(self, "viscous", as_vector(self.viscous, n, "viscous", nonnegative=True))
+        coulomb = as_vector(self.coulomb, n, "coulomb", nonnegative=True)
+        viscous = as_vector(self.viscous, n, "viscous", nonnegative=True)
+        coulomb.flags.writeable = False
+        viscous.flags.writeable = False
+        object.__setattr__(self, "coulomb", coulomb)
+        object.__setattr__(self, "viscous", viscous)
         band = as_positive_scalar(self.velocity_band, "velocity_band")
         object.__setattr__(self, "velocity_band", band)
         object.__setattr__(self, "_inv_band", 1.0 / band)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, CoulombViscousFriction):
+            return NotImplemented
+        return (
+            self.velocity_band == other.velocity_band
+            and np.array_equal(self.coulomb, other.coulomb)
+            and np.array_equal(self.viscous, other.viscous)
+        )
+
+    def __hash__(self) -> int:
+        return hash((self.coulomb.tobytes(), self.viscous.tobytes(), self.velocity_band))
 
     @property
     def n(self) -> int:
@@ -58,7 +78,12 @@ class CoulombViscousFriction:
         return self.coulomb * s + self.viscous * dq
 
     def compute_torque_into(self, dq: np.ndarray, out: np.ndarray) -> np.ndarray:
-        """Allocation-free tau_f(dq) for the control hot path (``dq`` and ``out`` float64 (n,))."""
+        """tau_f(dq) written into ``out`` (float64 (n,), like ``dq``) for the control hot path; returns ``out``.
+
+        ``out`` must be a different array from ``dq`` (the smooth sign is formed in ``out`` first).
+        """
+        if out is dq:
+            raise ConfigError("compute_torque_into: out must not be dq (it is overwritten before dq is read)")
         np.multiply(dq, self._inv_band, out=out)
         np.minimum(out, 1.0, out=out)
         np.maximum(out, -1.0, out=out)
