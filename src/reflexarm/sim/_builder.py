@@ -1,0 +1,220 @@
+"""Building the plant's MuJoCo model from the robot's own file (private).
+
+The MuJoCo model is compiled from the same URDF/MJCF file as the controller's Pinocchio model, then
+completed with what the simulation needs: sites for the end-effector and sensor frames when the file
+has none, the wrist force/torque sensors, the true joint friction and the scene's bodies.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pinocchio as pin
+
+from reflexarm.errors import ModelError
+from reflexarm.robots.friction import CoulombViscousFriction
+from reflexarm.robots.robot_model import RobotModel
+
+#: Collision bits shared by the plant and the scenes. The built-in arm uses contype=2, conaffinity=1:
+#: its geoms never collide with each other (2 & 1 == 0) but collide with anything whose contype has
+#: bit 1 (``CONTACT_ARM``). Static scenery (floor, table) and the hard cores of scene objects use bit 4
+#: (``CONTACT_WORLD``) in both masks, so they touch each other but never the arm.
+ARM_CONTYPE = 2
+ARM_CONAFFINITY = 1
+CONTACT_ARM = 1
+CONTACT_WORLD = 4
+
+#: Friction-loss constraint softness used instead of MuJoCo's default (solref 0.02 1, solimp 0.9 0.95):
+#: with the default, a joint loaded below its Coulomb level mu_C creeps at ~5 % of mu_C * M^-1 * 1 s
+#: (0.05 rad/s for elx of Atlas at 0.5 mu_C), which is no stiction at all. With impedance 0.9999 and the
+#: fastest time constant MuJoCo accepts (2 x timestep) the creep falls to ~3e-6 rad/s, far below the
+#: paper's position noise (3.4e-4 rad) over any experiment. Only applied where the file keeps MuJoCo's
+#: defaults.
+FRICTION_SOLIMP = (0.9999, 0.9999, 0.001, 0.5, 2.0)
+_DEFAULT_SOLREF = (0.02, 1.0)
+_DEFAULT_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)
+
+SENSOR_FORCE = "reflexarm_wrist_force"
+SENSOR_TORQUE = "reflexarm_wrist_torque"
+
+
+@dataclass
+class BuildInfo:
+    """Names the plant needs after compiling: the arm joints and the frame sites."""
+
+    joint_names: list[str]
+    ee_site: str
+    sensor_site: str
+    is_urdf: bool
+
+
+def load_spec(path: Path) -> tuple[mujoco.MjSpec, bool]:
+    """Parse a robot file into an MjSpec; URDF files are rewritten first (see :func:`urdf_for_mujoco`)."""
+    if not path.is_file():
+        raise ModelError(f"robot file {str(path)!r} does not exist")
+    is_urdf = path.suffix.lower() == ".urdf"
+    try:
+        if is_urdf:
+            spec = mujoco.MjSpec.from_string(urdf_for_mujoco(path.read_text(), path))
+        else:
+            spec = mujoco.MjSpec.from_file(str(path))
+    except ModelError:
+        raise
+    except Exception as e:  # MuJoCo raises ValueError with the parser's text
+        raise ModelError(f"MuJoCo cannot parse robot file {str(path)!r}: {e}") from e
+    return spec, is_urdf
+
+
+def urdf_for_mujoco(text: str, path: Path) -> str:
+    """URDF text MuJoCo can compile without the robot's ROS package.
+
+    MuJoCo cannot resolve ``package://`` mesh URIs (and from a string, no relative path either). Meshes
+    only shape collision and visual geometry; the dynamics come from ``<inertial>``. So every
+    ``<visual>``/``<collision>`` whose geometry is a ``<mesh>`` is dropped, and a ``<mujoco>`` block asks
+    MuJoCo to discard visuals, to keep fixed-joint links as bodies (so tool and sensor links stay
+    addressable) and never to derive inertia from geometry (as Pinocchio does not).
+    """
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as e:
+        raise ModelError(f"malformed URDF file {str(path)!r}: {e}") from e
+    if root.tag != "robot":
+        raise ModelError(f"malformed URDF file {str(path)!r}: root element is <{root.tag}>, expected <robot>")
+    for link in root.iter("link"):
+        for tag in ("visual", "collision"):
+            for element in link.findall(tag):
+                if element.find("geometry/mesh") is not None:
+                    link.remove(element)
+    for old in root.findall("mujoco"):
+        root.remove(old)
+    block = ET.SubElement(root, "mujoco")
+    ET.SubElement(block, "compiler", discardvisual="true", fusestatic="false", inertiafromgeom="false")
+    return ET.tostring(root, encoding="unicode")
+
+
+def _frame_pose(robot: RobotModel, frame: str, q: np.ndarray) -> pin.SE3:
+    model = robot.pin_model
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q)
+    return data.oMf[model.getFrameId(frame)].copy()
+
+
+def _body_for_frame(spec: mujoco.MjSpec, robot: RobotModel, frame: str) -> str:
+    """The MuJoCo body a Pinocchio frame is rigidly attached to."""
+    model = robot.pin_model
+    fid = model.getFrameId(frame)
+    seen = set()
+    f = model.frames[fid]
+    while True:
+        if spec.body(f.name) is not None and f.name != "world":
+            return str(f.name)
+        parent = int(f.parentFrame)
+        if parent in seen or parent == 0:
+            break
+        seen.add(parent)
+        f = model.frames[parent]
+    joint = int(model.frames[fid].parentJoint)
+    if joint > 0:
+        mj_joint = spec.joint(model.names[joint])
+        if mj_joint is not None:
+            return str(mj_joint.parent.name)
+    raise ModelError(
+        f"frame {frame!r} of {str(robot.source)!r} is not attached to a moving body MuJoCo knows; "
+        "use a frame on the arm"
+    )
+
+
+def _ensure_sites(spec: mujoco.MjSpec, robot: RobotModel, joint_names: list[str]) -> dict[str, str]:
+    """Sites for the ee and sensor frames: the file's own site of that name, else one added at the
+    Pinocchio frame placement relative to the body it hangs on (computed at the zero configuration)."""
+    sites: dict[str, str] = {}
+    missing = [f for f in dict.fromkeys((robot.ee_frame, robot.sensor_frame)) if spec.site(f) is None]
+    for f in (robot.ee_frame, robot.sensor_frame):
+        if f not in missing:
+            sites[f] = f
+    if not missing:
+        return sites
+    try:
+        model = spec.compile()
+    except Exception as e:
+        raise ModelError(f"MuJoCo cannot compile robot file {str(robot.source)!r}: {e}") from e
+    data = mujoco.MjData(model)
+    q = np.zeros(robot.n)
+    for i, name in enumerate(joint_names):
+        q[i] = model.qpos0[model.jnt_qposadr[model.joint(name).id]]
+    data.qpos[:] = model.qpos0
+    mujoco.mj_kinematics(model, data)
+    for frame in missing:
+        body = _body_for_frame(spec, robot, frame)
+        bid = model.body(body).id
+        body_pose = pin.SE3(data.xmat[bid].reshape(3, 3).copy(), data.xpos[bid].copy())
+        rel = body_pose.inverse() * _frame_pose(robot, frame, q)
+        name = frame if spec.site(frame) is None else f"reflexarm_{frame}"
+        quat = pin.Quaternion(rel.rotation)
+        spec.body(body).add_site(
+            name=name,
+            pos=np.asarray(rel.translation, dtype=float),
+            quat=np.array([quat.w, quat.x, quat.y, quat.z]),
+            size=[0.01, 0.01, 0.01],
+        )
+        sites[frame] = name
+    return sites
+
+
+def _joint_names(spec: mujoco.MjSpec, robot: RobotModel) -> list[str]:
+    names = robot.joint_names
+    missing = [j for j in names if spec.joint(j) is None]
+    if missing:
+        mj_names = [j.name for j in spec.joints]
+        raise ModelError(
+            f"robot file {str(robot.source)!r}: MuJoCo has no joint(s) {missing} that Pinocchio found; "
+            f"MuJoCo joints are: {mj_names}"
+        )
+    return list(names)
+
+
+def _set_friction(
+    spec: mujoco.MjSpec, joint_names: list[str], friction: CoulombViscousFriction | None, timestep: float
+) -> None:
+    if friction is not None and friction.n != len(joint_names):
+        raise ModelError(f"true_friction has {friction.n} joints; the robot has {len(joint_names)}")
+    solref = (2.0 * timestep, 1.0)
+    for i, name in enumerate(joint_names):
+        joint = spec.joint(name)
+        if friction is not None:
+            joint.frictionloss = float(friction.coulomb[i])
+            joint.damping = float(friction.viscous[i])
+        if np.allclose(joint.solref_friction, _DEFAULT_SOLREF) and np.allclose(joint.solimp_friction, _DEFAULT_SOLIMP):
+            joint.solref_friction = solref
+            joint.solimp_friction = list(FRICTION_SOLIMP)
+
+
+def build_robot_spec(
+    robot: RobotModel, *, true_friction: CoulombViscousFriction | None, timestep: float
+) -> tuple[mujoco.MjSpec, BuildInfo]:
+    """The robot part of the plant's MjSpec (the scene is added by the caller)."""
+    if robot.source is None:
+        raise ModelError(f"robot {robot.name!r} has no source file; the plant builds MuJoCo from the same file")
+    path = Path(robot.source)
+    spec, is_urdf = load_spec(path)
+    joint_names = _joint_names(spec, robot)
+    if is_urdf:
+        # URDF has no collision masks: give the arm the built-in convention (no self-collision).
+        for geom in spec.geoms:
+            geom.contype = ARM_CONTYPE
+            geom.conaffinity = ARM_CONAFFINITY
+    _set_friction(spec, joint_names, true_friction, timestep)
+    sites = _ensure_sites(spec, robot, joint_names)
+    sensor_site = sites[robot.sensor_frame]
+    spec.add_sensor(
+        name=SENSOR_FORCE, type=mujoco.mjtSensor.mjSENS_FORCE, objtype=mujoco.mjtObj.mjOBJ_SITE, objname=sensor_site
+    )
+    spec.add_sensor(
+        name=SENSOR_TORQUE, type=mujoco.mjtSensor.mjSENS_TORQUE, objtype=mujoco.mjtObj.mjOBJ_SITE, objname=sensor_site
+    )
+    spec.option.timestep = timestep
+    return spec, BuildInfo(joint_names, sites[robot.ee_frame], sensor_site, is_urdf)

@@ -1,0 +1,540 @@
+"""Plant: the *true* arm, simulated in MuJoCo from the same robot file as the controller's model."""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import mujoco
+import numpy as np
+import numpy.typing as npt
+
+from reflexarm.errors import ConfigError, ModelError, SimulationError
+from reflexarm.robots.friction import CoulombViscousFriction
+from reflexarm.robots.robot_model import RobotModel, load_robot
+from reflexarm.signals import Measurement
+from reflexarm.sim import _kernels
+from reflexarm.sim._builder import SENSOR_FORCE, SENSOR_TORQUE, build_robot_spec
+from reflexarm.sim.noise import PAPER_NOISE, SensorNoise
+from reflexarm.sim.scene import Scene
+
+__all__ = ["Plant"]
+
+#: A state whose velocity norm exceeds this [rad/s or m/s] is treated as diverged.
+MAX_SPEED = 1e3
+#: Noise samples are drawn in blocks of this many ticks (one ``Generator.uniform`` call per block).
+_NOISE_BLOCK = 1024
+
+ExtraTorque = Callable[[np.ndarray, np.ndarray, float], npt.ArrayLike]
+
+
+class _AppliedForce:
+    __slots__ = ("body", "force", "point_local")
+
+    def __init__(self, body: int, force: np.ndarray, point_local: np.ndarray) -> None:
+        self.body = body
+        self.force = force
+        self.point_local = point_local
+
+
+class Plant:
+    """The simulated arm: MuJoCo rigid-body dynamics, true friction, scene contacts and noisy sensors.
+
+    The MuJoCo model is compiled from ``robot.source`` (the same file the Pinocchio model was read from),
+    completed with the wrist force/torque sensor and the scene. Motors are ideal torque sources: the
+    commanded torque goes to ``qfrc_applied`` unchanged and is held over the control period.
+
+    Timing: :meth:`step` advances ``control_period`` in ``control_period / timestep`` physics substeps.
+    Positions and velocities in :meth:`measure` are those at :attr:`time`. Force quantities (the wrist
+    wrench, :meth:`true_external_torque`, :meth:`ee_contact_force`) come from the last physics evaluation,
+    i.e. the state one substep (0.5 ms by default) earlier under the torque just applied: a sensor
+    latency of one substep, and all three are mutually exact.
+
+    Args:
+        robot: a :class:`RobotModel` or the name of a built-in robot.
+        scene: a :class:`Scene` or a sequence of scenes (added to the model in order).
+        noise: sensor noise levels; default :data:`PAPER_NOISE`. Use ``SensorNoise.none()`` for exact
+            measurements.
+        seed: seed of the noise generator; :meth:`reset` restarts the noise sequence from it.
+        timestep: physics step [s].
+        control_period: period of :meth:`step` [s], an integer multiple of ``timestep``.
+        true_friction: joint friction of the true arm (MuJoCo ``frictionloss`` = Coulomb mu_C [Nm],
+            ``damping`` = viscous d_v [Nms/rad]); default: what the file says (for Atlas: Table I).
+        extra_joint_torque: ``f(q, dq, t) -> (n,)`` extra passive joint torque [Nm] added to the motor
+            torque at every physics substep (e.g. a Stribeck or stiction law the model lacks).
+
+    Raises:
+        ModelError: the file cannot be loaded into MuJoCo (message names the file).
+        ConfigError: bad timing or noise arguments.
+    """
+
+    def __init__(
+        self,
+        robot: RobotModel | str | os.PathLike[str],
+        *,
+        scene: Scene | Sequence[Scene] | None = None,
+        noise: SensorNoise | None = None,
+        seed: int = 0,
+        timestep: float = 5e-4,
+        control_period: float = 1e-3,
+        true_friction: CoulombViscousFriction | None = None,
+        extra_joint_torque: ExtraTorque | None = None,
+    ) -> None:
+        if not isinstance(robot, RobotModel):
+            robot = load_robot(robot)
+        self.robot = robot
+        self.n = n = robot.n
+        self.timestep, self.control_period, self.substeps = _check_timing(timestep, control_period)
+        if noise is None:
+            noise = PAPER_NOISE
+        if not isinstance(noise, SensorNoise):
+            raise ConfigError(f"noise must be a SensorNoise; got {type(noise).__name__}")
+        self.noise = noise
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+            raise ConfigError(f"seed must be an integer; got {seed!r}")
+        self.seed = int(seed)
+        if true_friction is not None and not isinstance(true_friction, CoulombViscousFriction):
+            raise ConfigError(f"true_friction must be a CoulombViscousFriction; got {type(true_friction).__name__}")
+        if extra_joint_torque is not None and not callable(extra_joint_torque):
+            raise ConfigError(f"extra_joint_torque must be callable f(q, dq, t); got {extra_joint_torque!r}")
+        self._extra = extra_joint_torque
+        if scene is None:
+            scenes: list[Scene] = []
+        elif isinstance(scene, Scene):
+            scenes = [scene]
+        else:
+            scenes = list(scene)
+            for s in scenes:
+                if not isinstance(s, Scene):
+                    raise ConfigError(f"scene must be a Scene or a sequence of Scenes; got {type(s).__name__}")
+        self.scenes = scenes
+
+        spec, info = build_robot_spec(robot, true_friction=true_friction, timestep=self.timestep)
+        for s in scenes:
+            try:
+                s.build(spec, robot)
+            except (ConfigError, SimulationError):
+                raise
+            except Exception as e:
+                raise SimulationError(f"scene {type(s).__name__} failed to build: {e}") from e
+        try:
+            self._model = spec.compile()
+        except Exception as e:
+            raise ModelError(f"MuJoCo cannot compile the plant of {str(robot.source)!r} with its scene: {e}") from e
+        self._spec = spec
+        m = self._model
+        self._data = mujoco.MjData(m)
+        self.is_urdf = info.is_urdf
+
+        # ---- index maps (arm joints in the Pinocchio order)
+        jids = np.array([m.joint(j).id for j in info.joint_names])
+        bad = [info.joint_names[i] for i, j in enumerate(jids) if m.jnt_type[j] not in (2, 3)]
+        if bad:
+            raise ModelError(f"robot file {str(robot.source)!r}: joints {bad} are not hinge/slide joints in MuJoCo")
+        self._qadr = _as_index(m.jnt_qposadr[jids])
+        self._vadr = _as_index(m.jnt_dofadr[jids])
+        self._arm_dofs = np.asarray(m.jnt_dofadr[jids], dtype=np.int64)
+        self._qadr_arr = np.asarray(m.jnt_qposadr[jids], dtype=np.int64)
+        self._ee_site = m.site(info.ee_site).id
+        self._sensor_site = m.site(info.sensor_site).id
+        self._ee_body = int(m.site_bodyid[self._ee_site])
+        sensor_body = int(m.site_bodyid[self._sensor_site])
+        self._load_bodies = _subtree(m, sensor_body)
+        self._physical_sensor = bool(m.body_jntnum[sensor_body] == 0 and m.body_dofnum[sensor_body] == 0)
+        self._com_ref_body = int(m.body_rootid[sensor_body])
+        self._force_adr = int(m.sensor_adr[m.sensor(SENSOR_FORCE).id])
+        self._torque_adr = int(m.sensor_adr[m.sensor(SENSOR_TORQUE).id])
+        first_arm_body = int(m.jnt_bodyid[jids[0]])
+        self._arm_bodies = _subtree(m, first_arm_body)
+        self._gravity = np.array(m.opt.gravity, dtype=float)
+
+        # ---- preallocated buffers and cached views into MjData (they share memory with it)
+        d = self._data
+        self._qpos, self._qvel, self._qfrc = d.qpos, d.qvel, d.qfrc_applied
+        self._xfrc = d.xfrc_applied
+        self._cinert, self._cvel, self._cacc = d.cinert, d.cvel, d.cacc
+        self._cfrc_int, self._cfrc_ext = d.cfrc_int, d.cfrc_ext
+        self._sensordata = d.sensordata
+        self._site_xpos, self._site_xmat = d.site_xpos, d.site_xmat
+        self._subtree_com = d.subtree_com
+        self._com_ref = d.subtree_com[self._com_ref_body]
+        self._site_pos = d.site_xpos[self._sensor_site]
+        self._site_mat = d.site_xmat[self._sensor_site]
+        self._cfrc_for_sensor = d.cfrc_int if self._physical_sensor else d.cfrc_ext
+        self._cdof = d.cdof
+        self._body_parent = np.asarray(m.body_parentid, dtype=np.int64)
+        self._dof_body = np.asarray(m.dof_bodyid, dtype=np.int64)
+        self._acc6 = np.zeros((m.nbody, 6))
+        self._tau = np.zeros(n)
+        self._dim = 3 * n + 9
+        self._buf = np.zeros(self._dim)
+        self._levels = np.concatenate(
+            [
+                np.full(n, noise.q),
+                np.full(n, noise.dq),
+                np.full(n, noise.tau_m),
+                np.full(3, noise.force),
+                np.full(3, noise.torque),
+                np.full(3, noise.gravity),
+            ]
+        )
+        self._noisy = not noise.is_zero
+        self._forces: dict[int, _AppliedForce] = {}
+        self._next_force = 0
+        self._failed: str | None = None
+        self._tick = 0
+        self.reset(robot.home)
+
+    # ------------------------------------------------------------------ facts
+    @property
+    def model(self) -> mujoco.MjModel:
+        """The compiled MuJoCo model (advanced use; changing it changes the true world)."""
+        return self._model
+
+    @property
+    def data(self) -> mujoco.MjData:
+        """The MuJoCo data (advanced use)."""
+        return self._data
+
+    @property
+    def time(self) -> float:
+        """Simulation time [s]."""
+        return float(self._data.time)
+
+    @property
+    def q(self) -> np.ndarray:
+        """True joint positions (n,) [rad] (a copy)."""
+        return self._qpos[self._qadr].copy()
+
+    @property
+    def dq(self) -> np.ndarray:
+        """True joint velocities (n,) [rad/s] (a copy)."""
+        return self._qvel[self._vadr].copy()
+
+    @property
+    def tau(self) -> np.ndarray:
+        """Motor torque currently applied (n,) [Nm] (a copy)."""
+        return self._tau.copy()
+
+    @property
+    def joint_names(self) -> list[str]:
+        return self.robot.joint_names
+
+    @property
+    def true_friction(self) -> CoulombViscousFriction:
+        """Joint friction of the plant (MuJoCo frictionloss, damping)."""
+        m = self._model
+        return CoulombViscousFriction(
+            np.array(m.dof_frictionloss[self._arm_dofs]), np.array(m.dof_damping[self._arm_dofs])
+        )
+
+    def describe(self) -> dict[str, Any]:
+        """JSON-serialisable description (for ``Trace.meta``)."""
+        return {
+            "robot": self.robot.name,
+            "robot_file": str(self.robot.source),
+            "timestep": self.timestep,
+            "control_period": self.control_period,
+            "seed": self.seed,
+            "noise": self.noise.as_dict(),
+            "true_friction": {
+                "coulomb": self.true_friction.coulomb.tolist(),
+                "viscous": self.true_friction.viscous.tolist(),
+            },
+            "extra_joint_torque": None if self._extra is None else getattr(self._extra, "__name__", repr(self._extra)),
+            "scene": [s.describe() for s in self.scenes],
+        }
+
+    # ------------------------------------------------------------------ state
+    def reset(
+        self, q0: npt.ArrayLike | None = None, dq0: npt.ArrayLike | None = None, *, seed: int | None = None
+    ) -> None:
+        """Put the arm at ``q0`` (default: the robot's home) with velocity ``dq0`` (default 0), the scene at
+        its initial state, time 0, no applied forces, zero torque; restart the noise sequence from
+        ``seed`` (default: the plant's seed)."""
+        n = self.n
+        q = _state_vector(self.robot.home if q0 is None else q0, n, "q0")
+        v = np.zeros(n) if dq0 is None else _state_vector(dq0, n, "dq0")
+        m, d = self._model, self._data
+        mujoco.mj_resetData(m, d)
+        self._qpos[self._qadr] = q
+        self._qvel[self._vadr] = v
+        self._tau[:] = 0.0
+        self._forces.clear()
+        self._failed = None
+        self._tick = 0
+        if seed is not None:
+            if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+                raise ConfigError(f"seed must be an integer; got {seed!r}")
+            self.seed = int(seed)
+        self._rng = np.random.default_rng(self.seed)
+        self._noise_rows = np.zeros((0, self._dim))
+        self._noise_i = 0
+        for s in self.scenes:
+            s.reset(self)
+        mujoco.mj_forward(m, d)
+
+    def step(self, tau: npt.ArrayLike) -> None:
+        """Apply motor torque ``tau`` (n,) [Nm], held constant, for one control period.
+
+        Raises:
+            SimulationError: non-finite ``tau`` (names the joints), or the state diverged (NaN/inf or a
+                speed above ``MAX_SPEED``); the plant then refuses to step until :meth:`reset`.
+        """
+        if self._failed is not None:
+            raise SimulationError(f"the plant failed earlier ({self._failed}); call reset() first")
+        t = np.asarray(tau, dtype=float)
+        if t.shape != (self.n,):
+            raise SimulationError(f"tau must have shape ({self.n},); got {t.shape}")
+        if not _kernels.set_torque(t, self._arm_dofs, self._tau, self._qfrc) < math.inf:
+            bad = [self.robot.joint_names[i] for i in np.flatnonzero(~np.isfinite(t))]
+            if bad:
+                raise SimulationError(f"non-finite motor torque on joint(s) {bad}: {t.tolist()}; not applied")
+            raise SimulationError(f"motor torque too large to be physical: {t.tolist()}; not applied")
+        for s in self.scenes:
+            s.update(self)
+        if self._forces:
+            self._apply_forces()
+        m, d = self._model, self._data
+        t_end = d.time + self.control_period
+        if self._extra is None:
+            mujoco.mj_step(m, d, self.substeps)
+        else:
+            for _ in range(self.substeps):
+                extra = np.asarray(self._extra(self.q, self.dq, float(d.time)), dtype=float)
+                if extra.shape != (self.n,) or not float(extra @ extra) < math.inf:
+                    raise SimulationError(
+                        f"extra_joint_torque returned {extra.tolist()!r}; expected a finite ({self.n},) array"
+                    )
+                self._qfrc[self._vadr] = t + extra
+                mujoco.mj_step(m, d)
+        self._tick += 1
+        vv = _kernels.sum_squares(self._qvel)
+        if not vv < MAX_SPEED * MAX_SPEED or d.time < t_end - 0.5 * self.timestep:
+            self._fail(vv)
+
+    def _fail(self, vv: float) -> None:
+        d = self._data
+        what = [
+            str(w).split("_")[-1]
+            for w in (
+                mujoco.mjtWarning.mjWARN_BADQPOS,
+                mujoco.mjtWarning.mjWARN_BADQVEL,
+                mujoco.mjtWarning.mjWARN_BADQACC,
+            )
+            if d.warning[int(w)].number > 0
+        ]
+        if what:
+            reason = f"MuJoCo found NaN/inf/huge values in {', '.join(what)} and reset its state"
+        elif not math.isfinite(vv):
+            reason = "the velocity became NaN/inf"
+        else:
+            reason = f"a speed of {math.sqrt(vv):.3g} exceeds {MAX_SPEED:g} rad/s or m/s"
+        self._failed = f"simulation diverged near t = {self._tick * self.control_period:.4f} s: {reason}"
+        raise SimulationError(self._failed + "; check the controller gains and the torque command")
+
+    # ------------------------------------------------------------------ sensors
+    def _next_noise(self) -> np.ndarray:
+        if self._noise_i >= self._noise_rows.shape[0]:
+            self._noise_rows = self._rng.uniform(-1.0, 1.0, (_NOISE_BLOCK, self._dim)) * self._levels
+            self._noise_i = 0
+        row: np.ndarray = self._noise_rows[self._noise_i]
+        self._noise_i += 1
+        return row
+
+    def _exact_measurement(self) -> np.ndarray:
+        """q, dq, tau_m, wrench (6), gravity (3) without noise, into the work buffer."""
+        buf = self._buf
+        _kernels.exact_measurement(
+            self._qpos,
+            self._qvel,
+            self._qadr_arr,
+            self._arm_dofs,
+            self._tau,
+            self._gravity,
+            self._cinert,
+            self._cvel,
+            self._cacc,
+            self._cfrc_for_sensor,
+            self._sensordata,
+            self._load_bodies,
+            self._com_ref,
+            self._site_pos,
+            self._site_mat,
+            self._force_adr,
+            self._torque_adr,
+            self._physical_sensor,
+            buf,
+        )
+        return buf
+
+    def measure(self) -> Measurement:
+        """What the robot's sensors report now (with noise): q, dq, tau_m (the applied motor torque), the
+        load-compensated wrist wrench (environment on the tool, sensor frame, about the sensor origin)
+        and gravity in the base frame."""
+        if self._failed is not None:
+            raise SimulationError(f"the plant failed earlier ({self._failed}); call reset() first")
+        buf = self._exact_measurement()
+        out = buf + self._next_noise() if self._noisy else buf.copy()
+        n = self.n
+        return Measurement(
+            float(self._data.time),
+            out[:n],
+            out[n : 2 * n],
+            out[2 * n : 3 * n],
+            out[3 * n : 3 * n + 6],
+            out[3 * n + 6 :],
+        )
+
+    def true_wrench(self) -> np.ndarray:
+        """The wrist wrench of :meth:`measure` without noise (6,) [N, Nm]."""
+        n = self.n
+        return self._exact_measurement()[3 * n : 3 * n + 6].copy()
+
+    # ------------------------------------------------------------------ true external quantities
+    def true_external_torque(self, out: np.ndarray | None = None) -> np.ndarray:
+        """tau_ext (n,) [Nm]: sum over the arm's bodies of J^T F of every external force on them.
+
+        The external wrenches are MuJoCo's ``cfrc_ext`` (contacts with scene objects, applied forces,
+        equality constraints) of the last physics evaluation; ``J_b^T F_b`` is evaluated as the dot product
+        of each dof's motion axis ``cdof`` with the wrenches summed over its subtree (both com-based about
+        the same point, so this is exact). Internal forces (joint friction, joint limits) are not included.
+        ``out``: optional (n,) array to write into (no allocation).
+        """
+        res = np.empty(self.n) if out is None else out
+        _kernels.external_joint_torque(
+            self._cfrc_ext,
+            self._cdof,
+            self._arm_bodies,
+            self._body_parent,
+            self._dof_body,
+            self._arm_dofs,
+            self._acc6,
+            res,
+        )
+        return res
+
+    def ee_contact_force(self, out: np.ndarray | None = None) -> np.ndarray:
+        """Force (3,) [N], world frame, that the environment exerts on the bodies beyond the wrist sensor
+        (contacts and applied forces, last physics evaluation). ``out``: optional (3,) array to write into."""
+        res = np.empty(3) if out is None else out
+        _kernels.sum_force(self._cfrc_ext, self._load_bodies, res)
+        return res
+
+    # ------------------------------------------------------------------ applied forces and poses
+    def _body_id(self, name: str | int | None) -> int:
+        m = self._model
+        if name is None:
+            return self._ee_body
+        if isinstance(name, (int, np.integer)):
+            if not 0 < int(name) < m.nbody:
+                raise ConfigError(f"body id {name} out of range 1..{m.nbody - 1}")
+            return int(name)
+        bid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name)
+        if bid < 0:
+            names = [m.body(i).name for i in range(m.nbody)]
+            raise ConfigError(f"unknown body {name!r}; bodies are: {', '.join(names)}")
+        return int(bid)
+
+    def body_pose(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """(position (3,), quaternion (w, x, y, z)) of a body in the world, at the last physics evaluation
+        (exact at the current state for bodies without joints, e.g. mocap bodies)."""
+        bid = self._body_id(name)
+        return self._data.xpos[bid].copy(), self._data.xquat[bid].copy()
+
+    def ee_position(self) -> np.ndarray:
+        """World position of the end-effector site (3,) [m] (last physics evaluation)."""
+        return np.array(self._data.site_xpos[self._ee_site])
+
+    def apply_external_force(
+        self, force_world: npt.ArrayLike, point_world: npt.ArrayLike | None = None, body: str | int | None = None
+    ) -> int:
+        """Apply a force [N] (world frame, constant until cleared) at a point moving with ``body``.
+
+        ``body`` defaults to the body carrying the end-effector site; ``point_world`` (world coordinates at
+        the time of the call) defaults to the end-effector site position. The point is stored in the body's
+        frame, so it moves with the body; the force keeps its world direction. It is applied through
+        ``xfrc_applied`` (force at the body's COM plus the moment (p - com) x f, refreshed each tick).
+        Returns a handle for :meth:`clear_external_force`.
+        """
+        f = np.asarray(force_world, dtype=float)
+        if f.shape != (3,) or not np.all(np.isfinite(f)):
+            raise ConfigError(f"force_world must be a finite 3-vector [N]; got {force_world!r}")
+        bid = self._body_id(body)
+        d = self._data
+        if point_world is None:
+            p = d.site_xpos[self._ee_site].copy() if body is None else d.xipos[bid].copy()
+        else:
+            p = np.asarray(point_world, dtype=float)
+            if p.shape != (3,) or not np.all(np.isfinite(p)):
+                raise ConfigError(f"point_world must be a finite 3-vector [m]; got {point_world!r}")
+        R = d.xmat[bid].reshape(3, 3)
+        local = R.T @ (p - d.xpos[bid])
+        handle = self._next_force
+        self._next_force += 1
+        self._forces[handle] = _AppliedForce(bid, f.copy(), local)
+        self._apply_forces()
+        return handle
+
+    def clear_external_force(self, handle: int | None = None) -> None:
+        """Remove one applied force (by handle) or all of them."""
+        if handle is None:
+            self._forces.clear()
+        elif handle in self._forces:
+            del self._forces[handle]
+        else:
+            raise ConfigError(f"no applied force with handle {handle!r}; active: {sorted(self._forces)}")
+        self._apply_forces()
+
+    def _apply_forces(self) -> None:
+        d = self._data
+        xfrc = self._xfrc
+        xfrc[:] = 0.0
+        for f in self._forces.values():
+            b = f.body
+            p = d.xpos[b] + d.xmat[b].reshape(3, 3) @ f.point_local
+            xfrc[b, :3] += f.force
+            xfrc[b, 3:] += np.cross(p - d.xipos[b], f.force)
+
+
+def _check_timing(timestep: float, control_period: float) -> tuple[float, float, int]:
+    for name, value in (("timestep", timestep), ("control_period", control_period)):
+        if not isinstance(value, (int, float, np.floating)) or not math.isfinite(value) or value <= 0:
+            raise ConfigError(f"{name} must be a positive number of seconds; got {value!r}")
+    ratio = control_period / timestep
+    substeps = round(ratio)
+    if substeps < 1 or abs(ratio - substeps) > 1e-9 * ratio:
+        raise ConfigError(
+            f"control_period ({control_period!r} s) must be an integer multiple of timestep ({timestep!r} s); "
+            f"got a ratio of {ratio:.6g}"
+        )
+    return float(timestep), float(control_period), int(substeps)
+
+
+def _state_vector(value: npt.ArrayLike, n: int, name: str) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as e:
+        raise ConfigError(f"{name} must be a numeric ({n},) array; got {value!r}") from e
+    if arr.shape != (n,) or not np.all(np.isfinite(arr)):
+        raise ConfigError(f"{name} must be a finite ({n},) array; got shape {arr.shape}: {arr.tolist()}")
+    return arr
+
+
+def _as_index(idx: np.ndarray) -> slice | np.ndarray:
+    """A slice when the indices are contiguous and increasing (views and fast assignment), else the array."""
+    idx = np.asarray(idx, dtype=np.intp)
+    if idx.size and np.all(np.diff(idx) == 1):
+        return slice(int(idx[0]), int(idx[-1]) + 1)
+    return idx
+
+
+def _subtree(m: mujoco.MjModel, root: int) -> np.ndarray:
+    """Body ids of the subtree rooted at ``root`` (MuJoCo orders parents before children)."""
+    inside = np.zeros(m.nbody, dtype=bool)
+    inside[root] = True
+    for b in range(root + 1, m.nbody):
+        inside[b] = inside[m.body_parentid[b]]
+    return np.flatnonzero(inside).astype(np.int64)
