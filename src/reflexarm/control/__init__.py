@@ -4,17 +4,23 @@ reaction (13) and the composed :class:`Controller`. Never imports :mod:`reflexar
 from reflexarm.control.collision import CollisionDetector
 from reflexarm.control.controller import MODES, REACTIONS, Controller
 from reflexarm.control.impedance import ImpedanceGains, JointImpedanceController, modal_damping
+from reflexarm.control.modes import CONTROL_MODES, ControlMode, ModeSchedule, ModeSupervisor, ModeTransition
 from reflexarm.control.momentum_observer import MomentumObserver
 from reflexarm.control.observer import DisturbanceObserver
 
 __all__ = [
+    "CONTROL_MODES",
     "MODES",
     "REACTIONS",
     "CollisionDetector",
+    "ControlMode",
     "Controller",
     "DisturbanceObserver",
     "ImpedanceGains",
     "JointImpedanceController",
+    "ModeSchedule",
+    "ModeSupervisor",
+    "ModeTransition",
     "MomentumObserver",
     "modal_damping",
 ]

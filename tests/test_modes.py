@@ -1,0 +1,259 @@
+"""The modes of Fig. 3 and the supervisor: closed loops (3), (10), (11) on an exact plant, automatic switch
+on a link collision, transition log, bumpless switching."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from pinsim import RigidBodyPlant
+from reflexarm.control import CONTROL_MODES, Controller, ModeSchedule, ModeSupervisor
+from reflexarm.errors import ConfigError
+from reflexarm.robots import CoulombViscousFriction
+from reflexarm.signals import Measurement, Reference
+
+DT = 1e-3
+
+
+def frictionless(robot):
+    return robot.with_friction(CoulombViscousFriction.zeros(robot.n))
+
+
+class WrenchPlant(RigidBodyPlant):
+    """The exact ABA plant with a force on the end effector (beyond the wrist sensor) and on a link.
+
+    ``ee_force(t)``: force [N] in the sensor frame, applied at the sensor origin; it is reported by the
+    wrist sensor. ``link_torque(t)``: a joint torque [Nm] from a contact on the structure, not measured.
+    """
+
+    def __init__(self, robot, ee_force=None, link_torque=None, **kw):
+        super().__init__(robot, substeps=2, **kw)
+        self.fid = robot.sensor_frame_id
+        self.ee_force = ee_force or (lambda t: np.zeros(3))
+        self.link_torque = link_torque or (lambda t: np.zeros(robot.n))
+
+    def _f(self, t, q, dq, tau):
+        J = pin.computeFrameJacobian(self.model, self.data, q, self.fid, pin.LOCAL)
+        total = tau + J[:3].T @ self.ee_force(t) + self.link_torque(t)
+        return dq, pin.aba(self.model, self.data, q, dq, total)
+
+    def measure(self):
+        m = super().measure()
+        return m._replace(wrench=np.concatenate([self.ee_force(self.t), np.zeros(3)]))
+
+
+def run(plant, ctl, q_d, n_steps):
+    ref = Reference.hold(q_d)
+    cmds, qs = [], []
+    for _ in range(n_steps):
+        m = plant.measure()
+        cmd = ctl.step(m, ref)
+        plant.step(cmd.tau)
+        cmds.append(cmd)
+        qs.append(m.q)
+    return np.array(qs), cmds
+
+
+def heavier(robot, factor=1.15):
+    """A true arm 15 % heavier than the model: the model error delta of (3)."""
+    return frictionless(robot).with_inertial_parameters(robot.inertial_parameters() * factor)
+
+
+K = 150.0
+F_EE = np.array([0.0, -30.0, 0.0])  # 30 N along the tool axis, into the end effector (sensor frame)
+
+
+@pytest.mark.parametrize("mode", list(CONTROL_MODES))
+def test_closed_loop_of_each_mode_under_ee_force(atlas, mode):
+    # Fig. 3 / eqs. (3), (10), (11): static equilibrium under a constant end-effector force with a model
+    # error delta (15 % heavier arm, exact otherwise, no friction, no noise).
+    model = frictionless(atlas)
+    true = heavier(atlas)
+    q_d = atlas.home
+    plant = WrenchPlant(true, ee_force=lambda t: F_EE)
+    plant.reset(q_d)
+    ctrl = Controller(model, stiffness=K, damping_ratio=0.7, observer_gain=10, threshold=None, switch_time=0.0)
+    sup = ModeSupervisor(ctrl, mode=mode)
+    qs, cmds = run(plant, sup, q_d, 4000)
+    q = qs[-1]
+    J = true.compute_frame_jacobian(q)
+    tau_ee = J[:3].T @ F_EE
+    # delta: what the model misses statically, g(q) - g_hat(q)
+    delta = -(true.compute_gravity(q) - model.compute_gravity(q))
+    lhs = K * (q - q_d)
+    # tolerance: 0.3 Nm = 1 % of the largest load torque; the residual's discretisation bias at rest is
+    # far below it, the remaining motion after 4 s (10 observer time constants) too.
+    atol = 0.3
+    if mode == "compliant":  # (3): K(q - q_d) = tau_ext + delta
+        np.testing.assert_allclose(lhs, tau_ee + delta, atol=atol)
+    elif mode == "precise_stiff":  # (10): K(q - q_d) = 0, the residual carries tau_ext + delta
+        np.testing.assert_allclose(lhs, 0.0, atol=atol)
+        np.testing.assert_allclose(cmds[-1].residual, tau_ee + delta, atol=atol)
+    else:  # (11): K(q - q_d) = tau_ext,EE, the residual carries delta only
+        np.testing.assert_allclose(lhs, tau_ee, atol=atol)
+        np.testing.assert_allclose(cmds[-1].residual, delta, atol=atol)
+    assert cmds[-1].mode == mode
+    assert np.abs(tau_ee).max() > 5 and np.abs(delta).max() > 1  # the test has something to show
+
+
+def test_link_collision_switches_to_compliant_and_is_logged(atlas):
+    # precise_ee_compliant is stiff against link contacts; a push on the structure is detected and the
+    # supervisor's controller (reaction "compliant") ramps kappa_eps to 0: the arm yields as in (3).
+    robot = frictionless(atlas)
+    push = np.zeros(robot.n)
+    push[1] = 20.0
+    t0 = 0.5
+    plant = WrenchPlant(robot, link_torque=lambda t: push if t >= t0 else np.zeros(robot.n))
+    plant.reset(robot.home)
+    ctrl = Controller(robot, stiffness=K, observer_gain=10, threshold=11.0, reaction="compliant", switch_time=0.1)
+    sup = ModeSupervisor(ctrl, mode="precise_ee_compliant")
+    qs, cmds = run(plant, sup, robot.home, 3000)
+    modes = [c.mode for c in cmds]
+    assert modes[0] == "precise_ee_compliant" and modes[-1] == "compliant"
+    tr = sup.transitions
+    assert [(x.from_mode, x.to_mode, x.cause) for x in tr] == [
+        ("", "precise_ee_compliant", "task"),
+        ("precise_ee_compliant", "compliant", "collision"),
+    ]
+    assert tr[1].joints == (1,)
+    # first-order residual reaching zeta = 11 of 20 Nm with k_o = 10: t = -ln(1 - 11/20)/10 = 0.080 s
+    # (tolerance 5 ms: the 1 ms tick plus the arm's own small motion feeding back into the residual)
+    assert abs(tr[1].t - t0 - (-np.log(1 - 11 / 20) / 10)) < 0.005
+    # after the switch the arm is compliant: K dq = tau_ext (3), to 1 % of the push (exact model)
+    np.testing.assert_allclose(K * (qs[-1] - robot.home), push, atol=0.2)
+    # the task cannot re-select a precise mode while the reaction is latched
+    with pytest.raises(ConfigError) as e:
+        sup.select("precise_stiff")
+    assert "cannot select mode 'precise_stiff': a collision at t = 0.5" in str(e.value)
+    assert "call acknowledge_collision() first" in str(e.value)
+    records = sup.transitions_as_records()
+    assert records[1] == {"t": tr[1].t, "from": "precise_ee_compliant", "to": "compliant", "cause": "collision",
+                          "joints": [1]}
+    sup.acknowledge_collision()
+    assert sup.mode == "precise_ee_compliant" and not sup.collision_latched
+
+
+def test_link_collision_with_gravity_reaction(atlas):
+    robot = frictionless(atlas)
+    push = np.zeros(robot.n)
+    push[0] = 20.0
+    plant = WrenchPlant(robot, link_torque=lambda t: push if t >= 0.3 else np.zeros(robot.n))
+    plant.reset(robot.home)
+    ctrl = Controller(robot, stiffness=K, observer_gain=10, threshold=11.0, reaction="gravity")
+    sup = ModeSupervisor(ctrl, mode="precise_stiff")
+    qs, cmds = run(plant, sup, robot.home, 600)
+    assert sup.transitions[-1].to_mode == "gravity_compensation" and sup.transitions[-1].cause == "collision"
+    i = next(k for k, c in enumerate(cmds) if c.mode == "gravity_compensation")
+    np.testing.assert_allclose(cmds[i + 1].tau, robot.compute_gravity(qs[i + 1]), atol=1e-9)  # eq. (13)
+
+
+def test_detection_without_reaction_is_logged_and_mode_kept(atlas):
+    robot = frictionless(atlas)
+    push = np.zeros(robot.n)
+    push[0] = 20.0
+    plant = WrenchPlant(robot, link_torque=lambda t: push if t >= 0.3 else np.zeros(robot.n))
+    plant.reset(robot.home)
+    ctrl = Controller(robot, stiffness=K, observer_gain=10, threshold=11.0, reaction="none")
+    sup = ModeSupervisor(ctrl, mode="compliant")
+    _, cmds = run(plant, sup, robot.home, 600)
+    assert cmds[-1].mode == "compliant"
+    assert [(x.from_mode, x.to_mode, x.cause) for x in sup.transitions] == [
+        ("", "compliant", "task"),
+        ("compliant", "compliant", "collision"),
+    ]
+
+
+def test_schedule_switches_modes_per_task_without_torque_jump(atlas):
+    # a task schedule: compliant -> precise_stiff -> precise_ee_compliant, with a model error and an EE
+    # force present, so every switch changes what is compensated. Bumpless: kappa_eps is ramped over
+    # switch_time, kappa_ext only enters the observer's integrand, so no tick's torque jumps.
+    model = frictionless(atlas)
+    plant = WrenchPlant(heavier(atlas), ee_force=lambda t: F_EE)
+    plant.reset(atlas.home)
+    ctrl = Controller(model, stiffness=K, observer_gain=10, threshold=None, switch_time=0.1)
+    sup = ModeSupervisor(ctrl, schedule=[(0.0, "compliant"), (1.0, "precise_stiff"), (2.0, "precise_ee_compliant")])
+    _, cmds = run(plant, sup, atlas.home, 3000)
+    assert [(x.to_mode, x.cause) for x in sup.transitions] == [
+        ("compliant", "task"),
+        ("precise_stiff", "task"),
+        ("precise_ee_compliant", "task"),
+    ]
+    # at the first tick at or after each start (the test plant's clock accumulates dt in floating point)
+    np.testing.assert_allclose([x.t for x in sup.transitions], [0.0, 1.0, 2.0], atol=DT * 1.01)
+    taus = np.array([c.tau for c in cmds])
+    jumps = np.abs(np.diff(taus, axis=0))
+    residual = np.abs(cmds[999].residual).max()
+    assert residual > 5.0  # there is something to switch in (the EE load plus delta)
+    # largest tick-to-tick torque change around the switches, against the steady sampling noise of the
+    # loop (none here: exact plant) plus the ramp: 1/100 of the compensated torque per tick at most,
+    # doubled for the arm's own motion during the ramp
+    for k in (1000, 2000):
+        assert jumps[k - 5 : k + 150].max() < 2 * residual / 100 + 0.05, (k, jumps[k - 5 : k + 150].max())
+    # and an instantaneous switch (switch_time = 0) does jump: the ramp is what makes it bumpless
+    plant.reset(atlas.home)
+    ctrl0 = Controller(model, stiffness=K, observer_gain=10, threshold=None, switch_time=0.0)
+    sup0 = ModeSupervisor(ctrl0, schedule=[(0.0, "compliant"), (1.0, "precise_stiff")])
+    _, cmds0 = run(plant, sup0, atlas.home, 1100)
+    jump0 = np.abs(np.diff([c.tau for c in cmds0], axis=0))[995:1005].max()
+    assert jump0 > 0.5 * residual
+
+
+def test_fault_and_recovery_are_logged(atlas):
+    ctrl = Controller(atlas, threshold=None)
+    sup = ModeSupervisor(ctrl, mode="precise_stiff")
+    good = Measurement(0.0, atlas.home.copy(), np.zeros(7), np.zeros(7), np.zeros(6), np.array([0, 0, -9.81]))
+    ref = Reference.hold(atlas.home)
+    sup.step(good, ref)
+    bad = good._replace(t=0.001, q=np.full(7, np.nan))
+    assert sup.step(bad, ref).mode == "fault"
+    sup.step(good._replace(t=0.002), ref)
+    assert [(x.to_mode, x.cause) for x in sup.transitions] == [
+        ("precise_stiff", "task"),
+        ("fault", "fault"),
+        ("precise_stiff", "recovered"),
+    ]
+    sup.reset()
+    assert sup.transitions == [] and sup.mode == "precise_stiff"
+
+
+def test_modes_table_matches_fig3():
+    m = CONTROL_MODES
+    assert (m["compliant"].kappa_eps, m["precise_stiff"].kappa_eps, m["precise_ee_compliant"].kappa_eps) == (0, 1, 1)
+    assert (m["precise_stiff"].kappa_ext, m["precise_ee_compliant"].kappa_ext) == (0, 1)
+    assert [(x.accurate, x.ee_compliant, x.link_compliant) for x in m.values()] == [
+        (False, True, True),
+        (True, False, False),
+        (True, True, False),
+    ]
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(mode="stiff"), "unknown control mode 'stiff'; modes are: compliant, precise_stiff, precise_ee_compliant"),
+        (dict(schedule=[]), "a mode schedule needs at least one (t_start, mode) entry"),
+        (dict(schedule=[(0.0, "compliant"), (0.0, "precise_stiff")]), "mode schedule times must be strictly"),
+        (dict(schedule=[(0.0, "soft")]), "unknown control mode 'soft'"),
+        (dict(schedule=[0.0]), "mode schedule entries must be (t_start, mode) pairs; got 0.0"),
+    ],
+)
+def test_bad_modes_raise_named_errors(atlas, kwargs, message):
+    with pytest.raises(ConfigError) as e:
+        ModeSupervisor(Controller(atlas), **kwargs)
+    assert message in str(e.value)
+
+
+def test_switch_values_other_than_0_1_are_rejected(atlas):
+    ctrl = Controller(atlas)
+    for name in ("kappa_eps", "kappa_ext", "kappa_f"):
+        with pytest.raises(ConfigError, match=f"{name} must be 0 or 1; got 2"):
+            ctrl.set_switches(**{name: 2})
+    with pytest.raises(ConfigError, match="controller must be a reflexarm Controller; got str"):
+        ModeSupervisor("ctrl")  # type: ignore[arg-type]
+
+
+def test_schedule_mode_at():
+    s = ModeSchedule([(0.0, "compliant"), (1.5, "precise_stiff")])
+    assert [s.mode_at(t) for t in (-1.0, 0.0, 1.499, 1.5, 9.0)] == [
+        "compliant", "compliant", "compliant", "precise_stiff", "precise_stiff"]
