@@ -128,8 +128,13 @@ def test_link_collision_switches_to_compliant_and_is_logged(atlas):
     assert "cannot select mode 'precise_stiff': a collision at t = 0.5" in str(e.value)
     assert "call acknowledge_collision() first" in str(e.value)
     records = sup.transitions_as_records()
-    assert records[1] == {"t": tr[1].t, "from": "precise_ee_compliant", "to": "compliant", "cause": "collision",
-                          "joints": [1]}
+    assert records[1] == {
+        "t": tr[1].t,
+        "from": "precise_ee_compliant",
+        "to": "compliant",
+        "cause": "collision",
+        "joints": [1],
+    }
     sup.acknowledge_collision()
     assert sup.mode == "precise_ee_compliant" and not sup.collision_latched
 
@@ -256,4 +261,9 @@ def test_switch_values_other_than_0_1_are_rejected(atlas):
 def test_schedule_mode_at():
     s = ModeSchedule([(0.0, "compliant"), (1.5, "precise_stiff")])
     assert [s.mode_at(t) for t in (-1.0, 0.0, 1.499, 1.5, 9.0)] == [
-        "compliant", "compliant", "compliant", "precise_stiff", "precise_stiff"]
+        "compliant",
+        "compliant",
+        "compliant",
+        "precise_stiff",
+        "precise_stiff",
+    ]
