@@ -1,8 +1,25 @@
-"""The *true* world: a MuJoCo plant built from the robot's own file, scenes, noisy sensors, a closed-loop
-runner and the recorded :class:`Trace`."""
+"""The *true* world: a MuJoCo plant built from the robot's own file, scenes (padded cinderblock, elbow
+push, end-effector force step), noisy sensors, a closed-loop runner and the recorded :class:`Trace`."""
 
+from reflexarm.sim.cinderblock import Cinderblock
+from reflexarm.sim.elbow_stick import ElbowStick
+from reflexarm.sim.end_effector_force import EndEffectorForce
 from reflexarm.sim.noise import PAPER_NOISE, SensorNoise
 from reflexarm.sim.plant import Plant
+from reflexarm.sim.runner import run_closed_loop
 from reflexarm.sim.scene import Scene
+from reflexarm.sim.trace import Trace
+from reflexarm.sim.trajectory import JointTrajectory
 
-__all__ = ["PAPER_NOISE", "Plant", "Scene", "SensorNoise"]
+__all__ = [
+    "PAPER_NOISE",
+    "Cinderblock",
+    "ElbowStick",
+    "EndEffectorForce",
+    "JointTrajectory",
+    "Plant",
+    "Scene",
+    "SensorNoise",
+    "Trace",
+    "run_closed_loop",
+]
