@@ -208,6 +208,10 @@ def build_robot_spec(
             geom.contype = ARM_CONTYPE
             geom.conaffinity = ARM_CONAFFINITY
     _set_friction(spec, joint_names, true_friction, timestep)
+    # Scene objects at rest may sleep (MuJoCo islands: a resting cinderblock costs nothing until the arm
+    # touches it, which wakes it); the arm itself never sleeps, its torques change every tick.
+    spec.joint(joint_names[0]).parent.sleep = mujoco.mjtSleepPolicy.mjSLEEP_NEVER
+    spec.option.enableflags |= int(mujoco.mjtEnableBit.mjENBL_SLEEP)
     sites = _ensure_sites(spec, robot, joint_names)
     sensor_site = sites[robot.sensor_frame]
     spec.add_sensor(
