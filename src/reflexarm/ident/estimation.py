@@ -1,0 +1,597 @@
+"""Weighted least squares for the base and friction parameters, eqs. (14)-(19): combined and sequential.
+
+The model (14) with tau_ext = 0 (or removed with the wrist wrench) and the friction regressor (15):
+
+    tau_m = Phi_b(q, dq, ddq) beta_b + diag(dq) d_v + diag(sgn dq) mu_C [+ tau_off]
+
+* **combined** (the paper's beta_I, their earlier work [24]): beta_b, d_v, mu_C (and the offsets)
+  estimated together in one weighted least-squares problem.
+* **sequential** (the paper's beta_II): d_v, mu_C come from the single-joint constant-velocity
+  experiments (:mod:`reflexarm.ident.joint_friction`); the friction-corrected torque (16)-(17)
+  ``tau_m,f = tau_m - Phi_f (d_v, mu_C)`` is then explained by Phi_b beta_b alone (45 instead of 59
+  unknowns on the Atlas arm).
+
+Both solve (18), ``beta = (F^T Sigma^-1 F)^-1 F^T Sigma^-1 b``, with F and b stacked over the samples as in
+(19) and ``Sigma = diag(sigma_1^2, ..., sigma_n^2)`` repeated per sample: each joint's rows are weighted
+by its torque noise variance. The variances are given (e.g. the sensor's) or estimated from the
+residuals of an ordinary least-squares pass (``noise_variance="estimate"``, the usual two-step
+weighting of Gautier and Swevers). The rows are reduced chunk by chunk to per-joint information matrices
+(see ``_GramAccumulator``), so memory stays bounded for long logs.
+
+Offsets (``offset=True``): a constant torque per joint, a friction-model extra for a torque sensor's
+bias or an asymmetric friction (the Panda's identified friction law has one, see Gaz et al. 2019). In
+the sequential method the offsets are estimated together with beta_b unless the given friction has
+them.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+import scipy.linalg
+
+from reflexarm.errors import IdentificationError
+from reflexarm.ident.base_parameters import (
+    BaseParameters,
+    compute_base_parameters,
+    condition_number,
+    warn_if_ill_conditioned,
+)
+from reflexarm.ident.logs import RobotLog
+from reflexarm.ident.regressor import BatchRegressor, compute_friction_regressor
+from reflexarm.robots.friction import DEFAULT_VELOCITY_BAND, CoulombViscousFriction
+from reflexarm.robots.robot_model import RobotModel
+
+__all__ = [
+    "METHODS",
+    "DynamicsIdentification",
+    "FrictionParameters",
+    "TorqueValidation",
+    "identify_dynamics",
+    "validate_model",
+]
+
+#: The two estimation methods of Sec. II-D.
+METHODS = ("sequential", "combined")
+
+#: Condition number of the column-normalised weighted regressor above which identification warns.
+#: Column normalisation makes the number independent of parameter units; above ~1e3 a 1 % torque error
+#: can move some parameter combination by more than 10 times its share of the torque.
+DEFAULT_CONDITION_LIMIT = 1e3
+
+_CHUNK = 10_000
+
+
+@dataclass(frozen=True)
+class FrictionParameters:
+    """Coulomb + viscous (+ offset) friction per joint, eq. (15), exact sign.
+
+    Attributes:
+        viscous: d_v [Nms/rad] (n,).
+        coulomb: mu_C [Nm] (n,).
+        offset: constant torque [Nm] (n,) or None.
+    """
+
+    viscous: np.ndarray
+    coulomb: np.ndarray
+    offset: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        v = np.asarray(self.viscous, dtype=float).reshape(-1)
+        c = np.asarray(self.coulomb, dtype=float).reshape(-1)
+        if v.shape != c.shape:
+            raise IdentificationError(f"viscous {v.shape} and coulomb {c.shape} must have one value per joint")
+        object.__setattr__(self, "viscous", v)
+        object.__setattr__(self, "coulomb", c)
+        if self.offset is not None:
+            o = np.asarray(self.offset, dtype=float).reshape(-1)
+            if o.shape != v.shape:
+                raise IdentificationError(f"offset {o.shape} must have one value per joint like viscous {v.shape}")
+            object.__setattr__(self, "offset", o)
+
+    @property
+    def n(self) -> int:
+        return int(self.viscous.size)
+
+    @classmethod
+    def from_model(cls, friction: CoulombViscousFriction) -> FrictionParameters:
+        """From a :class:`CoulombViscousFriction` (no offsets)."""
+        return cls(friction.viscous.copy(), friction.coulomb.copy())
+
+    def parameters(self) -> np.ndarray:
+        """(d_v, mu_C[, offset]) stacked, the column order of :func:`compute_friction_regressor`."""
+        parts = [self.viscous, self.coulomb] + ([self.offset] if self.offset is not None else [])
+        return np.concatenate(parts)
+
+    def compute_torque(self, dq: npt.ArrayLike) -> np.ndarray:
+        """tau_f = d_v dq + mu_C sgn(dq) [+ offset], exact sign, for (n,) or (N, n) velocities [Nm]."""
+        dq = np.asarray(dq, dtype=float)
+        out = self.viscous * dq + self.coulomb * np.sign(dq)
+        return out + self.offset if self.offset is not None else out
+
+    def to_model(self, velocity_band: float = DEFAULT_VELOCITY_BAND) -> CoulombViscousFriction:
+        """The controller's friction model (negative coefficients clipped to 0; offsets are not part of it)."""
+        return CoulombViscousFriction(
+            np.maximum(self.coulomb, 0.0), np.maximum(self.viscous, 0.0), velocity_band=velocity_band
+        )
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "viscous": self.viscous.tolist(),
+            "coulomb": self.coulomb.tolist(),
+            "offset": None if self.offset is None else self.offset.tolist(),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, object]) -> FrictionParameters:
+        try:
+            return cls(
+                np.asarray(d["viscous"], dtype=float),
+                np.asarray(d["coulomb"], dtype=float),
+                None if d.get("offset") is None else np.asarray(d["offset"], dtype=float),
+            )
+        except (KeyError, TypeError, ValueError) as e:
+            raise IdentificationError(f"malformed friction description: {e}") from e
+
+
+@dataclass(frozen=True)
+class DynamicsIdentification:
+    """Result of :func:`identify_dynamics`: base parameters + friction, and how they were obtained.
+
+    Attributes:
+        method: ``"sequential"`` (beta_II) or ``"combined"`` (beta_I).
+        robot_name: the robot's name; joint_names: its joints.
+        base: the base-parameter map used.
+        beta_b: identified base parameters (n_b,).
+        friction: friction parameters (given ones for ``sequential``, identified ones for ``combined``).
+        beta_std: standard deviations of the estimated parameters (beta_b, then the estimated friction
+            columns), from (F^T Sigma^-1 F)^-1 with the residual variance.
+        noise_variance: sigma_j^2 per joint used in Sigma [Nm^2].
+        condition_number: of the column-normalised weighted regressor of the estimated parameters.
+        n_samples: number of samples used.
+        residual_rms: RMS of the training residual per joint [Nm].
+        notes: what was done (weights, warnings).
+        timings: wall time of the regressor assembly and of the solve [s].
+    """
+
+    method: str
+    robot_name: str
+    joint_names: tuple[str, ...]
+    base: BaseParameters
+    beta_b: np.ndarray
+    friction: FrictionParameters
+    beta_std: np.ndarray
+    noise_variance: np.ndarray
+    condition_number: float
+    n_samples: int
+    residual_rms: np.ndarray
+    notes: tuple[str, ...] = field(default=())
+    timings: dict[str, float] = field(default_factory=dict, compare=False)
+
+    @property
+    def n(self) -> int:
+        return self.base.n_joints
+
+    def compute_torque(
+        self,
+        robot: RobotModel | BatchRegressor,
+        q: npt.ArrayLike,
+        dq: npt.ArrayLike,
+        ddq: npt.ArrayLike,
+    ) -> np.ndarray:
+        """Model torque Phi_b beta_b + tau_f(dq) for (N, n) samples [Nm] (the robot gives the kinematics)."""
+        reg = robot if isinstance(robot, BatchRegressor) else BatchRegressor(robot)
+        Q = np.atleast_2d(np.asarray(q, dtype=float))
+        DQ = np.atleast_2d(np.asarray(dq, dtype=float))
+        DDQ = np.atleast_2d(np.asarray(ddq, dtype=float))
+        out = np.empty(Q.shape)
+        for sl, Y in reg.iter_chunks(Q, DQ, DDQ, _CHUNK):
+            out[sl] = self.base.select(Y) @ self.beta_b
+        return out + self.friction.compute_torque(DQ)
+
+    def standard_parameters(self, nominal: npt.ArrayLike | None = None) -> np.ndarray:
+        """A standard (10 n) inertial vector consistent with beta_b, nearest to ``nominal``."""
+        return self.base.standard_from_base(self.beta_b, nominal)
+
+    def to_robot_model(self, robot: RobotModel, *, velocity_band: float | None = None) -> RobotModel:
+        """``robot`` with inertias consistent with beta_b (nearest to its own) and the identified friction.
+
+        The rigid-body torques of the returned model equal Phi_b beta_b for every motion. Friction
+        coefficients below 0 are clipped to 0; offsets are not part of :class:`CoulombViscousFriction`
+        and are dropped (a constant sensor bias is not friction the controller should compensate).
+        """
+        if robot.n != self.n:
+            raise IdentificationError(f"identified model has {self.n} joints; robot {robot.name!r} has {robot.n}")
+        pi = self.standard_parameters(robot.inertial_parameters())
+        band = robot.friction.velocity_band if velocity_band is None else velocity_band
+        return robot.with_inertial_parameters(pi).with_friction(self.friction.to_model(band))
+
+    # ------------------------------------------------------------------ serialisation
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "method": self.method,
+            "robot_name": self.robot_name,
+            "joint_names": list(self.joint_names),
+            "base": self.base.to_dict(),
+            "beta_b": self.beta_b.tolist(),
+            "base_names": self.base.base_names(),
+            "friction": self.friction.to_dict(),
+            "beta_std": self.beta_std.tolist(),
+            "noise_variance": self.noise_variance.tolist(),
+            "condition_number": self.condition_number,
+            "n_samples": self.n_samples,
+            "residual_rms": self.residual_rms.tolist(),
+            "notes": list(self.notes),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, object]) -> DynamicsIdentification:
+        try:
+            base = BaseParameters.from_dict(d["base"])  # type: ignore[arg-type]
+            return cls(
+                method=str(d["method"]),
+                robot_name=str(d["robot_name"]),
+                joint_names=tuple(str(x) for x in d["joint_names"]),  # type: ignore[attr-defined]
+                base=base,
+                beta_b=np.asarray(d["beta_b"], dtype=float),
+                friction=FrictionParameters.from_dict(d["friction"]),  # type: ignore[arg-type]
+                beta_std=np.asarray(d.get("beta_std", []), dtype=float),
+                noise_variance=np.asarray(d["noise_variance"], dtype=float),
+                condition_number=float(d.get("condition_number", np.nan)),  # type: ignore[arg-type]
+                n_samples=int(d.get("n_samples", 0)),  # type: ignore[call-overload]
+                residual_rms=np.asarray(d.get("residual_rms", []), dtype=float),
+                notes=tuple(str(x) for x in d.get("notes", [])),  # type: ignore[attr-defined]
+            )
+        except (KeyError, TypeError, ValueError) as e:
+            raise IdentificationError(f"malformed identification result: {e}") from e
+
+
+# ---------------------------------------------------------------------------------------------- solve
+class _GramAccumulator:
+    """Row-chunked weighted least squares per joint: keeps G_j = [A_j b_j]^T [A_j b_j], (p+1) x (p+1).
+
+    Since Sigma is diagonal per joint, the weighted problem of any weights is ``sum_j G_j / sigma_j^2``,
+    so one pass over the data serves the unweighted pass, the weighted solve and the residual
+    statistics (``|A_j x - b_j|^2 = (x, -1)^T G_j (x, -1)``). The solve equilibrates the columns
+    (unit diagonal, which removes the parameters' units from the conditioning) and uses a Cholesky
+    factor; its relative accuracy is about eps * cond^2 of the equilibrated regressor, 1e-10 at the
+    warning limit cond = 1e3. (A chunked QR would be accurate to eps * cond but costs 10-100x more
+    on a shared machine, where multi-threaded LAPACK QR of tall matrices degrades badly.)
+    """
+
+    def __init__(self, n: int, p: int) -> None:
+        self.n = n
+        self.p = p
+        self.G = np.zeros((n, p + 1, p + 1))
+        self.rows = 0
+
+    def add(self, A: np.ndarray, b: np.ndarray) -> None:
+        """A: (m, n, p) rows per joint; b: (m, n)."""
+        for j in range(self.n):
+            M = np.column_stack([A[:, j, :], b[:, j]])
+            self.G[j] += M.T @ M
+        self.rows += A.shape[0]
+
+    def solve(self, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        """(x, equilibrated (A^T W A) root R, weighted residual norm) of min sum_j w_j^2 |A_j x - b_j|^2."""
+        p = self.p
+        G = np.einsum("j,jab->ab", weights**2, self.G)
+        AtA, Atb, btb = G[:p, :p], G[:p, p], G[p, p]
+        d = np.sqrt(np.diag(AtA))
+        if d.size == 0 or d.min() <= 1e-150 or d.min() <= d.max() * 1e-13:
+            k = int(np.argmin(d))
+            raise IdentificationError(
+                f"the regressor is rank deficient: parameter column {k} is not excited by the data "
+                f"(its norm is {d[k] / max(d.max(), 1e-300):.1e} of the largest); use a richer trajectory"
+            )
+        S = AtA / np.outer(d, d)
+        try:
+            L = np.linalg.cholesky(S)
+        except np.linalg.LinAlgError as e:
+            raise IdentificationError(
+                "the regressor is rank deficient: some parameter combinations are not excited by the data "
+                f"(smallest eigenvalue of the normalised information matrix {np.linalg.eigvalsh(S)[0]:.1e}); "
+                "use a richer trajectory"
+            ) from e
+        y = scipy.linalg.cho_solve((L, True), Atb / d)
+        x = y / d
+        res2 = max(float(btb - 2 * x @ Atb + x @ AtA @ x), 0.0)
+        return x, L.T * d[None, :], float(np.sqrt(res2))
+
+    def residual_ss(self, x: np.ndarray) -> np.ndarray:
+        """sum over samples of (A_j x - b_j)^2 per joint."""
+        y = np.r_[x, -1.0]
+        return np.maximum(np.einsum("a,jab,b->j", y, self.G, y), 0.0)
+
+
+def _rhs(robot: RobotModel, log: RobotLog) -> np.ndarray:
+    """b of (19): measured torque plus the external torque of the wrist wrench, eq. (14)."""
+    tau = log.tau.copy()
+    if log.wrench is not None:
+        for k in range(len(log)):
+            tau[k] += robot.compute_frame_jacobian(log.q[k]).T @ log.wrench[k]
+    return tau
+
+
+def identify_dynamics(
+    robot: RobotModel,
+    log: RobotLog | Sequence[RobotLog],
+    *,
+    method: Literal["sequential", "combined"] = "sequential",
+    friction: FrictionParameters | CoulombViscousFriction | None = None,
+    offset: bool = False,
+    noise_variance: npt.ArrayLike | Literal["estimate"] | None = "estimate",
+    base: BaseParameters | None = None,
+    condition_limit: float = DEFAULT_CONDITION_LIMIT,
+    progress: bool = False,
+) -> DynamicsIdentification:
+    """Identify beta_b (and friction) from a log by weighted least squares, eq. (18).
+
+    Args:
+        robot: the arm (kinematics; the nominal inertias are not used).
+        log: one or more preprocessed logs (with ``ddq``, see :func:`~reflexarm.ident.preprocess_log`).
+        method: ``"sequential"`` (friction fixed to ``friction``, eqs. (16)-(17)) or ``"combined"``.
+        friction: the pre-identified friction for ``sequential`` (required there, ignored otherwise).
+        offset: also estimate a constant torque per joint (see the module docstring).
+        noise_variance: sigma_j^2 per joint [Nm^2] for Sigma; ``"estimate"``: from the residuals of an
+            unweighted pass; None: unweighted (Sigma = I).
+        base: base-parameter map (default: computed from ``robot``).
+        condition_limit: warn (:class:`IllConditionedWarning`) above this condition number.
+        progress: show a progress bar over the regressor chunks.
+
+    Raises:
+        IdentificationError: unknown method, missing friction for ``sequential``, log without ddq,
+            joint count mismatch, rank-deficient regressor.
+    """
+    if method not in METHODS:
+        raise IdentificationError(f"unknown identification method {method!r}; choose one of: {', '.join(METHODS)}")
+    logs = [log] if isinstance(log, RobotLog) else list(log)
+    if not logs:
+        raise IdentificationError("no log given")
+    n = robot.n
+    for lg in logs:
+        if lg.n != n:
+            raise IdentificationError(f"{lg.source}: log has {lg.n} joints; robot {robot.name!r} has {n}")
+        if lg.ddq is None:
+            raise IdentificationError(
+                f"{lg.source}: log has no ddq; run reflexarm.ident.preprocess_log first (filtering and differentiation)"
+            )
+    fixed: FrictionParameters | None = None
+    if method == "sequential":
+        if friction is None:
+            raise IdentificationError(
+                "method 'sequential' needs the pre-identified friction (friction=...; see identify_joint_friction)"
+            )
+        fixed = FrictionParameters.from_model(friction) if isinstance(friction, CoulombViscousFriction) else friction
+        if fixed.n != n:
+            raise IdentificationError(f"friction has {fixed.n} joints; robot {robot.name!r} has {n}")
+    base = base if base is not None else compute_base_parameters(robot)
+    reg = BatchRegressor(robot)
+    nb = base.n_base
+    est_offset = offset and (fixed is None or fixed.offset is None)
+    n_fric = 0 if method == "sequential" else 2 * n
+    p = nb + n_fric + (n if est_offset else 0)
+
+    def rows(lg: RobotLog, b_all: np.ndarray, sl: slice, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        Fb = base.select(Y)  # (m, n, nb)
+        b = b_all[sl]
+        dq = lg.dq[sl]
+        parts = [Fb]
+        if method == "combined":
+            parts.append(compute_friction_regressor(dq))
+        elif fixed is not None:
+            b = b - fixed.compute_torque(dq)  # eq. (16)
+        if est_offset:
+            m = Fb.shape[0]
+            off = np.zeros((m, n, n))
+            off[:, np.arange(n), np.arange(n)] = 1.0
+            parts.append(off)
+        return np.concatenate(parts, axis=2), b
+
+    # weights: given, estimated from an unweighted pass, or none
+    given = None
+    if isinstance(noise_variance, str):
+        if noise_variance != "estimate":
+            raise IdentificationError(f"noise_variance must be per-joint variances, 'estimate' or None; got {noise_variance!r}")
+    elif noise_variance is not None:
+        given = np.broadcast_to(np.asarray(noise_variance, dtype=float), (n,)).copy()
+        if not np.all(np.isfinite(given)) or np.any(given <= 0):
+            raise IdentificationError(f"noise_variance must be positive per joint; got {given.tolist()}")
+    total = sum(len(lg) for lg in logs)
+    acc = _GramAccumulator(n, p)
+    t_reg = t_solve = 0.0
+    for lg in logs:
+        clock = time.perf_counter()
+        b_all = _rhs(robot, lg)
+        t_reg += time.perf_counter() - clock
+        chunks = _progress(reg.iter_chunks(lg.q, lg.dq, lg.ddq, _CHUNK), progress, lg)
+        while True:
+            clock = time.perf_counter()
+            try:
+                sl, Y = next(chunks)
+            except StopIteration:
+                break
+            A, b = rows(lg, b_all, sl, Y)
+            t_reg += time.perf_counter() - clock
+            clock = time.perf_counter()
+            acc.add(A, b)
+            t_solve += time.perf_counter() - clock
+    clock = time.perf_counter()
+    notes: list[str] = []
+    if given is not None:
+        sigma2 = given
+        notes.append("Sigma from the given per-joint noise variances: " + ", ".join(f"{s:.3g}" for s in sigma2) + " Nm^2")
+    elif noise_variance is None:
+        sigma2 = np.ones(n)
+        notes.append("unweighted least squares (Sigma = I)")
+    else:
+        # per-joint residual variance of an unweighted fit -> Sigma of (18)
+        x0, _, _ = acc.solve(np.ones(n))
+        sigma2 = np.maximum(acc.residual_ss(x0) / max(total - p / n, 1.0), 1e-12)
+        notes.append(
+            "Sigma from the per-joint residual variances of an unweighted pass: "
+            + ", ".join(f"{s:.3g}" for s in sigma2)
+            + " Nm^2"
+        )
+    x, R, res_norm = acc.solve(1.0 / np.sqrt(sigma2))
+    t_solve += time.perf_counter() - clock
+    # condition number of the column-normalised weighted regressor (from R: same singular values)
+    col = np.linalg.norm(R, axis=0)
+    cond = condition_number(R / np.where(col > 0, col, 1.0))
+    warn_if_ill_conditioned(cond, f"the identification regressor ({p} parameters, {total:,} samples)", condition_limit)
+    # parameter standard deviations: s^2 (R^T R)^-1 with s^2 the weighted residual variance
+    dof = max(total * n - p, 1)
+    s2 = res_norm**2 / dof
+    Rinv = scipy.linalg.solve_triangular(R, np.eye(p))
+    std = np.sqrt(s2 * np.sum(Rinv**2, axis=1))
+    residual_rms = np.sqrt(acc.residual_ss(x) / total)
+    beta_b = x[:nb]
+    k = nb
+    if method == "combined":
+        fr = FrictionParameters(x[k : k + n], x[k + n : k + 2 * n])
+        k += 2 * n
+    else:
+        assert fixed is not None
+        fr = fixed
+    if est_offset:
+        fr = replace(fr, offset=x[k : k + n])
+    return DynamicsIdentification(
+        method=method,
+        robot_name=robot.name,
+        joint_names=tuple(robot.joint_names),
+        base=base,
+        beta_b=beta_b,
+        friction=fr,
+        beta_std=std,
+        noise_variance=sigma2,
+        condition_number=cond,
+        n_samples=total,
+        residual_rms=residual_rms,
+        notes=tuple(notes),
+        timings={"regressor_s": t_reg, "solve_s": t_solve},
+    )
+
+
+def _progress(it, progress: bool, lg: RobotLog):  # type: ignore[no-untyped-def]
+    if not progress:
+        yield from it
+        return
+    from tqdm import tqdm
+
+    with tqdm(total=len(lg), desc=f"regressor {lg.source}", unit="sample", leave=False) as bar:
+        for sl, Y in it:
+            yield sl, Y
+            bar.update(sl.stop - sl.start)
+
+
+# ---------------------------------------------------------------------------------------------- validation
+@dataclass(frozen=True)
+class TorqueValidation:
+    """Measured against predicted torques on a log (ideally not the one identified on).
+
+    Attributes:
+        t: time (N,) [s]; measured, predicted: (N, n) [Nm].
+        mse: per joint [Nm^2]; rmse: per joint [Nm]; nrmse: rmse / std(measured) per joint [-].
+        pooled_rmse: over all joints and samples [Nm].
+        label: which model (e.g. ``"sequential"``).
+    """
+
+    t: np.ndarray
+    measured: np.ndarray
+    predicted: np.ndarray
+    label: str = ""
+
+    @property
+    def error(self) -> np.ndarray:
+        return self.predicted - self.measured
+
+    @property
+    def mse(self) -> np.ndarray:
+        return np.mean(self.error**2, axis=0)
+
+    @property
+    def rmse(self) -> np.ndarray:
+        return np.sqrt(self.mse)
+
+    @property
+    def nrmse(self) -> np.ndarray:
+        return self.rmse / np.maximum(self.measured.std(axis=0), 1e-300)
+
+    @property
+    def pooled_rmse(self) -> float:
+        return float(np.sqrt(np.mean(self.error**2)))
+
+    def table(self, joint_names: Sequence[str] | None = None) -> list[dict[str, object]]:
+        """Rows ``{joint, mse, rmse, nrmse, std}`` per joint."""
+        names = list(joint_names) if joint_names is not None else [str(j + 1) for j in range(self.measured.shape[1])]
+        std = self.measured.std(axis=0)
+        return [
+            {
+                "joint": names[j],
+                "mse": float(self.mse[j]),
+                "rmse": float(self.rmse[j]),
+                "nrmse": float(self.nrmse[j]),
+                "torque_std": float(std[j]),
+            }
+            for j in range(len(names))
+        ]
+
+
+def validate_model(
+    result: DynamicsIdentification,
+    robot: RobotModel,
+    log: RobotLog,
+    *,
+    states: RobotLog | None = None,
+    label: str | None = None,
+) -> TorqueValidation:
+    """Predict the torques of ``log`` with ``result`` and compare with its measured (unfiltered) torques.
+
+    Args:
+        result: an identification.
+        robot: the arm (kinematics).
+        log: the validation log; its measured torque is the reference (``log.measured_torque``).
+        states: where to take q, dq, ddq from if not from ``log`` itself (e.g. a filtered copy on a
+            uniform grid); they are interpolated to ``log.t``.
+        label: name of the model in plots and tables (default: the method).
+    """
+    if states is None:
+        if log.ddq is None:
+            raise IdentificationError(f"{log.source}: validation log has no ddq; preprocess it or pass states=")
+        q, dq, ddq = log.q, log.dq, log.ddq
+    else:
+        if states.ddq is None:
+            raise IdentificationError(f"{states.source}: states have no ddq; preprocess them first")
+        if log.t[0] < states.t[0] - 1e-9 or log.t[-1] > states.t[-1] + 1e-9:
+            raise IdentificationError(
+                f"{log.source}: validation times {log.t[0]:.4g}..{log.t[-1]:.4g} s are outside the states' "
+                f"{states.t[0]:.4g}..{states.t[-1]:.4g} s"
+            )
+        q = _interp_cols(states.t, states.q, log.t)
+        dq = _interp_cols(states.t, states.dq, log.t)
+        ddq = _interp_cols(states.t, states.ddq, log.t)
+    pred = result.compute_torque(robot, q, dq, ddq)
+    meas = log.measured_torque
+    if log.wrench is not None:
+        meas = _rhs(robot, replace(log, tau=meas, tau_raw=None))
+    return TorqueValidation(log.t.copy(), meas.copy(), pred, label if label is not None else result.method)
+
+
+def _interp_cols(t: np.ndarray, y: np.ndarray, tn: np.ndarray) -> np.ndarray:
+    return np.column_stack([np.interp(tn, t, y[:, j]) for j in range(y.shape[1])])
+
+
+def save_identification(result: DynamicsIdentification, path: str | os.PathLike[str]) -> Path:
+    """Write ``result.to_dict()`` as JSON."""
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(json.dumps(result.to_dict(), indent=1))
+    return p
