@@ -187,7 +187,10 @@ def _set_friction(
         joint = spec.joint(name)
         if friction is not None:
             joint.frictionloss = float(friction.coulomb[i])
-            joint.damping = float(friction.viscous[i])
+            # MuJoCo 4 stores damping as (linear, polynomial terms...): the override is purely viscous
+            damping = np.zeros_like(np.atleast_1d(np.asarray(joint.damping, dtype=float)))
+            damping[0] = float(friction.viscous[i])
+            joint.damping = damping if damping.size > 1 else float(damping[0])
         if np.allclose(joint.solref_friction, _DEFAULT_SOLREF) and np.allclose(joint.solimp_friction, _DEFAULT_SOLIMP):
             joint.solref_friction = solref
             joint.solimp_friction = list(FRICTION_SOLIMP)
@@ -212,6 +215,9 @@ def build_robot_spec(
     # touches it, which wakes it); the arm itself never sleeps, its torques change every tick.
     spec.joint(joint_names[0]).parent.sleep = mujoco.mjtSleepPolicy.mjSLEEP_NEVER
     spec.option.enableflags |= int(mujoco.mjtEnableBit.mjENBL_SLEEP)
+    # Never let MuJoCo silently reset the state on NaN/huge accelerations (it would restart from qpos0
+    # mid-run); the bad values stay and the plant's own check turns them into a SimulationError.
+    spec.option.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
     sites = _ensure_sites(spec, robot, joint_names)
     sensor_site = sites[robot.sensor_frame]
     spec.add_sensor(

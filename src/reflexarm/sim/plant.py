@@ -317,17 +317,14 @@ class Plant:
 
     def _fail(self, vv: float) -> None:
         d = self._data
-        what = [
-            str(w).split("_")[-1]
-            for w in (
-                mujoco.mjtWarning.mjWARN_BADQPOS,
-                mujoco.mjtWarning.mjWARN_BADQVEL,
-                mujoco.mjtWarning.mjWARN_BADQACC,
-            )
-            if d.warning[int(w)].number > 0
-        ]
+        warnings = (
+            ("positions (qpos)", mujoco.mjtWarning.mjWARN_BADQPOS),
+            ("velocities (qvel)", mujoco.mjtWarning.mjWARN_BADQVEL),
+            ("accelerations (qacc)", mujoco.mjtWarning.mjWARN_BADQACC),
+        )
+        what = [label for label, w in warnings if d.warning[int(w)].number > 0]
         if what:
-            reason = f"MuJoCo found NaN/inf/huge values in {', '.join(what)} and reset its state"
+            reason = f"MuJoCo found NaN/inf/huge values in {', '.join(what)}"
         elif not math.isfinite(vv):
             reason = "the velocity became NaN/inf"
         else:
