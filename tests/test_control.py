@@ -326,3 +326,15 @@ def test_compiled_tick_matches_numpy_reference(atlas, kappa_f, kappa_ext):
         np.testing.assert_allclose(cmd.residual, r, rtol=1e-9, atol=1e-9)
         expected = imp.compute_torque(q, dq, ref, disturbance=np.clip(r, -0.5, 0.5))
         np.testing.assert_allclose(cmd.tau, expected, rtol=1e-9, atol=1e-9)
+
+
+def test_damping_update_uses_the_full_mass_matrix(atlas):
+    # crba fills only the upper triangle; the controller must mirror it before the factorization
+    imp = JointImpedanceController(atlas, stiffness=[100, 200, 300, 150, 50, 40, 30], damping_ratio=0.7)
+    rng = np.random.default_rng(2)
+    for _ in range(5):
+        q = rng.uniform(atlas.lower_limit, atlas.upper_limit)
+        imp.update_damping(atlas.home)  # leave a different matrix in Pinocchio's workspace first
+        D = imp.update_damping(q).copy()
+        expected = modal_damping(atlas.compute_mass_matrix(q), imp.stiffness, imp.damping_ratio)
+        np.testing.assert_allclose(D, expected, rtol=1e-10, atol=1e-12)

@@ -108,3 +108,45 @@ def controller_tick(q, dq, tau_m, wrench, q_d, dq_d, g, C, p, ff, J, D, gains, o
     if not np.isfinite(out_acc):
         return NONFINITE_OUTPUT
     return n_over
+
+
+@njit(cache=True)
+def modal_damping_into(M, stiffness, damping_ratio, out):  # noqa: D103
+    # D = L U diag(2 xi sqrt(lambda)) U^T L^T with M = L L^T and L^-1 K L^-T = U diag(lambda) U^T.
+    # Hand-written triangular solve: 7x7 solves through a threaded BLAS can cost milliseconds under load.
+    n = M.shape[0]
+    L = np.linalg.cholesky(M)
+    B = np.zeros((n, n))  # B = L^-1 sqrt(K), lower triangular
+    for j in range(n):
+        B[j, j] = np.sqrt(stiffness[j]) / L[j, j]
+        for i in range(j + 1, n):
+            s = 0.0
+            for m in range(j, i):
+                s += L[i, m] * B[m, j]
+            B[i, j] = -s / L[i, i]
+    A = np.zeros((n, n))
+    for i in range(n):
+        for j in range(i + 1):
+            s = 0.0
+            for m in range(j + 1):
+                s += B[i, m] * B[j, m]
+            A[i, j] = s
+            A[j, i] = s
+    lam, U = np.linalg.eigh(A)
+    LU = np.zeros((n, n))
+    for i in range(n):
+        for j in range(n):
+            s = 0.0
+            for m in range(i + 1):
+                s += L[i, m] * U[m, j]
+            LU[i, j] = s
+    for j in range(n):
+        lam[j] = 2.0 * damping_ratio[j] * np.sqrt(max(lam[j], 0.0))
+    for i in range(n):
+        for j in range(i + 1):
+            s = 0.0
+            for m in range(n):
+                s += LU[i, m] * lam[m] * LU[j, m]
+            out[i, j] = s
+            out[j, i] = s
+    return out

@@ -7,9 +7,9 @@ from typing import NamedTuple
 import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
-import scipy.linalg.lapack as lapack
 
 from reflexarm._validation import as_switch, as_vector
+from reflexarm.control import _kernels
 from reflexarm.errors import ConfigError
 from reflexarm.robots.robot_model import RobotModel
 from reflexarm.signals import Reference
@@ -45,14 +45,13 @@ def modal_damping(mass_matrix: np.ndarray, stiffness: np.ndarray, damping_ratio:
         stiffness: diagonal of K (n,) [Nm/rad].
         damping_ratio: modal damping ratios (n,).
     """
-    L, info = lapack.dpotrf(mass_matrix, lower=1, clean=1)
-    if info != 0:
-        raise ConfigError(f"mass matrix is not positive definite (Cholesky failed at pivot {info})")
-    # B = L^-1 sqrt(K); A = B B^T = L^-1 K L^-T
-    B, info = lapack.dtrtrs(L, np.diag(np.sqrt(stiffness)), lower=1)
-    lam, U, info = lapack.dsyev(B @ B.T)
-    LU = L @ U
-    return (LU * (2.0 * damping_ratio * np.sqrt(np.maximum(lam, 0.0)))) @ LU.T
+    M = np.ascontiguousarray(mass_matrix, dtype=float)
+    if not np.all(np.isfinite(M)) or np.any(np.linalg.eigvalsh(M) <= 0.0):
+        raise ConfigError("mass matrix is not symmetric positive definite")
+    out = np.empty_like(M)
+    return _kernels.modal_damping_into(
+        M, np.asarray(stiffness, dtype=float), np.asarray(damping_ratio, dtype=float), out
+    )
 
 
 class JointImpedanceController:
@@ -96,6 +95,8 @@ class JointImpedanceController:
         self._data_ff = self._model0.createData()
         self._zeros = np.zeros(n)
         self.damping = np.zeros((n, n))
+        self._M = np.zeros((n, n))
+        self._lower = np.tril_indices(n, -1)
         self._calls = 0
 
     @property
@@ -116,9 +117,11 @@ class JointImpedanceController:
 
     def update_damping(self, q: np.ndarray) -> np.ndarray:
         """Recompute D from M(q) now (in place) and return it."""
-        M = pin.crba(self._model, self._data, q)
-        M = np.triu(M) + np.triu(M, 1).T
-        self.damping[:] = modal_damping(M, self.gains.stiffness, self.gains.damping_ratio)
+        M = pin.crba(self._model, self._data, q)  # upper triangle filled
+        Ms = self._M
+        Ms[:] = M
+        Ms[self._lower] = Ms.T[self._lower]  # mirror the upper triangle (crba leaves the lower stale)
+        _kernels.modal_damping_into(Ms, self.gains.stiffness, self.gains.damping_ratio, self.damping)
         return self.damping
 
     def maybe_update_damping(self, q: np.ndarray) -> None:
