@@ -368,9 +368,9 @@ class Plant:
         return buf
 
     def measure(self) -> Measurement:
-        """What the robot's sensors report now (with noise): q, dq, tau_m (the applied motor torque), the
-        load-compensated wrist wrench (environment on the tool, sensor frame, about the sensor origin)
-        and gravity in the base frame."""
+        """What the robot's sensors report now (with noise): q, dq, tau_m (the motor torque applied over the
+        last control period, i.e. the previous command; 0 after reset), the load-compensated wrist wrench
+        (environment on the tool, sensor frame, about the sensor origin) and gravity in the base frame."""
         if self._failed is not None:
             raise SimulationError(f"the plant failed earlier ({self._failed}); call reset() first")
         buf = self._exact_measurement()

@@ -76,7 +76,9 @@ class Trace:
             raise DataError("trace time t has NaN/inf entries")
         if N > 1 and not np.all(np.diff(t) > 0.0):
             k = int(np.flatnonzero(np.diff(t) <= 0.0)[0])
-            raise DataError(f"trace time must be strictly increasing; t[{k}] = {t[k]!r} >= t[{k + 1}] = {t[k + 1]!r}")
+            raise DataError(
+                f"trace time must be strictly increasing; t[{k}] = {t[k]:.9g} >= t[{k + 1}] = {t[k + 1]:.9g}"
+            )
         self.t = t
         q = np.asarray(self.q, dtype=float)
         if q.ndim != 2 or q.shape[0] != N:
@@ -166,7 +168,7 @@ class Trace:
 
             def put(name: str, arr: np.ndarray) -> None:
                 layout[name] = list(arr.shape[1:])
-                flat = arr.reshape(arr.shape[0], -1)
+                flat = arr.reshape(arr.shape[0], int(np.prod(arr.shape[1:])))
                 if arr.ndim == 1:
                     columns[name] = arr
                 else:
