@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from reflexarm.errors import ConfigError, ModelError, SimulationError
-from reflexarm.robots import CoulombViscousFriction, load_robot
+from reflexarm.robots import CoulombViscousFriction, builtin_robots, load_robot
 from reflexarm.sim import PAPER_NOISE, Plant, SensorNoise
 
 #: Statics and load compensation are exact algebra on MuJoCo's own quantities and on Pinocchio's
@@ -165,6 +165,19 @@ def test_jacobian_transpose_of_wrench_is_the_true_external_torque(robot, plant):
     plant.clear_external_force()
     plant.step(robot.compute_gravity(plant.q))
     np.testing.assert_allclose(plant.true_external_torque(), 0.0, atol=0.0)
+
+
+@pytest.mark.parametrize("name", sorted(builtin_robots()))
+def test_wrist_sensor_on_every_builtin(name):
+    """The same static check on each shipped robot (the sensor site, load and frames come from its file)."""
+    if not builtin_robots()[name].path.exists():
+        pytest.skip(f"{name} file not written yet")
+    robot = load_robot(name)
+    plant = Plant(robot, noise=SensorNoise.none())
+    F = np.array([5.0, -10.0, 20.0])
+    q, J_ee = hold_with_force(plant, robot, F)
+    np.testing.assert_allclose(robot.compute_frame_jacobian(q).T @ plant.measure().wrench, J_ee.T @ F, atol=EXACT)
+    np.testing.assert_allclose(plant.true_external_torque(), J_ee.T @ F, atol=EXACT)
 
 
 def test_force_on_a_link_before_the_sensor_is_not_seen_by_it(robot, plant):

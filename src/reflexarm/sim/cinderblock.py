@@ -92,6 +92,7 @@ class Cinderblock(Scene):
             raise ConfigError(f"table_size must be two positive lengths [m]; got {np.asarray(table_size).tolist()}")
         self.yaw = float(yaw)
         self.name = str(name)
+        self._adr_cache: tuple[mujoco.MjModel, int] | None = None
 
     # ------------------------------------------------------------------ Scene hooks
     def build(self, spec: mujoco.MjSpec, robot: RobotModel) -> None:
@@ -175,10 +176,13 @@ class Cinderblock(Scene):
     # ------------------------------------------------------------------ queries
     def _qpos_adr(self, plant: Plant) -> int:
         m = plant.model
+        if self._adr_cache is not None and self._adr_cache[0] is m:
+            return self._adr_cache[1]
         jid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, f"{self.name}_free")
         if jid < 0:
             raise ConfigError(f"this plant has no cinderblock named {self.name!r}")
-        return int(m.jnt_qposadr[jid])
+        self._adr_cache = (m, int(m.jnt_qposadr[jid]))
+        return self._adr_cache[1]
 
     def pose(self, plant: Plant) -> tuple[np.ndarray, np.ndarray]:
         """(position (3,), quaternion (w, x, y, z)) of the block's centre now."""

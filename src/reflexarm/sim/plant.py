@@ -451,7 +451,8 @@ class Plant:
         """Apply a force [N] (world frame, constant until cleared) at a point moving with ``body``.
 
         ``body`` defaults to the body carrying the end-effector site; ``point_world`` (world coordinates at
-        the time of the call) defaults to the end-effector site position. The point is stored in the body's
+        the time of the call) defaults to the end-effector site position, or to the centre of mass of
+        ``body`` when a body is named. The point is stored in the body's
         frame, so it moves with the body; the force keeps its world direction. It is applied through
         ``xfrc_applied`` (force at the body's COM plus the moment (p - com) x f, refreshed each tick).
         Returns a handle for :meth:`clear_external_force`.
