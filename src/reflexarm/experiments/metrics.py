@@ -12,6 +12,7 @@ from reflexarm.errors import DataError
 __all__ = [
     "apparent_stiffness",
     "msie",
+    "msie_per_joint",
     "normalize_by_max",
     "rms",
     "window_mean",
@@ -34,8 +35,8 @@ def _time_series(t: npt.ArrayLike, x: npt.ArrayLike, name: str) -> tuple[np.ndar
     return tt, xx
 
 
-def msie(t: npt.ArrayLike, q: npt.ArrayLike, q_ref: npt.ArrayLike) -> float:
-    """Mean squared integrated error, eq. (20): ``1/(n_j T_f) sum_i int_0^T_f (q_i - q_ref_i)^2 dt`` [rad^2].
+def msie_per_joint(t: npt.ArrayLike, q: npt.ArrayLike, q_ref: npt.ArrayLike) -> np.ndarray:
+    """Each joint's share of (20): ``1/T_f int_0^T_f (q_i - q_ref_i)^2 dt`` (n_j,) [rad^2]; MSIE is their mean.
 
     ``q`` and ``q_ref`` are sampled at the same times ``t`` (shape (N, n_j)); the integral is the
     trapezoidal rule over ``[t[0], t[-1]]`` and ``T_f = t[-1] - t[0]``.
@@ -48,8 +49,15 @@ def msie(t: npt.ArrayLike, q: npt.ArrayLike, q_ref: npt.ArrayLike) -> float:
     if qq.shape != rr.shape:
         raise DataError(f"q and q_ref must have the same shape; got {qq.shape} and {rr.shape}")
     e2 = (qq - rr) ** 2
-    integral = np.trapezoid(e2, tt, axis=0)  # (n_j,)
-    return float(integral.sum() / (qq.shape[1] * (tt[-1] - tt[0])))
+    return np.asarray(np.trapezoid(e2, tt, axis=0) / (tt[-1] - tt[0]))
+
+
+def msie(t: npt.ArrayLike, q: npt.ArrayLike, q_ref: npt.ArrayLike) -> float:
+    """Mean squared integrated error, eq. (20): ``1/(n_j T_f) sum_i int_0^T_f (q_i - q_ref_i)^2 dt`` [rad^2].
+
+    See :func:`msie_per_joint` for the sampling and the errors raised.
+    """
+    return float(msie_per_joint(t, q, q_ref).mean())
 
 
 def normalize_by_max(values: Sequence[float] | npt.ArrayLike) -> np.ndarray:

@@ -418,7 +418,7 @@ def run_paper_task(task: SweepTask, context: PaperSweepContext) -> dict[str, Any
     """
     from reflexarm.errors import SimulationError
     from reflexarm.experiments import compensation as comp
-    from reflexarm.experiments.metrics import msie, window_mean
+    from reflexarm.experiments.metrics import msie_per_joint, window_mean
 
     setup = context.setup
     model_seed, noise_seed = trial_seeds(task.seed, task.trial)
@@ -443,9 +443,11 @@ def run_paper_task(task: SweepTask, context: PaperSweepContext) -> dict[str, Any
     if trace.q.shape != context.q_ref.shape:
         raise DataError(f"run {task.key} has {trace.q.shape} samples, the reference {context.q_ref.shape}")
     load = setup.load_window
+    per_joint = msie_per_joint(trace.t, trace.q, context.q_ref)
     return {
-        "msie": msie(trace.t, trace.q, context.q_ref),
+        "msie": float(per_joint.mean()),
         "status": "ok",
+        **{f"msie_j{i + 1}": float(v) for i, v in enumerate(per_joint)},
         "residual1_load_Nm": float(window_mean(trace.t, trace.residual[:, 0], *load)),
         "q1_load_rad": float(window_mean(trace.t, trace.q[:, 0], *load)),
         "max_abs_residual_Nm": float(np.abs(trace.residual).max()),
@@ -551,6 +553,8 @@ def paper_sweep(
     out = Path(out)
     manifest = {"experiment": f"paper-sweep/{kind}", "format": 1, "seed": int(seed), "setup": setup.as_dict()}
     _prepare_folder(out, manifest)  # refuse a folder with other settings before the reference run
+    if scheduler is not None:  # and an unreachable scheduler
+        _connect(scheduler, scheduler_timeout).close()
     t_ref, q_ref = reference_trajectory(setup, out)
     context = PaperSweepContext(setup, t_ref, q_ref)
     res = run_sweep(

@@ -1,0 +1,175 @@
+"""Fig. 12 (efc-step), Fig. 11 (compliance loss) and Fig. 3 (mode table) on the simulated Atlas arm.
+
+Every run is seeded (model-error draw and sensor noise); the tolerances are the issue's targets, and
+where the default plant (MuJoCo dry friction with stiction) does not meet a target the test pins down
+why (see ``test_efc_step_dry_friction_explains_the_larger_ee_displacement``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from reflexarm.errors import ConfigError
+from reflexarm.experiments.compensation import (
+    CompensationSetup,
+    compliance_loss,
+    efc_step,
+    mode_table,
+    plot_compliance_loss,
+    plot_efc_step,
+)
+from reflexarm.experiments.metrics import msie, msie_per_joint, normalize_by_max, window_mean
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def dry():
+    return efc_step(CompensationSetup(), seed=0)
+
+
+@pytest.fixture(scope="module")
+def frictionless():
+    return efc_step(CompensationSetup(plant_friction="none"), seed=0)
+
+
+def rows(result):
+    return {r["run"]: r for r in result.rows}
+
+
+def test_efc_step_dc_without_efc_is_stiff(dry):
+    # (10): DC without EFC leaves less than half the no-DC displacement (issue's target); measured ~1 %
+    r = rows(dry)
+    assert dry.summary["dc_vs_nodc_displacement"] < 0.5
+    assert r["no DC"]["ee_displacement_mm"] > 30.0  # the load does displace the compliant arm
+    # with the observer converged, the residual carries the external torque: tau_eps_1 ~ tau_ext,1 + delta_1.
+    # Tolerance 2.5 Nm: shz's static friction (mu_C = 2 Nm, any value up to it while the joint rests) is
+    # part of delta_1; gravity does not act on shz (vertical axis), model errors add < 0.5 Nm.
+    np.testing.assert_allclose(r["DC"]["residual1_Nm"], r["DC"]["tau_ext1_Nm"], atol=2.5)
+
+
+def test_efc_step_residual_with_efc_stays_small(dry):
+    # (11): with EFC the observer does not see the end-effector load. Joint 1 (the one Fig. 12 plots):
+    # under 10 % of the DC-without-EFC run's residual (issue's target).
+    assert dry.summary["efc_vs_dc_residual1"] < 0.10
+
+
+def test_efc_step_q1_follows_the_compliant_run(dry):
+    # Fig. 12 plots q_1: with EFC its displacement under the load is the no-DC run's within 5 %
+    assert abs(dry.summary["efc_vs_nodc_q1"] - 1.0) < 0.05
+
+
+def test_efc_step_dry_friction_explains_the_larger_ee_displacement(dry):
+    # Measured: with the default plant the EE displacement with EFC is ~1.36x the no-DC run's, not within
+    # 5 %. Cause: the Table I Coulomb friction of shx, ely, elx (6.7, 10.3, 6.1 Nm) exceeds the load's
+    # torque on those joints (< 4 Nm), so without DC they stick (true dry friction); with DC the
+    # observer sees their friction as delta and compensates it, and they yield as (11) prescribes.
+    r = rows(dry)
+    no_dc = np.abs(r["no DC"]["q_displacement_rad"][1:4])
+    efc = np.abs(r["DC+EFC"]["q_displacement_rad"][1:4])
+    assert no_dc.max() < 1e-3  # stuck (1 mrad: far below the 10-40 mrad they move with EFC)
+    assert efc.max() > 0.01
+    assert dry.summary["efc_vs_nodc_displacement"] > 1.05  # the target is not met on this plant: reported
+    # ... and the residual of those joints is their friction, not the end-effector load: the norm
+    # over all joints is not below 10 % of the DC run's (it is ~0.9), joint 1's is (previous test)
+    assert dry.summary["efc_vs_dc_residual_norm"] > 0.5
+
+
+def test_efc_step_meets_the_paper_on_a_plant_without_stiction(frictionless):
+    # the same experiment on a frictionless arm: EE displacement with EFC within 5 % of no-DC, the
+    # residual (every joint, norm) below 10 % of DC-without-EFC, DC under half the no-DC displacement
+    s = frictionless.summary
+    assert abs(s["efc_vs_nodc_displacement"] - 1.0) < 0.05
+    assert s["efc_vs_dc_residual_norm"] < 0.10
+    assert s["dc_vs_nodc_displacement"] < 0.5
+
+
+def test_efc_step_cutoff_not_reached_by_the_50N_load(dry):
+    # the 50 N step produces < 30 Nm on every joint: the cut-off never acts, so it explains none of
+    # the DC run's (already tiny) displacement; the runs with and without it are identical
+    r = rows(dry)
+    assert dry.summary["peak_dc_residual_Nm"] < 30.0
+    assert dry.summary["cutoff_share_of_dc_displacement"] == 0.0
+    np.testing.assert_array_equal(dry.traces["DC"].q, dry.traces["DC, no cut-off"].q)
+    assert r["DC"]["ee_displacement_mm"] < 2.0
+
+
+def test_efc_step_release_returns_with_dc(dry):
+    # after the release the DC runs return to q_d (model errors compensated), the compliant one keeps
+    # a friction dead-band offset (stiction holds it)
+    r = rows(dry)
+    assert r["DC+EFC"]["ee_after_release_mm"] < 0.5 * r["no DC"]["ee_after_release_mm"]
+
+
+def test_efc_step_plot(dry, tmp_path):
+    p = plot_efc_step(dry, tmp_path / "fig12.png")
+    assert p.stat().st_size > 10_000
+
+
+@pytest.fixture(scope="module")
+def push():
+    return compliance_loss(seed=0)
+
+
+def test_compliance_loss_dc_stiffens_and_the_cutoff_limits_it(push):
+    s = push.summary
+    by = rows(push)
+    # Fig. 11: with DC the hand needs more force for less displacement (paper: force x1.93, position
+    # x0.67, stiffness x2.87); measured here x1.77, x0.44, x4.1 with a 2000 N/m hand.
+    assert s["force_ratio"] > 1.3
+    assert s["displacement_ratio"] < 0.8
+    assert s["stiffness_ratio"] > 2.0
+    # the 30 Nm cut-off acts (the raw residual passes it) and is what keeps the stiffening finite:
+    # without it the arm would hold its position (stiffness ratio > 50x; measured ~240x)
+    assert by["DC"]["residual1_Nm"] > 30.0
+    assert s["stiffness_ratio_no_cutoff"] > 10 * s["stiffness_ratio"]
+    assert by["DC, no cut-off"]["displacement_mm"] < 5.0
+
+
+def test_compliance_loss_plot(push, tmp_path):
+    assert plot_compliance_loss(push, tmp_path / "fig11.png").stat().st_size > 10_000
+
+
+def test_mode_table_agrees_with_every_check_mark_of_fig3():
+    table, traces = mode_table(seed=0)
+    by = {r["mode"]: r for r in table}
+    assert all(r["agrees_with_paper"] for r in table), table
+    # the numbers behind the marks, with margins from the 0.5 decision line
+    assert by["precise_stiff"]["accuracy_ratio"] < 0.3 and by["precise_ee_compliant"]["accuracy_ratio"] < 0.3
+    assert by["compliant"]["ee_compliance_ratio"] > 0.8 and by["precise_ee_compliant"]["ee_compliance_ratio"] > 0.8
+    assert by["precise_stiff"]["ee_compliance_ratio"] < 0.1
+    assert by["compliant"]["link_compliance_ratio"] > 0.8
+    assert by["precise_stiff"]["link_compliance_ratio"] < 0.1
+    assert by["precise_ee_compliant"]["link_compliance_ratio"] < 0.1
+    # the supervisor's automatic switch gives every mode its link compliance back, and it is logged
+    assert all(r["link_compliant_supervised"] for r in table)
+    log = traces["precise_ee_compliant/link_force/supervised"].meta["mode_transitions"]
+    assert [(x["from"], x["to"], x["cause"]) for x in log] == [
+        ("", "precise_ee_compliant", "task"),
+        ("precise_ee_compliant", "compliant", "collision"),
+    ]
+    tr = traces["precise_ee_compliant/link_force/supervised"]
+    assert tr.mode[0] == "precise_ee_compliant" and tr.mode[-1] == "compliant"
+
+
+def test_setup_validation():
+    with pytest.raises(ConfigError, match="unknown plant friction 'wet'; choose one of: dry, smooth, none"):
+        CompensationSetup(plant_friction="wet")
+    with pytest.raises(ConfigError, match="model_error must be non-negative; got -0.1"):
+        CompensationSetup(model_error=-0.1)
+    with pytest.raises(ConfigError, match="need 0 <= t_on < t_off"):
+        CompensationSetup(t_on=2.0, t_off=1.0)
+
+
+def test_msie_matches_its_definition():
+    # eq. (20) against a hand computation: q - q_ref = a sin(w t) on one joint, 0 on the other, over a
+    # whole number of periods: (1/(n T)) int a^2 sin^2 = a^2 / (2 n)
+    t = np.linspace(0.0, 2.0, 20001)
+    a = 0.1
+    q = np.zeros((t.size, 2))
+    q[:, 0] = a * np.sin(2 * np.pi * t)
+    assert msie(t, q, np.zeros_like(q)) == pytest.approx(a**2 / 4, rel=1e-6)
+    np.testing.assert_allclose(msie_per_joint(t, q, np.zeros_like(q)), [a**2 / 2, 0.0], atol=1e-9)
+    np.testing.assert_allclose(normalize_by_max([1.0, 4.0, 2.0]), [0.25, 1.0, 0.5])
+    assert window_mean(t, q[:, 1], 0.0, 1.0) == 0.0
