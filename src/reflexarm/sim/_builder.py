@@ -153,7 +153,7 @@ def _ensure_sites(spec: mujoco.MjSpec, robot: RobotModel, joint_names: list[str]
         bid = model.body(body).id
         body_pose = pin.SE3(data.xmat[bid].reshape(3, 3).copy(), data.xpos[bid].copy())
         rel = body_pose.inverse() * _frame_pose(robot, frame, q)
-        name = frame if spec.site(frame) is None else f"reflexarm_{frame}"
+        name = frame  # MuJoCo names are unique per object type: a body may share the frame's name
         quat = pin.Quaternion(rel.rotation)
         spec.body(body).add_site(
             name=name,

@@ -83,12 +83,14 @@ def load_compensated_wrench(
             out[3 + k] -= sensordata[torque_adr + k]
 
 
+#: Layout of the packed integer index array of :func:`measurement` (then qadr (n), vadr (n), load (nload)).
+IDX_N, IDX_NLOAD, IDX_FORCE, IDX_TORQUE, IDX_PHYSICAL, IDX_COM_BODY, IDX_SITE, IDX_HEADER = 0, 1, 2, 3, 4, 5, 6, 7
+
+
 @numba.njit(cache=True)
-def exact_measurement(
+def measurement(
     qpos: np.ndarray,
     qvel: np.ndarray,
-    qadr: np.ndarray,
-    vadr: np.ndarray,
     tau: np.ndarray,
     gravity: np.ndarray,
     cinert: np.ndarray,
@@ -96,38 +98,46 @@ def exact_measurement(
     cacc: np.ndarray,
     cfrc: np.ndarray,
     sensordata: np.ndarray,
-    load_bodies: np.ndarray,
-    com_ref: np.ndarray,
-    site_pos: np.ndarray,
-    site_mat: np.ndarray,
-    force_adr: int,
-    torque_adr: int,
-    physical: bool,
+    subtree_com: np.ndarray,
+    site_xpos: np.ndarray,
+    site_xmat: np.ndarray,
+    idx: np.ndarray,
+    noise: np.ndarray,
     out: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
-    """The noiseless measurement vector (q, dq, tau_m, wrench (6), gravity (3)) into ``out``."""
-    n = qadr.size
+    """The measurement vector (q, dq, tau_m, wrench (6), gravity (3)) plus ``noise`` into ``out``.
+
+    ``idx`` packs the integer layout (see ``IDX_*``) so that one call with few arguments does it all
+    (numba's dispatch cost grows with the number of arguments).
+    """
+    n = idx[IDX_N]
+    nload = idx[IDX_NLOAD]
+    h = IDX_HEADER
     for i in range(n):
-        out[i] = qpos[qadr[i]]
-        out[n + i] = qvel[vadr[i]]
-        out[2 * n + i] = tau[i]
+        out[i] = qpos[idx[h + i]] + noise[i]
+        out[n + i] = qvel[idx[h + n + i]] + noise[n + i]
+        out[2 * n + i] = tau[i] + noise[2 * n + i]
+    site = idx[IDX_SITE]
+    w = out[3 * n : 3 * n + 6]
     load_compensated_wrench(
         cinert,
         cvel,
         cacc,
         cfrc,
         sensordata,
-        load_bodies,
-        com_ref,
-        site_pos,
-        site_mat,
-        force_adr,
-        torque_adr,
-        physical,
-        out[3 * n : 3 * n + 6],
+        idx[h + 2 * n : h + 2 * n + nload],
+        subtree_com[idx[IDX_COM_BODY]],
+        site_xpos[site],
+        site_xmat[site],
+        idx[IDX_FORCE],
+        idx[IDX_TORQUE],
+        idx[IDX_PHYSICAL] != 0,
+        w,
     )
+    for k in range(6):
+        w[k] += noise[3 * n + k]
     for k in range(3):
-        out[3 * n + 6 + k] = gravity[k]
+        out[3 * n + 6 + k] = gravity[k] + noise[3 * n + 6 + k]
 
 
 @numba.njit(cache=True)
@@ -194,3 +204,31 @@ def sum_force(cfrc_ext: np.ndarray, bodies: np.ndarray, out: np.ndarray) -> None
     for b in bodies:
         for c in range(3):
             out[c] += cfrc_ext[b, 3 + c]
+
+
+@numba.njit(cache=True)
+def quintic_sample(
+    starts: np.ndarray, lengths: np.ndarray, origins: np.ndarray, deltas: np.ndarray, t_end: float, t: float
+) -> np.ndarray:  # pragma: no cover - compiled
+    """Rows (q, dq, ddq) of a chain of rest-to-rest minimum-jerk segments at time ``t`` (see JointTrajectory)."""
+    nseg = starts.size
+    if t <= starts[0]:
+        i, s, ds, dds = 0, 0.0, 0.0, 0.0
+    elif t >= t_end:
+        i, s, ds, dds = nseg - 1, 1.0, 0.0, 0.0
+    else:
+        i = int(np.searchsorted(starts, t, side="right")) - 1
+        T = lengths[i]
+        x = (t - starts[i]) / T
+        x2 = x * x
+        s = x2 * x * (10.0 - 15.0 * x + 6.0 * x2)
+        ds = 30.0 * x2 * (1.0 - 2.0 * x + x2) / T
+        dds = 60.0 * x * (1.0 - 3.0 * x + 2.0 * x2) / (T * T)
+    n = origins.shape[1]
+    out = np.empty((3, n))
+    for j in range(n):
+        d = deltas[i, j]
+        out[0, j] = origins[i, j] + s * d
+        out[1, j] = ds * d
+        out[2, j] = dds * d
+    return out

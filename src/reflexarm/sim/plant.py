@@ -159,9 +159,6 @@ class Plant:
         self._sensordata = d.sensordata
         self._site_xpos, self._site_xmat = d.site_xpos, d.site_xmat
         self._subtree_com = d.subtree_com
-        self._com_ref = d.subtree_com[self._com_ref_body]
-        self._site_pos = d.site_xpos[self._sensor_site]
-        self._site_mat = d.site_xmat[self._sensor_site]
         self._cfrc_for_sensor = d.cfrc_int if self._physical_sensor else d.cfrc_ext
         self._cdof = d.cdof
         self._body_parent = np.asarray(m.body_parentid, dtype=np.int64)
@@ -169,7 +166,16 @@ class Plant:
         self._acc6 = np.zeros((m.nbody, 6))
         self._tau = np.zeros(n)
         self._dim = 3 * n + 9
-        self._buf = np.zeros(self._dim)
+        self._zero_noise = np.zeros(self._dim)
+        self._idx = np.zeros(_kernels.IDX_HEADER + 2 * n + self._load_bodies.size, dtype=np.int64)
+        self._idx[_kernels.IDX_N] = n
+        self._idx[_kernels.IDX_NLOAD] = self._load_bodies.size
+        self._idx[_kernels.IDX_FORCE] = self._force_adr
+        self._idx[_kernels.IDX_TORQUE] = self._torque_adr
+        self._idx[_kernels.IDX_PHYSICAL] = int(self._physical_sensor)
+        self._idx[_kernels.IDX_COM_BODY] = self._com_ref_body
+        self._idx[_kernels.IDX_SITE] = self._sensor_site
+        self._idx[_kernels.IDX_HEADER :] = np.concatenate([self._qadr_arr, self._arm_dofs, self._load_bodies])
         self._levels = np.concatenate(
             [
                 np.full(n, noise.q),
@@ -341,14 +347,12 @@ class Plant:
         self._noise_i += 1
         return row
 
-    def _exact_measurement(self) -> np.ndarray:
-        """q, dq, tau_m, wrench (6), gravity (3) without noise, into the work buffer."""
-        buf = self._buf
-        _kernels.exact_measurement(
+    def _measurement_vector(self, noise: np.ndarray) -> np.ndarray:
+        """A fresh (3n + 9,) vector: q, dq, tau_m, wrench (6), gravity (3), plus ``noise``."""
+        out = np.empty(self._dim)
+        _kernels.measurement(
             self._qpos,
             self._qvel,
-            self._qadr_arr,
-            self._arm_dofs,
             self._tau,
             self._gravity,
             self._cinert,
@@ -356,16 +360,14 @@ class Plant:
             self._cacc,
             self._cfrc_for_sensor,
             self._sensordata,
-            self._load_bodies,
-            self._com_ref,
-            self._site_pos,
-            self._site_mat,
-            self._force_adr,
-            self._torque_adr,
-            self._physical_sensor,
-            buf,
+            self._subtree_com,
+            self._site_xpos,
+            self._site_xmat,
+            self._idx,
+            noise,
+            out,
         )
-        return buf
+        return out
 
     def measure(self) -> Measurement:
         """What the robot's sensors report now (with noise): q, dq, tau_m (the motor torque applied over the
@@ -373,8 +375,7 @@ class Plant:
         (environment on the tool, sensor frame, about the sensor origin) and gravity in the base frame."""
         if self._failed is not None:
             raise SimulationError(f"the plant failed earlier ({self._failed}); call reset() first")
-        buf = self._exact_measurement()
-        out = buf + self._next_noise() if self._noisy else buf.copy()
+        out = self._measurement_vector(self._next_noise() if self._noisy else self._zero_noise)
         n = self.n
         return Measurement(
             float(self._data.time),
@@ -388,7 +389,7 @@ class Plant:
     def true_wrench(self) -> np.ndarray:
         """The wrist wrench of :meth:`measure` without noise (6,) [N, Nm]."""
         n = self.n
-        return self._exact_measurement()[3 * n : 3 * n + 6].copy()
+        return self._measurement_vector(self._zero_noise)[3 * n : 3 * n + 6]
 
     # ------------------------------------------------------------------ true external quantities
     def true_external_torque(self, out: np.ndarray | None = None) -> np.ndarray:

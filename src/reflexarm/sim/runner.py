@@ -95,34 +95,38 @@ def run_closed_loop(
             controller.reset()
         qpos, qadr, qvel, vadr = plant._qpos, plant._qadr, plant._qvel, plant._vadr
         observe = [s for s in plant.scenes if type(s).observe is not Scene.observe]
+        T, Q, DQ, QM, QD, DQD = rec.t, rec.q, rec.dq, rec.q_meas, rec.q_d, rec.dq_d
+        TAU, TAUM, RES, COL, COLD = rec.tau, rec.tau_m, rec.residual, rec.collision, rec.collided
+        W, FEE, TEXT, modes, faults = rec.wrench, rec.f_ext_ee, rec.tau_ext, rec.mode, rec.fault
+        measure, sample, control, step = plant.measure, trajectory.sample, controller.step, plant.step
+        external_torque, ee_force = plant.true_external_torque, plant.ee_contact_force
         for k in range(N):
-            m = plant.measure()
-            r = trajectory.sample(m.t)
-            cmd = controller.step(m, r)
-            rec.t[k] = m.t
-            rec.q[k] = qpos[qadr]
-            rec.dq[k] = qvel[vadr]
-            rec.q_meas[k] = m.q
-            rec.q_d[k] = r.q_d
-            rec.dq_d[k] = r.dq_d
-            rec.tau[k] = cmd.tau
-            rec.tau_m[k] = m.tau_m
-            rec.residual[k] = cmd.residual
-            rec.collision[k] = cmd.collision
+            m = measure()
+            r = sample(m.t)
+            cmd = control(m, r)
+            T[k] = m.t
+            Q[k] = qpos[qadr]
+            DQ[k] = qvel[vadr]
+            QM[k] = m.q
+            QD[k] = r.q_d
+            DQD[k] = r.dq_d
+            TAU[k] = cmd.tau
+            TAUM[k] = m.tau_m
+            RES[k] = cmd.residual
+            COL[k] = cmd.collision
             if cmd.collided_joints:
-                rec.collided[k, list(cmd.collided_joints)] = True
-            rec.mode.append(str(cmd.mode))
-            rec.fault.append(str(cmd.fault) if cmd.fault else "")
-            rec.wrench[k] = m.wrench
-            plant.true_external_torque(out=rec.tau_ext[k])
-            plant.ee_contact_force(out=rec.f_ext_ee[k])
+                COLD[k, list(cmd.collided_joints)] = True
+            modes.append(str(cmd.mode))
+            faults.append(str(cmd.fault) if cmd.fault else "")
+            W[k] = m.wrench
+            external_torque(out=TEXT[k])
+            ee_force(out=FEE[k])
             for s in observe:
                 rec.put_extras(k, s.observe(plant))
             rec.done = k + 1
-            stop = callback(k, plant, m, cmd) if callback is not None else None
-            if stop:
+            if callback is not None and callback(k, plant, m, cmd):
                 break
-            plant.step(cmd.tau)
+            step(cmd.tau)
             if bar is not None and (k + 1) % 100 == 0:
                 bar.update(100)
     except BaseException as e:
@@ -133,6 +137,7 @@ def run_closed_loop(
         raise
     finally:
         if bar is not None:
+            bar.update(rec.done - bar.n)
             bar.close()
     return rec.trace(meta)
 

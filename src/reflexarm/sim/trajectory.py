@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import bisect
 import math
 
 import numpy as np
@@ -10,6 +9,7 @@ import numpy.typing as npt
 
 from reflexarm.errors import ConfigError
 from reflexarm.signals import Reference
+from reflexarm.sim import _kernels
 
 __all__ = ["JointTrajectory"]
 
@@ -92,6 +92,8 @@ class JointTrajectory:
         self._origins = np.array(origins)
         self._deltas = np.array(deltas)
         self._t_end = t
+        self._starts_arr = np.array(starts)
+        self._lengths_arr = np.array(lengths)
 
     @classmethod
     def hold(cls, q: npt.ArrayLike, duration: float, t0: float = 0.0) -> JointTrajectory:
@@ -109,28 +111,11 @@ class JointTrajectory:
         """Absolute end time [s]."""
         return self._t_end
 
-    def _coefficients(self, t: float) -> tuple[int, float, float, float]:
-        """Segment index and (s, ds/dt, d2s/dt2) at time t."""
-        if t <= self._starts[0]:
-            return 0, 0.0, 0.0, 0.0
-        if t >= self._t_end:
-            return len(self._starts) - 1, 1.0, 0.0, 0.0
-        i = bisect.bisect_right(self._starts, t) - 1
-        T = self._lengths[i]
-        x = (t - self._starts[i]) / T
-        x2 = x * x
-        x3 = x2 * x
-        s = x3 * (10.0 - 15.0 * x + 6.0 * x2)
-        ds = 30.0 * x2 * (1.0 - 2.0 * x + x2) / T
-        dds = 60.0 * x * (1.0 - 3.0 * x + 2.0 * x2) / (T * T)
-        return i, s, ds, dds
-
     def sample(self, t: float) -> Reference:
         """q_d, dq_d, ddq_d at time ``t`` [s] (fresh arrays)."""
-        i, s, ds, dds = self._coefficients(float(t))
-        delta = self._deltas[i]
-        out = np.multiply.outer(np.array((s, ds, dds)), delta)
-        out[0] += self._origins[i]
+        out = _kernels.quintic_sample(
+            self._starts_arr, self._lengths_arr, self._origins, self._deltas, self._t_end, float(t)
+        )
         return Reference(out[0], out[1], out[2])
 
     def sample_many(self, times: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
