@@ -311,9 +311,8 @@ class Plant:
             for _ in range(self.substeps):
                 extra = np.asarray(self._extra(self.q, self.dq, float(d.time)), dtype=float)
                 if extra.shape != (self.n,) or not float(extra @ extra) < math.inf:
-                    raise SimulationError(
-                        f"extra_joint_torque returned {extra.tolist()!r}; expected a finite ({self.n},) array"
-                    )
+                    self._failed = f"extra_joint_torque returned {extra.tolist()!r} at t = {d.time:.4f} s"
+                    raise SimulationError(f"{self._failed}; expected a finite ({self.n},) array")
                 self._qfrc[self._vadr] = t + extra
                 mujoco.mj_step(m, d)
         self._tick += 1
