@@ -1,0 +1,155 @@
+"""The identified model on disk: base parameters + friction, in a JSON file the controller loads.
+
+File format (``"format": "reflexarm-identified-model"``, version 1), JSON:
+
+* ``robot``: name, ``source`` (a built-in robot's name or the robot file's path), frames, joint names;
+* ``identification``: the :class:`~reflexarm.ident.DynamicsIdentification` (method, base-parameter map,
+  beta_b with names, friction, noise variances, condition number, notes);
+* ``standard_parameters``: 10 n inertial parameters consistent with beta_b, the ones nearest to the
+  robot file's nominal values (see :meth:`BaseParameters.standard_from_base`): any such vector gives
+  the same M(q), C, g, so the controller can use it as an ordinary :class:`RobotModel`;
+* ``friction_model``: Coulomb mu_C, viscous d_v and the smooth-sign band of the controller's
+  :class:`CoulombViscousFriction` (negative identified coefficients clipped to 0; offsets are not part
+  of it).
+
+:func:`load_identified_model` returns the :class:`RobotModel` to hand to
+:class:`reflexarm.control.Controller`, after checking that the file fits the robot (joint names, and
+that the standard parameters reproduce the stored base parameters).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from reflexarm.errors import ModelError
+from reflexarm.ident.estimation import DynamicsIdentification
+from reflexarm.robots.friction import CoulombViscousFriction
+from reflexarm.robots.robot_model import RobotModel, builtin_robots, load_robot
+
+__all__ = ["FORMAT", "load_identified_model", "read_identified_model", "save_identified_model"]
+
+FORMAT = "reflexarm-identified-model"
+VERSION = 1
+
+#: Relative tolerance on the base parameters re-computed from the stored standard parameters.
+_CONSISTENCY_RTOL = 1e-8
+
+
+def _robot_source(robot: RobotModel) -> str:
+    b = builtin_robots().get(robot.name)
+    if b is not None and robot.source is not None and Path(robot.source).resolve() == b.path.resolve():
+        return robot.name
+    return str(Path(robot.source).resolve()) if robot.source is not None else robot.name
+
+
+def save_identified_model(
+    result: DynamicsIdentification,
+    robot: RobotModel,
+    path: str | os.PathLike[str],
+    *,
+    extra: dict[str, object] | None = None,
+) -> Path:
+    """Write the identified model of ``robot`` to ``path`` (JSON, see the module docstring).
+
+    Args:
+        result: the identification.
+        robot: the robot it was identified for (its nominal inertias pick the standard parameters).
+        path: output file (``.json``).
+        extra: more JSON-serialisable facts to store (e.g. validation metrics).
+    """
+    if result.n != robot.n or tuple(robot.joint_names) != tuple(result.joint_names):
+        raise ModelError(
+            f"identification of joints {list(result.joint_names)} does not fit robot {robot.name!r} "
+            f"with joints {robot.joint_names}"
+        )
+    model = result.to_robot_model(robot)
+    doc = {
+        "format": FORMAT,
+        "version": VERSION,
+        "robot": {
+            "name": robot.name,
+            "source": _robot_source(robot),
+            "ee_frame": robot.ee_frame,
+            "sensor_frame": robot.sensor_frame,
+            "joint_names": robot.joint_names,
+        },
+        "identification": result.to_dict(),
+        "standard_parameter_names": robot.inertial_parameter_names(),
+        "standard_parameters": model.inertial_parameters().tolist(),
+        "friction_model": {
+            "coulomb": model.friction.coulomb.tolist(),
+            "viscous": model.friction.viscous.tolist(),
+            "velocity_band": model.friction.velocity_band,
+        },
+        "extra": extra or {},
+    }
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(json.dumps(doc, indent=1))
+    return p
+
+
+def read_identified_model(path: str | os.PathLike[str]) -> tuple[DynamicsIdentification, dict[str, object]]:
+    """The stored identification and the whole JSON document."""
+    p = Path(path)
+    try:
+        doc = json.loads(p.read_text())
+    except FileNotFoundError as e:
+        raise ModelError(f"identified model file {str(p)!r} does not exist") from e
+    except (OSError, json.JSONDecodeError) as e:
+        raise ModelError(f"cannot read identified model file {str(p)!r}: {e}") from e
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise ModelError(f"{p.name}: not a reflexarm identified model (expected \"format\": \"{FORMAT}\")")
+    if doc.get("version") != VERSION:
+        raise ModelError(f"{p.name}: unsupported identified-model version {doc.get('version')!r}; this reflexarm reads {VERSION}")
+    try:
+        result = DynamicsIdentification.from_dict(doc["identification"])
+    except Exception as e:
+        raise ModelError(f"{p.name}: malformed identification section: {e}") from e
+    return result, doc
+
+
+def load_identified_model(path: str | os.PathLike[str], robot: RobotModel | None = None) -> RobotModel:
+    """The controller's :class:`RobotModel` from an identified-model file.
+
+    Args:
+        path: the JSON file written by :func:`save_identified_model`.
+        robot: the robot (default: loaded from the file's ``robot.source``).
+
+    Raises:
+        ModelError: unreadable file, wrong format, joints that do not match, or standard parameters
+            that do not reproduce the stored base parameters.
+    """
+    result, doc = read_identified_model(path)
+    name = Path(path).name
+    info = doc.get("robot", {})
+    if robot is None:
+        src = info.get("source")
+        if not src:
+            raise ModelError(f"{name}: no robot source stored; pass robot=")
+        robot = load_robot(src, ee_frame=info.get("ee_frame"), sensor_frame=info.get("sensor_frame"))
+    if tuple(robot.joint_names) != tuple(result.joint_names):
+        raise ModelError(
+            f"{name}: identified for joints {list(result.joint_names)}; robot {robot.name!r} has {robot.joint_names}"
+        )
+    pi = np.asarray(doc.get("standard_parameters", []), dtype=float)
+    if pi.size != 10 * robot.n:
+        raise ModelError(f"{name}: expected {10 * robot.n} standard parameters; found {pi.size}")
+    beta = result.base.base_from_standard(pi)
+    scale = np.maximum(np.abs(result.beta_b), np.abs(result.beta_b).max() * 1e-6)
+    if np.any(np.abs(beta - result.beta_b) > _CONSISTENCY_RTOL * scale + 1e-12):
+        raise ModelError(f"{name}: the standard parameters do not reproduce the stored base parameters (edited file?)")
+    fm = doc.get("friction_model", {})
+    try:
+        friction = CoulombViscousFriction(
+            np.asarray(fm["coulomb"], dtype=float),
+            np.asarray(fm["viscous"], dtype=float),
+            float(fm.get("velocity_band", robot.friction.velocity_band)),
+        )
+    except Exception as e:
+        raise ModelError(f"{name}: malformed friction_model: {e}") from e
+    return robot.with_inertial_parameters(pi).with_friction(friction)
