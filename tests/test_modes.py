@@ -267,3 +267,45 @@ def test_schedule_mode_at():
         "precise_stiff",
         "precise_stiff",
     ]
+
+
+def test_cutoff_lets_the_excess_over_30Nm_through(atlas):
+    # precise_stiff (10) with a 45 Nm link torque on joint 1: the compensation is cut off at 30 Nm, so
+    # the arm yields by the excess, K (q_1 - q_d1) = 45 - 30 (exact model, no friction, no noise)
+    robot = frictionless(atlas)
+    push = np.zeros(robot.n)
+    push[0] = 45.0
+    plant = WrenchPlant(robot, link_torque=lambda t: push if t >= 0.2 else np.zeros(robot.n))
+    plant.reset(robot.home)
+    ctrl = Controller(robot, stiffness=K, observer_gain=10, threshold=None, residual_limit=30.0, switch_time=0.0)
+    sup = ModeSupervisor(ctrl, mode="precise_stiff")
+    qs, cmds = run(plant, sup, robot.home, 2500)
+    # tolerance 0.1 Nm: steady state after 23 observer time constants, exact plant
+    np.testing.assert_allclose(K * (qs[-1][0] - robot.home[0]), 45.0 - 30.0, atol=0.1)
+    np.testing.assert_allclose(cmds[-1].residual[0], 45.0, atol=0.1)  # the observer itself is not clipped
+
+
+def test_parallel_fast_detection_observer_detects_earlier(atlas):
+    # Sec. III-A's proposal: a slow observer (k_o = 10) for compensation, a fast one (k_o = 50) for
+    # detection. A 20 Nm push on joint 2 crosses zeta = 11 Nm after -ln(1 - 11/20)/k_o: 80 ms with the
+    # slow observer alone, 16 ms with the fast one; the compensation keeps the slow observer's dynamics.
+    robot = frictionless(atlas)
+    push = np.zeros(robot.n)
+    push[1] = 20.0
+    t0 = 0.3
+    times, residual_at = {}, {}
+    for fast in (None, 50.0):
+        plant = WrenchPlant(robot, link_torque=lambda t: push if t >= t0 else np.zeros(robot.n))
+        plant.reset(robot.home)
+        ctrl = Controller(
+            robot, stiffness=K, observer_gain=10, detection_observer_gain=fast, threshold=11.0, reaction="none"
+        )
+        sup = ModeSupervisor(ctrl, mode="precise_ee_compliant")
+        run(plant, sup, robot.home, 500)
+        times[fast] = sup.transitions[-1].t - t0
+        residual_at[fast] = ctrl.observer.residual[1]
+    # tolerance 3 ms: the 1 ms tick plus the arm's small motion feeding back into the residual
+    assert abs(times[None] - (-np.log(1 - 11 / 20) / 10)) < 0.003
+    assert abs(times[50.0] - (-np.log(1 - 11 / 20) / 50)) < 0.003
+    # the compensating observer is the slow one in both cases: same residual at the end (0.2 s after)
+    np.testing.assert_allclose(residual_at[50.0], residual_at[None], atol=1e-9)
