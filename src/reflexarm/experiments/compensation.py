@@ -339,10 +339,10 @@ def efc_step(setup: CompensationSetup | None = None, *, seed: int = 0, progress:
     from reflexarm.experiments.sweeps import trial_seeds
 
     model_seed, noise_seed = trial_seeds(seed, 0)
-    runs = {name: (ke, kx, None) for name, (ke, kx) in CASES.items()}
+    runs: dict[str, tuple[int, int, float | None]] = {name: (ke, kx, None) for name, (ke, kx) in CASES.items()}
     runs["DC, no cut-off"] = (1, 0, NO_CUTOFF)
     traces: dict[str, Trace] = {}
-    rows = []
+    rows: list[dict[str, Any]] = []
     for name, (ke, kx, limit) in runs.items():
         tr = run_case(
             setup, ke, kx, model_seed=model_seed, noise_seed=noise_seed, residual_limit=limit, progress=progress
@@ -377,7 +377,7 @@ def plot_efc_step(result: EfcStepResult, path: str | Path) -> Path:
     }
     for name in CASES:
         tr = result.traces[name]
-        kw = dict(color=colors[name], lw=1.2, label=labels[name])
+        kw: dict[str, Any] = {"color": colors[name], "lw": 1.2, "label": labels[name]}
         axes[0].plot(tr.t, tr.q[:, 0], **kw)
         axes[1].plot(tr.t, tr.tau_ext[:, 0], **kw)
         axes[2].plot(tr.t, tr.residual[:, 0], **kw)
@@ -538,8 +538,9 @@ def compliance_loss(
     t_release = 4.0
     window = (t_release - 0.5, t_release)
     pre = (0.3, 0.5)
-    runs = {"no DC": (0, None), "DC": (1, None), "DC, no cut-off": (1, NO_CUTOFF)}
-    traces, rows = {}, []
+    runs: dict[str, tuple[int, float | None]] = {"no DC": (0, None), "DC": (1, None), "DC, no cut-off": (1, NO_CUTOFF)}
+    traces: dict[str, Trace] = {}
+    rows: list[dict[str, Any]] = []
     for name, (ke, limit) in runs.items():
         push = HandPush(depth=depth, stiffness=hand_stiffness, t_release=t_release)
         tr = run_case(
@@ -728,7 +729,7 @@ def mode_table(
     q0 = _posture(setup, robot)
     k = setup.stiffness
     traces: dict[str, Trace] = {}
-    rows = []
+    rows: list[dict[str, Any]] = []
     acc: dict[str, float] = {}
     for name, mode in CONTROL_MODES.items():
         # accuracy: free motion
@@ -747,7 +748,7 @@ def mode_table(
         J_ee = robot.compute_frame_jacobian(q0, robot.ee_frame, world_aligned=True)[:3]
         ee_ratio = float(np.linalg.norm(dx)) / _designed_displacement(robot, q0, J_ee, f_ee, k)
         # link compliance, without and with the supervisor's automatic switch
-        link_ratio = {}
+        link_ratio: dict[bool, float] = {}
         for supervised in (False, True):
             push = LinkForce(magnitude=setup.force, t_on=setup.t_on, t_off=setup.t_off)
             plant, _ = build_plant(setup, [push], noise_scale=setup.noise_scale, seed=noise_seed)

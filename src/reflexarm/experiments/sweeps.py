@@ -390,7 +390,7 @@ class PaperSweepContext:
     q_ref: np.ndarray
 
 
-def paper_sweep_tasks(kind: str, levels: Sequence[float], trials: int, seed: int = 0) -> list[SweepTask]:
+def paper_sweep_tasks(kind: str, levels: Sequence[float] | str, trials: int, seed: int = 0) -> list[SweepTask]:
     """The runs of a Fig. 13 / Fig. 14 sweep: every level x condition x trial.
 
     Raises:
