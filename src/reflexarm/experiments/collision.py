@@ -83,9 +83,9 @@ LINK_SETTING = CollisionSetting("Coll.Det", stiffness=300.0, observer_gain=5.0, 
 # The end-effector collision: the forearm points forward, shz swings the hand towards the body's
 # midline through a padded cinderblock standing on a table (joint values [rad], model order).
 EE_START = np.array([0.55, -1.3, 1.57, 1.57, 0.0, 0.0, 0.0])
-EE_GOAL = np.array([-0.7, -1.3, 1.57, 1.57, 0.0, 0.0, 0.0])
+EE_GOAL = np.array([-0.45, -1.3, 1.57, 1.57, 0.0, 0.0, 0.0])
 EE_MOVE_TIME = 6.0  # [s]: peak hand speed ~0.12 m/s, the paper's "moderate velocity (100 mm/s)"
-EE_BLOCK = dict(position=(0.70, 0.225), table_height=0.60)
+EE_BLOCK = dict(position=(0.70, 0.225), table_height=0.585, mass=20.0)
 
 
 def ee_collision_trajectory(start: np.ndarray = EE_START, goal: np.ndarray = EE_GOAL) -> JointTrajectory:
