@@ -135,6 +135,21 @@ def test_link_collision_switches_to_compliant_and_is_logged(atlas):
         "cause": "collision",
         "joints": [1],
     }
+
+    class FakeTrace:
+        meta: dict = {}
+
+    trace = FakeTrace()
+    sup.log_to(trace)
+    assert trace.meta["mode_transitions"] == records
+    with pytest.raises(ConfigError, match="cannot log mode transitions to int: it has no dict 'meta'"):
+        sup.log_to(3)
+    assert sup.describe() == {
+        "type": "ModeSupervisor",
+        "initial_mode": "precise_ee_compliant",
+        "reaction": "compliant",
+        "schedule": None,
+    }
     sup.acknowledge_collision()
     assert sup.mode == "precise_ee_compliant" and not sup.collision_latched
 

@@ -21,8 +21,8 @@ collision-detection setting of Sec. III); the *automatic* switch after a collisi
 (:meth:`ModeSupervisor.select`, or a time :class:`ModeSchedule`), and when a link collision is detected
 the controller's configured ``reaction`` takes over ("compliant": kappa_eps -> 0, ramped bumplessly;
 "gravity": eq. (13)). Every change of the active mode is recorded as a :class:`ModeTransition` with its
-time and cause; :meth:`ModeSupervisor.transitions_as_records` gives them in a form that goes into
-``Trace.meta``.
+time and cause; :meth:`ModeSupervisor.log_to` stores them in a recorded ``Trace.meta`` (the trace's
+per-tick ``mode`` column shows the active mode).
 """
 
 from __future__ import annotations
@@ -278,6 +278,24 @@ class ModeSupervisor:
     def _log(self, t: float, mode: str, cause: str, joints: tuple[int, ...]) -> None:
         self.transitions.append(ModeTransition(float(t), self._reported, mode, cause, tuple(joints)))
         self._reported = mode
+
+    def describe(self) -> dict[str, object]:
+        """JSON-serialisable description (a runner puts it into ``Trace.meta``)."""
+        return {
+            "type": "ModeSupervisor",
+            "initial_mode": self._initial,
+            "reaction": self.controller.reaction,
+            "schedule": None
+            if self.schedule is None
+            else [[float(t), m] for t, m in zip(self.schedule.times, self.schedule.modes, strict=True)],
+        }
+
+    def log_to(self, trace: object) -> None:
+        """Store the transition log in a recorded trace's ``meta["mode_transitions"]`` (any object with ``meta``)."""
+        meta = getattr(trace, "meta", None)
+        if not isinstance(meta, dict):
+            raise ConfigError(f"cannot log mode transitions to {type(trace).__name__}: it has no dict 'meta'")
+        meta["mode_transitions"] = self.transitions_as_records()
 
     def transitions_as_records(self) -> list[dict[str, object]]:
         """The transition log as JSON-serialisable dicts (for ``Trace.meta["mode_transitions"]``)."""

@@ -763,7 +763,7 @@ def mode_table(
             runner_ctrl: Controller | ModeSupervisor = ModeSupervisor(ctrl, mode=name) if supervised else ctrl
             tr_l = run_closed_loop(plant, runner_ctrl, _Hold(q0), setup.duration, progress=progress)
             if isinstance(runner_ctrl, ModeSupervisor):
-                tr_l.meta["mode_transitions"] = runner_ctrl.transitions_as_records()
+                runner_ctrl.log_to(tr_l)
             traces[f"{name}/link_force{'/supervised' if supervised else ''}"] = tr_l
             P = ee_positions(tr_l, robot, "l_larm")
             dp = window_mean(tr_l.t, P, *setup.load_window) - window_mean(tr_l.t, P, *setup.pre_window)
