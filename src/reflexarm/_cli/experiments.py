@@ -135,8 +135,8 @@ def _compliance_loss(args: argparse.Namespace) -> int:
             ("run", "run", "{}"),
             ("residual_limit_Nm", "cut-off [Nm]", "{:g}"),
             ("force_N", "|f| [N]", "{:.1f}"),
-            ("displacement_mm", "|dx| [mm]", "{:.1f}"),
-            ("apparent_stiffness_N_per_m", "|f|/|dx| [N/m]", "{:.0f}"),
+            ("displacement_mm", "dx along push [mm]", "{:.1f}"),
+            ("apparent_stiffness_N_per_m", "|f|/dx [N/m]", "{:.0f}"),
             ("residual1_Nm", "res_1 [Nm]", "{:.1f}"),
         ],
     )
@@ -167,7 +167,8 @@ def _mode_table(args: argparse.Namespace) -> int:
             {
                 "mode": r["mode"],
                 "kappa": f"eps={r['kappa_eps']}, ext={r['kappa_ext']}",
-                "acc": f"{r['accuracy_ratio']:.3f} {_mark(r['accurate'])} / {_mark(r['paper_accurate'])}",
+                "acc": f"{r['accuracy_ratio']:.3f} ({1e3 * r['tracking_rms_rad']:.1f} mrad) {_mark(r['accurate'])} / "
+                f"{_mark(r['paper_accurate'])}",
                 "ee": f"{r['ee_compliance_ratio']:.3f} {_mark(r['ee_compliant'])} / {_mark(r['paper_ee_compliant'])}",
                 "link": f"{r['link_compliance_ratio']:.3f} {_mark(r['link_compliant'])} / "
                 f"{_mark(r['paper_link_compliant'])}",

@@ -524,7 +524,8 @@ def compliance_loss(
     so the observer sees the push). The push (:class:`HandPush`): the hand's rest point travels ``depth``
     in 1 s from t = 0.5 s and is held until 4.0 s; the hand's stiffness of 2000 N/m is an assumption (a
     firm human grip; a rigid hand would show the stiffening only as force, a very soft one only as
-    position). Under the hold (mean over 3.5-4.0 s), the apparent stiffness is ``|f| / |dx|``.
+    position). Under the hold (mean over 3.5-4.0 s), the displacement is measured along the push (as f_x
+    and Delta x of Fig. 11) and the apparent stiffness is ``|f| / dx`` (:func:`apparent_stiffness`).
 
     Summary: force ratio DC / no DC (paper: 1.93), displacement ratio (paper: 0.67), apparent stiffness
     ratio (paper: 2.87, "about 187 %" more), the same with the cut-off removed, and the peak |residual|.
@@ -563,7 +564,8 @@ def compliance_loss(
                 "kappa_eps": ke,
                 "residual_limit_Nm": setup.residual_limit if limit is None else limit,
                 "force_N": float(np.linalg.norm(f)),
-                "displacement_mm": 1000 * float(np.linalg.norm(dx)),
+                "displacement_mm": 1000 * float(dx @ f) / float(np.linalg.norm(f)),  # along the push
+                "displacement_norm_mm": 1000 * float(np.linalg.norm(dx)),
                 "apparent_stiffness_N_per_m": apparent_stiffness(f, dx),
                 "peak_abs_residual_Nm": float(np.abs(tr.residual).max()),
                 "residual1_Nm": float(window_mean(tr.t, tr.residual[:, 0], *window)),

@@ -88,9 +88,19 @@ def rms(x: npt.ArrayLike) -> float:
 
 
 def apparent_stiffness(force: npt.ArrayLike, displacement: npt.ArrayLike) -> float:
-    """|f| / |dx| [N/m] of a static push: the stiffness the pusher feels (force and displacement 3-vectors)."""
-    f = float(np.linalg.norm(np.asarray(force, dtype=float)))
-    d = float(np.linalg.norm(np.asarray(displacement, dtype=float)))
-    if d == 0.0:
-        raise DataError("zero displacement: the apparent stiffness is undefined")
-    return f / d
+    """Stiffness felt by whoever pushes [N/m]: ``|f| / (dx . f/|f|)``, the displacement along the force.
+
+    Sideways motion of the pushed point (the arm's compliance need not be aligned with the push) does not
+    count; this is the f_x over Delta x of Fig. 11.
+
+    Raises:
+        DataError: zero force, or no displacement along the force.
+    """
+    f = np.asarray(force, dtype=float)
+    fn = float(np.linalg.norm(f))
+    if fn == 0.0:
+        raise DataError("zero force: the apparent stiffness is undefined")
+    along = float(np.asarray(displacement, dtype=float) @ f) / fn
+    if along <= 0.0:
+        raise DataError(f"the point did not yield along the force (displacement along it {along:.3g} m)")
+    return fn / along
