@@ -57,6 +57,7 @@ from reflexarm.sim.trace import Trace
 
 __all__ = [
     "HYDRAULIC_JOINTS",
+    "MOVING_SPEED",
     "SCENARIOS",
     "FrictionExperiment",
     "IdentificationStudy",
@@ -76,6 +77,9 @@ SCENARIOS = ("table1", "stribeck")
 IDENT_STIFFNESS = 300.0
 #: Model-error level of the "perturbed nominal" model (the paper's +-10 %).
 NOMINAL_ERROR_LEVEL = 0.1
+#: Speed below which a joint counts as not moving [rad/s]: the paper's velocity noise level, below
+#: which the sign of the measured velocity (hence of the Coulomb torque) is undetermined.
+MOVING_SPEED = PAPER_NOISE.dq
 
 
 @dataclass(frozen=True)
@@ -96,8 +100,11 @@ class StribeckFriction:
 
     def __call__(self, q: np.ndarray, dq: np.ndarray, t: float) -> np.ndarray:
         """Passive joint torque added to the motor torque [Nm] (opposes the motion)."""
-        return -(self.static_ratio - 1.0) * self.coulomb * np.exp(-((dq / self.stribeck_velocity) ** 2)) * np.tanh(
-            dq / self.smoothing
+        return (
+            -(self.static_ratio - 1.0)
+            * self.coulomb
+            * np.exp(-((dq / self.stribeck_velocity) ** 2))
+            * np.tanh(dq / self.smoothing)
         )
 
     def describe(self) -> dict[str, object]:
@@ -342,8 +349,11 @@ class IdentificationStudy:
         friction: the single-joint experiments.
         excitation: the excitation design (optimized Fourier trajectory, condition numbers).
         validation_trajectory: the (different) validation trajectory.
-        results: ``{"combined": beta_I, "sequential": beta_II}`` identifications.
+        results: ``{"combined": beta_I, "sequential": beta_II}`` identifications from every sample (as
+            in the paper).
         validations: the validation torques of both.
+        results_moving, validations_moving: the same with the rows of non-moving joints
+            (|dq_j| < :data:`MOVING_SPEED`) left out of the identification (``min_speed``).
         true_base: the plant's true base parameters.
         notes: the scenario's plant description.
     """
@@ -357,14 +367,24 @@ class IdentificationStudy:
     validation_log: RobotLog
     results: dict[str, DynamicsIdentification]
     validations: dict[str, TorqueValidation]
+    results_moving: dict[str, DynamicsIdentification]
+    validations_moving: dict[str, TorqueValidation]
     true_base: np.ndarray
     notes: dict[str, object] = field(default_factory=dict)
 
-    def table(self) -> list[dict[str, object]]:
-        """Table I analogue: per joint, validation MSE of both methods and the friction parameters."""
+    def table(self, *, moving: bool = False) -> list[dict[str, object]]:
+        """Table I analogue: per joint, validation MSE of both methods and the friction parameters.
+
+        ``mse_*``: over every validation sample (as the paper); ``mse_moving_*``: over the samples where
+        the joint moves (|dq_j| >= :data:`MOVING_SPEED`). ``moving=True``: the variant identified
+        without the non-moving rows.
+        """
         names = self.robot.joint_names
-        comb, seq = self.results["combined"], self.results["sequential"]
-        vc, vs = self.validations["combined"], self.validations["sequential"]
+        res = self.results_moving if moving else self.results
+        val = self.validations_moving if moving else self.validations
+        comb, seq = res["combined"], res["sequential"]
+        vc, vs = val["combined"], val["sequential"]
+        mc, ms = vc.mse_moving(MOVING_SPEED), vs.mse_moving(MOVING_SPEED)
         rows = []
         for j in range(self.robot.n):
             rows.append(
@@ -372,6 +392,8 @@ class IdentificationStudy:
                     "joint": f"{j + 1} ({names[j]})",
                     "mse_combined": float(vc.mse[j]),
                     "mse_sequential": float(vs.mse[j]),
+                    "mse_moving_combined": float(mc[j]),
+                    "mse_moving_sequential": float(ms[j]),
                     "mu_C_single_joint": float(seq.friction.coulomb[j]),
                     "d_v_single_joint": float(seq.friction.viscous[j]),
                     "mu_C_combined": float(comb.friction.coulomb[j]),
@@ -382,10 +404,14 @@ class IdentificationStudy:
             )
         return rows
 
-    def hydraulic_mse(self) -> dict[str, float]:
-        """Mean validation MSE over the hydraulic joints, per method [Nm^2]."""
+    def hydraulic_mse(self, *, moving: bool = False) -> dict[str, float]:
+        """Mean validation MSE over the hydraulic joints, per method [Nm^2]: over all validation samples
+        (``<method>``) and over the moving ones (``<method>_moving_samples``)."""
         idx = list(HYDRAULIC_JOINTS)
-        return {m: float(np.mean(v.mse[idx])) for m, v in self.validations.items()}
+        val = self.validations_moving if moving else self.validations
+        out = {m: float(np.mean(v.mse[idx])) for m, v in val.items()}
+        out.update({f"{m}_moving_samples": float(np.mean(v.mse_moving(MOVING_SPEED)[idx])) for m, v in val.items()})
+        return out
 
 
 def _validation_trajectory(robot: RobotModel, seed: int, base_frequency: float) -> FourierTrajectory:
@@ -446,20 +472,42 @@ def run_identification_study(
     traj = excitation.trajectory.with_periods(periods)
     vtraj = _validation_trajectory(robot, seed + 1, excitation.trajectory.base_frequency).with_periods(periods)
     ident_raw, _ = simulate_log(
-        robot, traj, traj.duration, controller_model=nominal, noise=noise, seed=seed + 1,
-        extra_joint_torque=extra, source="excitation", progress=progress,
+        robot,
+        traj,
+        traj.duration,
+        controller_model=nominal,
+        noise=noise,
+        seed=seed + 1,
+        extra_joint_torque=extra,
+        source="excitation",
+        progress=progress,
     )
     valid_raw, _ = simulate_log(
-        robot, vtraj, vtraj.duration, controller_model=nominal, noise=noise, seed=seed + 2,
-        extra_joint_torque=extra, source="validation", progress=progress,
+        robot,
+        vtraj,
+        vtraj.duration,
+        controller_model=nominal,
+        noise=noise,
+        seed=seed + 2,
+        extra_joint_torque=extra,
+        source="validation",
+        progress=progress,
     )
     ident = preprocess_log(ident_raw)
     valid = preprocess_log(valid_raw)
-    results = {
-        "combined": identify_dynamics(robot, ident, method="combined", base=base),
-        "sequential": identify_dynamics(robot, ident, method="sequential", friction=fr.friction, base=base),
-    }
+
+    def both(min_speed: float) -> dict[str, DynamicsIdentification]:
+        return {
+            "combined": identify_dynamics(robot, ident, method="combined", base=base, min_speed=min_speed),
+            "sequential": identify_dynamics(
+                robot, ident, method="sequential", friction=fr.friction, base=base, min_speed=min_speed
+            ),
+        }
+
+    results = both(0.0)
+    results_moving = both(MOVING_SPEED)
     validations = {m: validate_model(r, robot, valid, label=m) for m, r in results.items()}
+    validations_moving = {m: validate_model(r, robot, valid, label=m) for m, r in results_moving.items()}
     return IdentificationStudy(
         scenario=scenario,
         robot=robot,
@@ -470,6 +518,8 @@ def run_identification_study(
         validation_log=valid,
         results=results,
         validations=validations,
+        results_moving=results_moving,
+        validations_moving=validations_moving,
         true_base=base.base_from_standard(robot.inertial_parameters()),
         notes={"scenario": scenario, "extra_joint_torque": None if extra is None else extra.describe()},
     )
@@ -494,7 +544,7 @@ class TrackingComparison:
         rows = []
         for name in self.rms_error:
             row: dict[str, object] = {"model": name}
-            for j, jn in enumerate(joint_names):
+            for j in range(len(joint_names)):
                 row[f"rms_{j + 1}"] = float(self.rms_error[name][j])
             row["rms_all"] = float(np.sqrt(np.mean(self.rms_error[name] ** 2)))
             rows.append(row)
@@ -529,8 +579,17 @@ def compare_tracking(
     rms, mx, traces = {}, {}, {}
     for name, model in models.items():
         _, tr = simulate_log(
-            robot, trajectory, duration, controller_model=model, stiffness=stiffness, kappa_f=kappa_f,
-            noise=noise, seed=seed, extra_joint_torque=extra_joint_torque, source=name, progress=progress,
+            robot,
+            trajectory,
+            duration,
+            controller_model=model,
+            stiffness=stiffness,
+            kappa_f=kappa_f,
+            noise=noise,
+            seed=seed,
+            extra_joint_torque=extra_joint_torque,
+            source=name,
+            progress=progress,
         )
         m = tr.t >= settle
         e = tr.q_d[m] - tr.q[m]

@@ -2,7 +2,7 @@
 weighted least squares (combined and sequential), validation, and the identified model written back.
 
 Never imports :mod:`reflexarm.control`; the experiments that run the plant with the controller live in
-:mod:`reflexarm.experiments.identification`.
+:mod:`reflexarm.experiments.identification`. Figures are in :mod:`reflexarm.ident.plots`.
 """
 
 from reflexarm.ident.base_parameters import BaseParameters, IllConditionedWarning, compute_base_parameters
@@ -14,7 +14,20 @@ from reflexarm.ident.estimation import (
     identify_dynamics,
     validate_model,
 )
+from reflexarm.ident.excitation import ExcitationDesign, FourierTrajectory, optimize_excitation
+from reflexarm.ident.joint_friction import (
+    ConstantVelocityTrajectory,
+    FrictionFit,
+    FrictionPoint,
+    fit_friction,
+    friction_from_fits,
+    friction_points,
+    identify_joint_friction,
+    plan_friction_experiment,
+    segment_constant_velocity,
+)
 from reflexarm.ident.logs import DEFAULT_CUTOFF_HZ, LogRepairWarning, RobotLog, load_log, preprocess_log, save_log
+from reflexarm.ident.model_file import load_identified_model, read_identified_model, save_identified_model
 from reflexarm.ident.regressor import BatchRegressor, compute_friction_regressor
 
 __all__ = [
@@ -22,17 +35,32 @@ __all__ = [
     "METHODS",
     "BaseParameters",
     "BatchRegressor",
+    "ConstantVelocityTrajectory",
     "DynamicsIdentification",
+    "ExcitationDesign",
+    "FourierTrajectory",
+    "FrictionFit",
     "FrictionParameters",
+    "FrictionPoint",
     "IllConditionedWarning",
     "LogRepairWarning",
     "RobotLog",
     "TorqueValidation",
     "compute_base_parameters",
     "compute_friction_regressor",
+    "fit_friction",
+    "friction_from_fits",
+    "friction_points",
     "identify_dynamics",
+    "identify_joint_friction",
+    "load_identified_model",
     "load_log",
+    "optimize_excitation",
+    "plan_friction_experiment",
     "preprocess_log",
+    "read_identified_model",
+    "save_identified_model",
     "save_log",
+    "segment_constant_velocity",
     "validate_model",
 ]

@@ -129,10 +129,11 @@ class BaseParameters:
         """Why 10 n parameters reduce to n_b: per link, how many are base columns, lumped or unidentifiable."""
         A = self.matrix()
         n = self.n_joints
+        after = self.diagonal[self.n_base] if self.n_base < self.diagonal.size else 0.0
         lines = [
             f"{self.n_base} base parameters of {self.n_standard} standard ones "
             f"({self.n_standard - self.n_base} removed); the QR diagonal drops from "
-            f"{self.diagonal[self.n_base - 1]:.2e} to {self.diagonal[self.n_base] if self.n_base < self.diagonal.size else 0:.2e} "
+            f"{self.diagonal[self.n_base - 1]:.2e} to {after:.2e} "
             f"(tolerance {self.rank_tolerance:.0e}).",
             "per link: base columns (kept as the representative of a combination) / lumped into a base "
             "combination of another column / no effect on any joint torque:",

@@ -271,14 +271,16 @@ class _GramAccumulator:
         self.n = n
         self.p = p
         self.G = np.zeros((n, p + 1, p + 1))
-        self.rows = 0
+        self.rows = np.zeros(n, dtype=np.int64)
 
-    def add(self, A: np.ndarray, b: np.ndarray) -> None:
-        """A: (m, n, p) rows per joint; b: (m, n)."""
+    def add(self, A: np.ndarray, b: np.ndarray, keep: np.ndarray | None = None) -> None:
+        """A: (m, n, p) rows per joint; b: (m, n); keep: (m, n) bool, rows to use (default all)."""
         for j in range(self.n):
             M = np.column_stack([A[:, j, :], b[:, j]])
+            if keep is not None:
+                M = M[keep[:, j]]
             self.G[j] += M.T @ M
-        self.rows += A.shape[0]
+            self.rows[j] += M.shape[0]
 
     def solve(self, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         """(x, equilibrated (A^T W A) root R, weighted residual norm) of min sum_j w_j^2 |A_j x - b_j|^2."""
@@ -331,6 +333,7 @@ def identify_dynamics(
     noise_variance: npt.ArrayLike | Literal["estimate"] | None = "estimate",
     base: BaseParameters | None = None,
     condition_limit: float = DEFAULT_CONDITION_LIMIT,
+    min_speed: float = 0.0,
     progress: bool = False,
 ) -> DynamicsIdentification:
     """Identify beta_b (and friction) from a log by weighted least squares, eq. (18).
@@ -345,6 +348,10 @@ def identify_dynamics(
             unweighted pass; None: unweighted (Sigma = I).
         base: base-parameter map (default: computed from ``robot``).
         condition_limit: warn (:class:`IllConditionedWarning`) above this condition number.
+        min_speed: leave out the rows (joint j at sample k) with |dq_j| < min_speed [rad/s]: there the
+            sign of the velocity, hence the Coulomb torque, is undetermined (sticking, or speeds within
+            the velocity noise). Each joint's rows are separate equations of (19), so this drops no
+            other joint's information. Default 0: every row is used.
         progress: show a progress bar over the regressor chunks.
 
     Raises:
@@ -400,7 +407,9 @@ def identify_dynamics(
     given = None
     if isinstance(noise_variance, str):
         if noise_variance != "estimate":
-            raise IdentificationError(f"noise_variance must be per-joint variances, 'estimate' or None; got {noise_variance!r}")
+            raise IdentificationError(
+                f"noise_variance must be per-joint variances, 'estimate' or None; got {noise_variance!r}"
+            )
     elif noise_variance is not None:
         given = np.broadcast_to(np.asarray(noise_variance, dtype=float), (n,)).copy()
         if not np.all(np.isfinite(given)) or np.any(given <= 0):
@@ -409,6 +418,7 @@ def identify_dynamics(
     acc = _GramAccumulator(n, p)
     t_reg = t_solve = 0.0
     for lg in logs:
+        assert lg.ddq is not None  # checked above
         clock = time.perf_counter()
         b_all = _rhs(robot, lg)
         t_reg += time.perf_counter() - clock
@@ -420,22 +430,25 @@ def identify_dynamics(
             except StopIteration:
                 break
             A, b = rows(lg, b_all, sl, Y)
+            keep = np.abs(lg.dq[sl]) >= min_speed if min_speed > 0 else None
             t_reg += time.perf_counter() - clock
             clock = time.perf_counter()
-            acc.add(A, b)
+            acc.add(A, b, keep)
             t_solve += time.perf_counter() - clock
     clock = time.perf_counter()
     notes: list[str] = []
     if given is not None:
         sigma2 = given
-        notes.append("Sigma from the given per-joint noise variances: " + ", ".join(f"{s:.3g}" for s in sigma2) + " Nm^2")
+        notes.append(
+            "Sigma from the given per-joint noise variances: " + ", ".join(f"{s:.3g}" for s in sigma2) + " Nm^2"
+        )
     elif noise_variance is None:
         sigma2 = np.ones(n)
         notes.append("unweighted least squares (Sigma = I)")
     else:
         # per-joint residual variance of an unweighted fit -> Sigma of (18)
         x0, _, _ = acc.solve(np.ones(n))
-        sigma2 = np.maximum(acc.residual_ss(x0) / max(total - p / n, 1.0), 1e-12)
+        sigma2 = np.maximum(acc.residual_ss(x0) / np.maximum(acc.rows - p / n, 1.0), 1e-12)
         notes.append(
             "Sigma from the per-joint residual variances of an unweighted pass: "
             + ", ".join(f"{s:.3g}" for s in sigma2)
@@ -448,11 +461,17 @@ def identify_dynamics(
     cond = condition_number(R / np.where(col > 0, col, 1.0))
     warn_if_ill_conditioned(cond, f"the identification regressor ({p} parameters, {total:,} samples)", condition_limit)
     # parameter standard deviations: s^2 (R^T R)^-1 with s^2 the weighted residual variance
-    dof = max(total * n - p, 1)
+    dof = max(int(acc.rows.sum()) - p, 1)
     s2 = res_norm**2 / dof
     Rinv = scipy.linalg.solve_triangular(R, np.eye(p))
     std = np.sqrt(s2 * np.sum(Rinv**2, axis=1))
-    residual_rms = np.sqrt(acc.residual_ss(x) / total)
+    residual_rms = np.sqrt(acc.residual_ss(x) / np.maximum(acc.rows, 1))
+    if min_speed > 0:
+        notes.append(
+            f"rows with |dq_j| < {min_speed:g} rad/s left out: "
+            + ", ".join(f"{100 * (1 - r / total):.0f} %" for r in acc.rows)
+            + " of each joint's samples"
+        )
     beta_b = x[:nb]
     k = nb
     if method == "combined":
@@ -498,7 +517,7 @@ class TorqueValidation:
     """Measured against predicted torques on a log (ideally not the one identified on).
 
     Attributes:
-        t: time (N,) [s]; measured, predicted: (N, n) [Nm].
+        t: time (N,) [s]; measured, predicted: (N, n) [Nm]; dq: the velocities used (N, n) [rad/s].
         mse: per joint [Nm^2]; rmse: per joint [Nm]; nrmse: rmse / std(measured) per joint [-].
         pooled_rmse: over all joints and samples [Nm].
         label: which model (e.g. ``"sequential"``).
@@ -508,10 +527,19 @@ class TorqueValidation:
     measured: np.ndarray
     predicted: np.ndarray
     label: str = ""
+    dq: np.ndarray | None = None
 
     @property
     def error(self) -> np.ndarray:
         return self.predicted - self.measured
+
+    def mse_moving(self, min_speed: float) -> np.ndarray:
+        """MSE per joint over the samples where that joint moves, |dq_j| >= ``min_speed`` [Nm^2]."""
+        if self.dq is None:
+            raise IdentificationError("this validation has no velocities; build it with validate_model")
+        keep = np.abs(self.dq) >= min_speed
+        e2 = np.where(keep, self.error**2, 0.0)
+        return e2.sum(axis=0) / np.maximum(keep.sum(axis=0), 1)
 
     @property
     def mse(self) -> np.ndarray:
@@ -582,7 +610,7 @@ def validate_model(
     meas = log.measured_torque
     if log.wrench is not None:
         meas = _rhs(robot, replace(log, tau=meas, tau_raw=None))
-    return TorqueValidation(log.t.copy(), meas.copy(), pred, label if label is not None else result.method)
+    return TorqueValidation(log.t.copy(), meas.copy(), pred, label if label is not None else result.method, dq.copy())
 
 
 def _interp_cols(t: np.ndarray, y: np.ndarray, tn: np.ndarray) -> np.ndarray:

@@ -408,7 +408,12 @@ def optimize_excitation(
         limits_optimized=limits,
         iterations=int(res.get("nit", 0)),
         message=str(res.get("message", "")),
-        bounds={"lower": lo.tolist(), "upper": hi.tolist(), "max_velocity": vmax.tolist(), "max_acceleration": amax.tolist()},
+        bounds={
+            "lower": lo.tolist(),
+            "upper": hi.tolist(),
+            "max_velocity": vmax.tolist(),
+            "max_acceleration": amax.tolist(),
+        },
     )
 
 

@@ -37,6 +37,7 @@ __all__ = [
     "FrictionFit",
     "FrictionPoint",
     "fit_friction",
+    "friction_from_fits",
     "friction_points",
     "identify_joint_friction",
     "plan_friction_experiment",
@@ -262,10 +263,11 @@ def segment_constant_velocity(
 
     With ``windows`` (planned ``(t_begin, t_end, v)`` rows), each window minus ``settle`` seconds at its
     start is used. With ``q`` (the joint's positions) and ``position_window`` (lo, hi), each interval is
-    further cut to the samples inside that position range. Without, intervals are found from the data: the velocity is smoothed (moving average
-    over ``smooth`` seconds), split where its sign changes or where it leaves ``tolerance`` (relative) of
-    the interval's median, and intervals shorter than ``min_duration`` [s] or slower than ``min_speed``
-    [rad/s] are dropped; ``settle`` seconds are dropped at each start.
+    further cut to the samples inside that position range. Without ``windows``, intervals are found from
+    the data: the velocity is smoothed (moving average over ``smooth`` seconds), split where its sign
+    changes or where it leaves ``tolerance`` (relative) of the interval's median, and intervals shorter
+    than ``min_duration`` [s] or slower than ``min_speed`` [rad/s] are dropped; ``settle`` seconds are
+    dropped at each start.
     """
     tt = np.asarray(t, dtype=float)
     v = np.asarray(dq, dtype=float).reshape(-1)
@@ -416,7 +418,9 @@ def fit_friction(points: Sequence[FrictionPoint], *, offset: bool = False) -> Fr
     A = np.column_stack(cols)
     k = A.shape[1]
     if v.size < k + 1:
-        raise IdentificationError(f"{v.size} friction points cannot determine {k} parameters with a residual; run more speeds")
+        raise IdentificationError(
+            f"{v.size} friction points cannot determine {k} parameters with a residual; run more speeds"
+        )
     if offset and (np.all(v > 0) or np.all(v < 0)):
         raise IdentificationError("Coulomb friction and an offset need points in both directions")
     x, *_ = np.linalg.lstsq(A, tau, rcond=None)
@@ -474,12 +478,16 @@ def identify_joint_friction(
     return fit_friction(friction_points(robot, joint, t, q, dq, tau, intervals), offset=offset)
 
 
-def friction_from_fits(fits: Sequence[FrictionFit], n: int, *, default: FrictionParameters | None = None) -> FrictionParameters:
+def friction_from_fits(
+    fits: Sequence[FrictionFit], n: int, *, default: FrictionParameters | None = None
+) -> FrictionParameters:
     """Assemble per-joint fits into :class:`FrictionParameters` (joints without a fit: ``default`` or 0)."""
     viscous = np.zeros(n) if default is None else default.viscous.copy()
     coulomb = np.zeros(n) if default is None else default.coulomb.copy()
     have_offset = any(f.offset is not None for f in fits)
-    offset = (np.zeros(n) if default is None or default.offset is None else default.offset.copy()) if have_offset else None
+    offset = (
+        (np.zeros(n) if default is None or default.offset is None else default.offset.copy()) if have_offset else None
+    )
     for f in fits:
         viscous[f.joint] = f.viscous
         coulomb[f.joint] = f.coulomb

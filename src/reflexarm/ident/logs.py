@@ -120,7 +120,7 @@ class RobotLog:
         N = t.size
         if N < 2:
             raise DataError(f"{where}: a log needs at least 2 samples; got {N}")
-        arrays: dict[str, np.ndarray | None] = {"t": t}
+        arrays: dict[str, np.ndarray | None] = {"t": t}  # validated arrays, set on self at the end
         n = None
         for name in ("q", "dq", "tau", "ddq", "tau_raw"):
             value = getattr(self, name)
@@ -144,22 +144,22 @@ class RobotLog:
             arrays["wrench"] = w
         else:
             arrays["wrench"] = None
-        for name, arr in arrays.items():
-            if arr is None:
+        for name, checked in arrays.items():
+            if checked is None:
                 continue
-            bad = ~np.isfinite(arr)
+            bad = ~np.isfinite(checked)
             if bad.any():
                 row = int(np.argwhere(bad)[0][0])
-                col = "" if arr.ndim == 1 else f"[:, {int(np.argwhere(bad)[0][1])}]"
-                raise DataError(f"{where}: {name}{col} is {_describe(arr[bad][0])} at row {row}")
+                col = "" if checked.ndim == 1 else f"[:, {int(np.argwhere(bad)[0][1])}]"
+                raise DataError(f"{where}: {name}{col} is {_describe(checked[bad][0])} at row {row}")
         steps = np.diff(t)
         if np.any(steps <= 0):
             row = int(np.argmax(steps <= 0)) + 1
             raise DataError(
                 f"{where}: time is not strictly increasing at row {row}: t = {t[row]!r} s after {t[row - 1]!r} s"
             )
-        for name, arr in arrays.items():
-            object.__setattr__(self, name, arr)
+        for name, value in arrays.items():
+            object.__setattr__(self, name, value)
 
     # ------------------------------------------------------------------ facts
     @property
@@ -586,7 +586,7 @@ def save_log(log: RobotLog, path: str | os.PathLike[str]) -> Path:
             arrays["ddq"] = log.ddq
         if log.wrench is not None:
             arrays["wrench"] = log.wrench
-        np.savez_compressed(p, **arrays)
+        np.savez_compressed(p, **arrays)  # type: ignore[arg-type]
         return p
     import pandas as pd
 
@@ -652,7 +652,8 @@ def preprocess_log(
     if cutoff_hz is not None:
         if not 0 < cutoff_hz < 0.5 * fs:
             raise DataError(
-                f"{log.source}: filter cutoff {cutoff_hz!r} Hz must be between 0 and the Nyquist frequency {0.5 * fs:.4g} Hz"
+                f"{log.source}: filter cutoff {cutoff_hz!r} Hz must be between 0 and the Nyquist frequency "
+                f"{0.5 * fs:.4g} Hz"
             )
         b, a = butter(order, cutoff_hz / (0.5 * fs))
         padlen = min(3 * max(len(a), len(b)), t.size - 1)

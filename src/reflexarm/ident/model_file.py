@@ -22,6 +22,7 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -93,7 +94,7 @@ def save_identified_model(
     return p
 
 
-def read_identified_model(path: str | os.PathLike[str]) -> tuple[DynamicsIdentification, dict[str, object]]:
+def read_identified_model(path: str | os.PathLike[str]) -> tuple[DynamicsIdentification, dict[str, Any]]:
     """The stored identification and the whole JSON document."""
     p = Path(path)
     try:
@@ -103,9 +104,11 @@ def read_identified_model(path: str | os.PathLike[str]) -> tuple[DynamicsIdentif
     except (OSError, json.JSONDecodeError) as e:
         raise ModelError(f"cannot read identified model file {str(p)!r}: {e}") from e
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
-        raise ModelError(f"{p.name}: not a reflexarm identified model (expected \"format\": \"{FORMAT}\")")
+        raise ModelError(f'{p.name}: not a reflexarm identified model (expected "format": "{FORMAT}")')
     if doc.get("version") != VERSION:
-        raise ModelError(f"{p.name}: unsupported identified-model version {doc.get('version')!r}; this reflexarm reads {VERSION}")
+        raise ModelError(
+            f"{p.name}: unsupported identified-model version {doc.get('version')!r}; this reflexarm reads {VERSION}"
+        )
     try:
         result = DynamicsIdentification.from_dict(doc["identification"])
     except Exception as e:
