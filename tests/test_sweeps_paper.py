@@ -148,3 +148,19 @@ def test_cli_bad_input_is_a_clear_error(argv, message, tmp_path, capsys):
     assert cli_main([*argv, "--out", str(tmp_path), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert message in err and "error:" in err
+
+
+def test_unreachable_scheduler_fails_before_any_run(tmp_path):
+    from reflexarm.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="cannot reach the Dask scheduler at 'tcp://127.0.0.1:9' within 1 s"):
+        paper_sweep(
+            "noise",
+            tmp_path,
+            levels="1",
+            trials=1,
+            scheduler="tcp://127.0.0.1:9",
+            scheduler_timeout=1.0,
+            progress=False,
+        )
+    assert not (tmp_path / "reference.npz").exists()  # refused before spending a run on the reference
