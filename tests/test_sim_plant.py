@@ -33,14 +33,17 @@ def plant(robot):
 
 def hold_with_force(plant, robot, force, ticks=20):
     """Apply ``force`` [N] (world) at the end effector and cancel it and gravity with the motors, so that
-    the arm stays exactly at rest: tau = g(q) - J_ee^T F (Pinocchio)."""
-    q = plant.q
+    the arm stays at rest: tau = g(q) - J_ee^T F (Pinocchio). Returns the state after the hold and J_ee
+    there (the friction-loss constraint lets the held arm creep by ~1e-11 rad; expectations are taken at
+    the final state so that only round-off remains)."""
+    q0 = plant.q
     plant.apply_external_force(force)
-    J_ee = robot.compute_frame_jacobian(q, robot.ee_frame, world_aligned=True)[:3]
-    tau = robot.compute_gravity(q) - J_ee.T @ force
+    J0 = robot.compute_frame_jacobian(q0, robot.ee_frame, world_aligned=True)[:3]
+    tau = robot.compute_gravity(q0) - J0.T @ force
     for _ in range(ticks):
         plant.step(tau)
-    return q, J_ee
+    q = plant.q
+    return q, robot.compute_frame_jacobian(q, robot.ee_frame, world_aligned=True)[:3]
 
 
 # ---------------------------------------------------------------------- friction (Table I)
