@@ -6,12 +6,15 @@ Never imports :mod:`reflexarm.control`; the experiments that run the plant with 
 """
 
 from reflexarm.ident.base_parameters import BaseParameters, IllConditionedWarning, compute_base_parameters
+from reflexarm.ident.consistency import project_physically_consistent
 from reflexarm.ident.estimation import (
     METHODS,
     DynamicsIdentification,
     FrictionParameters,
+    PhysicalConsistencyWarning,
     TorqueValidation,
     identify_dynamics,
+    mass_matrix_margin,
     validate_model,
 )
 from reflexarm.ident.excitation import ExcitationDesign, FourierTrajectory, optimize_excitation
@@ -44,6 +47,7 @@ __all__ = [
     "FrictionPoint",
     "IllConditionedWarning",
     "LogRepairWarning",
+    "PhysicalConsistencyWarning",
     "RobotLog",
     "TorqueValidation",
     "compute_base_parameters",
@@ -55,9 +59,11 @@ __all__ = [
     "identify_joint_friction",
     "load_identified_model",
     "load_log",
+    "mass_matrix_margin",
     "optimize_excitation",
     "plan_friction_experiment",
     "preprocess_log",
+    "project_physically_consistent",
     "read_identified_model",
     "save_identified_model",
     "save_log",

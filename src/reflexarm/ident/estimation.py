@@ -29,6 +29,7 @@ from __future__ import annotations
 import json
 import os
 import time
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -54,8 +55,10 @@ __all__ = [
     "METHODS",
     "DynamicsIdentification",
     "FrictionParameters",
+    "PhysicalConsistencyWarning",
     "TorqueValidation",
     "identify_dynamics",
+    "mass_matrix_margin",
     "validate_model",
 ]
 
@@ -160,6 +163,10 @@ class DynamicsIdentification:
         residual_rms: RMS of the training residual per joint [Nm].
         notes: what was done (weights, warnings).
         timings: wall time of the regressor assembly and of the solve [s].
+        information: F^T Sigma^-1 F of the estimated parameters (beta_b, then the estimated friction
+            columns), the metric of :func:`~reflexarm.ident.consistency.project_physically_consistent`.
+        physical_parameters: a physically consistent standard parameter vector realising beta_b, if
+            known (set by the projection); :meth:`to_robot_model` then uses it.
     """
 
     method: str
@@ -175,6 +182,8 @@ class DynamicsIdentification:
     residual_rms: np.ndarray
     notes: tuple[str, ...] = field(default=())
     timings: dict[str, float] = field(default_factory=dict, compare=False)
+    information: np.ndarray | None = field(default=None, compare=False)
+    physical_parameters: np.ndarray | None = field(default=None, compare=False)
 
     @property
     def n(self) -> int:
@@ -207,12 +216,28 @@ class DynamicsIdentification:
         The rigid-body torques of the returned model equal Phi_b beta_b for every motion. Friction
         coefficients below 0 are clipped to 0; offsets are not part of :class:`CoulombViscousFriction`
         and are dropped (a constant sensor bias is not friction the controller should compensate).
+        Warns (:class:`PhysicalConsistencyWarning`) if M(q) of beta_b is not positive definite
+        everywhere in the joint range (see :func:`mass_matrix_margin`).
         """
         if robot.n != self.n:
             raise IdentificationError(f"identified model has {self.n} joints; robot {robot.name!r} has {robot.n}")
-        pi = self.standard_parameters(robot.inertial_parameters())
+        pi = (
+            self.physical_parameters
+            if self.physical_parameters is not None
+            else self.standard_parameters(robot.inertial_parameters())
+        )
         band = robot.friction.velocity_band if velocity_band is None else velocity_band
-        return robot.with_inertial_parameters(pi).with_friction(self.friction.to_model(band))
+        model = robot.with_inertial_parameters(pi).with_friction(self.friction.to_model(band))
+        margin = mass_matrix_margin(model)
+        if margin <= 0:
+            warnings.warn(
+                f"the {self.method} base parameters are not physically consistent: M(q) is not positive definite "
+                f"in the joint range (smallest eigenvalue ratio {margin:.3g}); a controller cannot use this model. "
+                "Leave out sticking rows (min_speed), use a richer excitation or the sequential method",
+                PhysicalConsistencyWarning,
+                stacklevel=2,
+            )
+        return model
 
     # ------------------------------------------------------------------ serialisation
     def to_dict(self) -> dict[str, object]:
@@ -230,6 +255,8 @@ class DynamicsIdentification:
             "n_samples": self.n_samples,
             "residual_rms": self.residual_rms.tolist(),
             "notes": list(self.notes),
+            "information": None if self.information is None else self.information.tolist(),
+            "physical_parameters": None if self.physical_parameters is None else self.physical_parameters.tolist(),
         }
 
     @classmethod
@@ -249,9 +276,33 @@ class DynamicsIdentification:
                 n_samples=int(d.get("n_samples", 0)),  # type: ignore[call-overload]
                 residual_rms=np.asarray(d.get("residual_rms", []), dtype=float),
                 notes=tuple(str(x) for x in d.get("notes", [])),  # type: ignore[attr-defined]
+                information=None if d.get("information") is None else np.asarray(d["information"], dtype=float),
+                physical_parameters=None
+                if d.get("physical_parameters") is None
+                else np.asarray(d["physical_parameters"], dtype=float),
             )
         except (KeyError, TypeError, ValueError) as e:
             raise IdentificationError(f"malformed identification result: {e}") from e
+
+
+class PhysicalConsistencyWarning(UserWarning):
+    """Identified parameters give a mass matrix that is not positive definite somewhere."""
+
+
+def mass_matrix_margin(robot: RobotModel, *, n_samples: int = 200, seed: int = 0) -> float:
+    """min over random configurations in the joint range of lambda_min(M(q)) / lambda_max(M(q)).
+
+    Positive: M(q) is positive definite at every sampled configuration (a necessary condition for a
+    model a controller can use); <= 0: it is not.
+    """
+    from reflexarm.ident.base_parameters import random_samples
+
+    q, _, _ = random_samples(robot, n_samples, np.random.default_rng(seed))
+    worst = np.inf
+    for k in range(n_samples):
+        ev = np.linalg.eigvalsh(robot.compute_mass_matrix(q[k]))
+        worst = min(worst, float(ev[0] / max(abs(ev[-1]), 1e-300)))
+    return worst
 
 
 # ---------------------------------------------------------------------------------------------- solve
@@ -496,6 +547,7 @@ def identify_dynamics(
         residual_rms=residual_rms,
         notes=tuple(notes),
         timings={"regressor_s": t_reg, "solve_s": t_solve},
+        information=R.T @ R,
     )
 
 

@@ -21,13 +21,14 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from reflexarm.errors import ModelError
-from reflexarm.ident.estimation import DynamicsIdentification
+from reflexarm.ident.estimation import DynamicsIdentification, PhysicalConsistencyWarning, mass_matrix_margin
 from reflexarm.robots.friction import CoulombViscousFriction
 from reflexarm.robots.robot_model import RobotModel, builtin_robots, load_robot
 
@@ -67,7 +68,18 @@ def save_identified_model(
             f"identification of joints {list(result.joint_names)} does not fit robot {robot.name!r} "
             f"with joints {robot.joint_names}"
         )
-    model = result.to_robot_model(robot)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PhysicalConsistencyWarning)
+        model = result.to_robot_model(robot)
+    margin = mass_matrix_margin(model)
+    if margin <= 0:
+        warnings.warn(
+            f"{Path(path).name}: the {result.method} base parameters give a mass matrix that is not positive "
+            f"definite in the joint range (smallest eigenvalue ratio {margin:.3g}); the file is written, but "
+            "load_identified_model will refuse it",
+            PhysicalConsistencyWarning,
+            stacklevel=2,
+        )
     doc = {
         "format": FORMAT,
         "version": VERSION,
@@ -81,6 +93,7 @@ def save_identified_model(
         "identification": result.to_dict(),
         "standard_parameter_names": robot.inertial_parameter_names(),
         "standard_parameters": model.inertial_parameters().tolist(),
+        "mass_matrix_margin": margin,
         "friction_model": {
             "coulomb": model.friction.coulomb.tolist(),
             "viscous": model.friction.viscous.tolist(),
@@ -116,16 +129,21 @@ def read_identified_model(path: str | os.PathLike[str]) -> tuple[DynamicsIdentif
     return result, doc
 
 
-def load_identified_model(path: str | os.PathLike[str], robot: RobotModel | None = None) -> RobotModel:
+def load_identified_model(
+    path: str | os.PathLike[str], robot: RobotModel | None = None, *, allow_inconsistent: bool = False
+) -> RobotModel:
     """The controller's :class:`RobotModel` from an identified-model file.
 
     Args:
         path: the JSON file written by :func:`save_identified_model`.
         robot: the robot (default: loaded from the file's ``robot.source``).
+        allow_inconsistent: load even if M(q) is not positive definite somewhere in the joint range
+            (for analysis; a controller cannot use such a model).
 
     Raises:
-        ModelError: unreadable file, wrong format, joints that do not match, or standard parameters
-            that do not reproduce the stored base parameters.
+        ModelError: unreadable file, wrong format, joints that do not match, standard parameters that
+            do not reproduce the stored base parameters, or (unless ``allow_inconsistent``) a mass matrix
+            that is not positive definite.
     """
     result, doc = read_identified_model(path)
     name = Path(path).name
@@ -155,4 +173,13 @@ def load_identified_model(path: str | os.PathLike[str], robot: RobotModel | None
         )
     except Exception as e:
         raise ModelError(f"{name}: malformed friction_model: {e}") from e
-    return robot.with_inertial_parameters(pi).with_friction(friction)
+    model = robot.with_inertial_parameters(pi).with_friction(friction)
+    if not allow_inconsistent:
+        margin = mass_matrix_margin(model)
+        if margin <= 0:
+            raise ModelError(
+                f"{name}: the identified parameters give a mass matrix that is not positive definite in the joint "
+                f"range (smallest eigenvalue ratio {margin:.3g}); the controller cannot use this model "
+                "(pass allow_inconsistent=True to load it for analysis)"
+            )
+    return model
