@@ -156,6 +156,7 @@ def project_physically_consistent(
     beta = A @ pi
     d_beta = beta - beta_hat
     cost = float(d_beta @ H_eff @ d_beta)
+    rel_change = float(np.linalg.norm(d_beta)) / max(float(np.linalg.norm(beta_hat)), 1e-300)
     rss = float(np.sum(result.residual_rms**2 / np.maximum(result.noise_variance, 1e-300))) * result.n_samples
     friction = result.friction
     if K is not None:
@@ -177,9 +178,8 @@ def project_physically_consistent(
         notes=result.notes
         + (
             f"projected onto physically consistent parameters (pseudo-inertias positive definite): weighted "
-            f"residual sum of "
-            f"squares +{cost:.4g} ({100 * cost / max(rss, 1e-300):.3g} % of {rss:.4g}); |delta beta_b| / |beta_b| = "
-            f"{np.linalg.norm(d_beta) / max(np.linalg.norm(beta_hat), 1e-300):.3g}",
+            f"residual sum of squares +{cost:.4g} ({100 * cost / max(rss, 1e-300):.3g} % of {rss:.4g}); "
+            f"|delta beta_b| / |beta_b| = {rel_change:.3g}",
         ),
     )
     return projected
