@@ -11,13 +11,14 @@ from typing import Any
 from reflexarm._cli.common import add_common, format_table, out_dir
 
 
-def _add_setup_options(p: argparse.ArgumentParser) -> None:
+def _add_setup_options(p: argparse.ArgumentParser, friction: str) -> None:
     p.add_argument(
         "--plant-friction",
         choices=("dry", "smooth", "none"),
-        default="dry",
-        help="true arm's joint friction: dry = MuJoCo frictionloss with stiction (Table I, default); "
-        "smooth = continuous-time Coulomb + viscous without stiction (as the paper's simulation); none",
+        default=friction,
+        help="true arm's joint friction: smooth = continuous-time Coulomb + viscous, Table I, no stiction (the "
+        "paper's simulation); dry = MuJoCo frictionloss with stiction (Table I, like the real arm); none "
+        f"(default {friction})",
     )
     p.add_argument("--model-error", type=float, default=10.0, help="+- model errors [%%] (default 10)")
     p.add_argument("--noise-scale", type=float, default=1.0, help="factor on the paper's sensor noise (default 1)")
@@ -40,19 +41,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     """Add ``efc-step``, ``compliance-loss``, ``mode-table`` and ``sweep`` to the top-level parser."""
     p = sub.add_parser("efc-step", help="50 N step on the end effector: no DC / DC / DC+EFC (Fig. 12)")
     add_common(p, default_out="results/efc-step")
-    _add_setup_options(p)
+    _add_setup_options(p, "smooth")
     p.set_defaults(func=_efc_step)
 
     p = sub.add_parser("compliance-loss", help="push the end effector and hold it, with and without DC (Fig. 11)")
     add_common(p, default_out="results/compliance-loss")
-    _add_setup_options(p)
+    _add_setup_options(p, "dry")
     p.add_argument("--depth", type=float, default=0.10, help="travel of the pushing hand [m] (default 0.10)")
     p.add_argument("--hand-stiffness", type=float, default=2000.0, help="the hand's stiffness [N/m] (default 2000)")
     p.set_defaults(func=_compliance_loss)
 
     p = sub.add_parser("mode-table", help="the table of Fig. 3, measured for each control mode")
     add_common(p, default_out="results/mode-table")
-    _add_setup_options(p)
+    _add_setup_options(p, "dry")
     p.set_defaults(func=_mode_table)
 
     s = sub.add_parser("sweep", help="robustness sweeps: model errors (Fig. 13) or sensor noise (Fig. 14)")
@@ -64,7 +65,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     ):
         k = ssub.add_parser(kind, help=f"{fig}: normalised MSIE (20) over the level, DC without and with EFC")
         add_common(k, default_out=f"results/sweep-{kind}")
-        _add_setup_options(k)
+        _add_setup_options(k, "smooth")
         k.add_argument("--levels", default=None, help=f"{levels_help}; 'a:b[:step]' or 'a,b,c'")
         k.add_argument("--trials", type=int, default=10, help="random draws per level (default 10)")
         k.add_argument("--workers", type=int, default=None, help="local worker processes (default: every core)")
