@@ -265,12 +265,13 @@ def condition_number(matrix: np.ndarray) -> float:
     return float(s[0] / s[-1])
 
 
-def warn_if_ill_conditioned(cond: float, what: str, limit: float) -> None:
+def warn_if_ill_conditioned(cond: float, what: str, limit: float, rank_deficiency: int = 0) -> None:
     """Warn (:class:`IllConditionedWarning`) when ``cond`` exceeds ``limit``, naming the condition number."""
-    if not np.isfinite(cond):
+    if rank_deficiency or not np.isfinite(cond):
+        lost = f"{rank_deficiency} parameter combination(s)" if rank_deficiency else "some parameters"
         warnings.warn(
-            f"{what} is rank deficient (condition number inf): some parameters are not excited by the data; "
-            "the estimate of those is arbitrary (use a richer trajectory or fewer parameters)",
+            f"{what} is rank deficient (condition number {cond:.3g}): {lost} not excited by the data; "
+            "their estimate is arbitrary (use a richer trajectory or fewer parameters)",
             IllConditionedWarning,
             stacklevel=3,
         )

@@ -37,13 +37,11 @@ from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
-import scipy.linalg
 
 from reflexarm.errors import IdentificationError
 from reflexarm.ident.base_parameters import (
     BaseParameters,
     compute_base_parameters,
-    condition_number,
     warn_if_ill_conditioned,
 )
 from reflexarm.ident.logs import RobotLog
@@ -306,16 +304,28 @@ def mass_matrix_margin(robot: RobotModel, *, n_samples: int = 200, seed: int = 0
 
 
 # ---------------------------------------------------------------------------------------------- solve
+@dataclass(frozen=True)
+class _Solution:
+    x: np.ndarray
+    information: np.ndarray  # A^T W A
+    covariance: np.ndarray  # (A^T W A)^+
+    residual_norm: float
+    condition_number: float  # of the column-equilibrated weighted regressor
+    rank_deficiency: int
+
+
 class _GramAccumulator:
     """Row-chunked weighted least squares per joint: keeps G_j = [A_j b_j]^T [A_j b_j], (p+1) x (p+1).
 
     Since Sigma is diagonal per joint, the weighted problem of any weights is ``sum_j G_j / sigma_j^2``,
     so one pass over the data serves the unweighted pass, the weighted solve and the residual
     statistics (``|A_j x - b_j|^2 = (x, -1)^T G_j (x, -1)``). The solve equilibrates the columns
-    (unit diagonal, which removes the parameters' units from the conditioning) and uses a Cholesky
-    factor; its relative accuracy is about eps * cond^2 of the equilibrated regressor, 1e-10 at the
-    warning limit cond = 1e3. (A chunked QR would be accurate to eps * cond but costs 10-100x more
-    on a shared machine, where multi-threaded LAPACK QR of tall matrices degrades badly.)
+    (unit diagonal, which removes the parameters' units from the conditioning) and uses the eigen-
+    decomposition of the equilibrated information matrix: its relative accuracy is about eps * cond^2
+    of the equilibrated regressor (1e-10 at the warning limit cond = 1e3), and a rank-deficient problem
+    gets the minimum-norm solution instead of a failure. (A chunked QR would be accurate to eps * cond
+    but costs 10-100x more on a shared machine, where multi-threaded LAPACK QR of tall matrices degrades
+    badly.)
     """
 
     def __init__(self, n: int, p: int) -> None:
@@ -333,31 +343,28 @@ class _GramAccumulator:
             self.G[j] += M.T @ M
             self.rows[j] += M.shape[0]
 
-    def solve(self, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-        """(x, equilibrated (A^T W A) root R, weighted residual norm) of min sum_j w_j^2 |A_j x - b_j|^2."""
+    def solve(self, weights: np.ndarray) -> _Solution:
+        """min sum_j w_j^2 |A_j x - b_j|^2 (minimum-norm in equilibrated coordinates if rank deficient)."""
         p = self.p
         G = np.einsum("j,jab->ab", weights**2, self.G)
         AtA, Atb, btb = G[:p, :p], G[:p, p], G[p, p]
-        d = np.sqrt(np.diag(AtA))
-        if d.size == 0 or d.min() <= 1e-150 or d.min() <= d.max() * 1e-13:
-            k = int(np.argmin(d))
-            raise IdentificationError(
-                f"the regressor is rank deficient: parameter column {k} is not excited by the data "
-                f"(its norm is {d[k] / max(d.max(), 1e-300):.1e} of the largest); use a richer trajectory"
-            )
-        S = AtA / np.outer(d, d)
-        try:
-            L = np.linalg.cholesky(S)
-        except np.linalg.LinAlgError as e:
-            raise IdentificationError(
-                "the regressor is rank deficient: some parameter combinations are not excited by the data "
-                f"(smallest eigenvalue of the normalised information matrix {np.linalg.eigvalsh(S)[0]:.1e}); "
-                "use a richer trajectory"
-            ) from e
-        y = scipy.linalg.cho_solve((L, True), Atb / d)
-        x = y / d
+        d = np.sqrt(np.maximum(np.diag(AtA), 0.0))
+        zero = d <= max(d.max(), 1e-300) * 1e-13
+        ds = np.where(zero, 1.0, d)
+        S = AtA / np.outer(ds, ds)
+        S[zero, :] = 0.0
+        S[:, zero] = 0.0
+        ev, V = np.linalg.eigh(0.5 * (S + S.T))
+        keep = ev > max(ev[-1], 1e-300) * 1e-12
+        cond = float(np.sqrt(ev[-1] / ev[0])) if ev[0] > 0 else float("inf")
+        # y = S^+ (A^T b / d): eigen-decomposition solve, exact pseudo-inverse when rank deficient
+        rhs = np.where(zero, 0.0, Atb / ds)
+        y = V[:, keep] @ ((V[:, keep].T @ rhs) / ev[keep])
+        x = y / ds
         res2 = max(float(btb - 2 * x @ Atb + x @ AtA @ x), 0.0)
-        return x, L.T * d[None, :], float(np.sqrt(res2))
+        # covariance factor of the estimate: (A^T W A)^+ in the original coordinates
+        cov = (V[:, keep] / ev[keep]) @ V[:, keep].T / np.outer(ds, ds)
+        return _Solution(x, AtA, cov, float(np.sqrt(res2)), cond, int(p - keep.sum()))
 
     def residual_ss(self, x: np.ndarray) -> np.ndarray:
         """sum over samples of (A_j x - b_j)^2 per joint."""
@@ -405,9 +412,13 @@ def identify_dynamics(
             other joint's information. Default 0: every row is used.
         progress: show a progress bar over the regressor chunks.
 
+    Warns:
+        IllConditionedWarning: the regressor is rank deficient or its condition number (column-
+            normalised, weighted) exceeds ``condition_limit``; the message gives the condition number.
+
     Raises:
         IdentificationError: unknown method, missing friction for ``sequential``, log without ddq,
-            joint count mismatch, rank-deficient regressor.
+            joint count mismatch.
     """
     if method not in METHODS:
         raise IdentificationError(f"unknown identification method {method!r}; choose one of: {', '.join(METHODS)}")
@@ -498,24 +509,27 @@ def identify_dynamics(
         notes.append("unweighted least squares (Sigma = I)")
     else:
         # per-joint residual variance of an unweighted fit -> Sigma of (18)
-        x0, _, _ = acc.solve(np.ones(n))
+        x0 = acc.solve(np.ones(n)).x
         sigma2 = np.maximum(acc.residual_ss(x0) / np.maximum(acc.rows - p / n, 1.0), 1e-12)
         notes.append(
             "Sigma from the per-joint residual variances of an unweighted pass: "
             + ", ".join(f"{s:.3g}" for s in sigma2)
             + " Nm^2"
         )
-    x, R, res_norm = acc.solve(1.0 / np.sqrt(sigma2))
+    sol = acc.solve(1.0 / np.sqrt(sigma2))
+    x, cond = sol.x, sol.condition_number
     t_solve += time.perf_counter() - clock
-    # condition number of the column-normalised weighted regressor (from R: same singular values)
-    col = np.linalg.norm(R, axis=0)
-    cond = condition_number(R / np.where(col > 0, col, 1.0))
-    warn_if_ill_conditioned(cond, f"the identification regressor ({p} parameters, {total:,} samples)", condition_limit)
-    # parameter standard deviations: s^2 (R^T R)^-1 with s^2 the weighted residual variance
+    what = f"the identification regressor ({p} parameters, {int(acc.rows.max()):,} samples)"
+    warn_if_ill_conditioned(cond, what, condition_limit, sol.rank_deficiency)
+    if sol.rank_deficiency:
+        notes.append(
+            f"rank deficient by {sol.rank_deficiency}: the unexcited parameter combinations got the minimum-norm "
+            "estimate (in column-normalised coordinates)"
+        )
+    # parameter standard deviations: s^2 (F^T W F)^+ with s^2 the weighted residual variance
     dof = max(int(acc.rows.sum()) - p, 1)
-    s2 = res_norm**2 / dof
-    Rinv = scipy.linalg.solve_triangular(R, np.eye(p))
-    std = np.sqrt(s2 * np.sum(Rinv**2, axis=1))
+    s2 = sol.residual_norm**2 / dof
+    std = np.sqrt(np.maximum(s2 * np.diag(sol.covariance), 0.0))
     residual_rms = np.sqrt(acc.residual_ss(x) / np.maximum(acc.rows, 1))
     if min_speed > 0:
         notes.append(
@@ -547,7 +561,7 @@ def identify_dynamics(
         residual_rms=residual_rms,
         notes=tuple(notes),
         timings={"regressor_s": t_reg, "solve_s": t_solve},
-        information=R.T @ R,
+        information=sol.information,
     )
 
 
