@@ -38,12 +38,12 @@ instead of rejected, unless ``repair=False``:
   periods of the host clock, the host time is kept.
 
 :func:`preprocess_log` then resamples to a uniform grid (positions by cubic Hermite interpolation with
-the measured velocities as slopes, the other signals linearly; only gaps are actually filled when the
-log is already on the grid) and filters with a zero-phase Butterworth low-pass (``scipy.signal.filtfilt``,
-order 4, default cutoff :data:`DEFAULT_CUTOFF_HZ` for q, dq and ddq), and derives ddq as the central
-difference of the filtered dq. The torques are filtered with the same filter for identification (the
-regressor and the torque then see the same filter, Gautier's parallel filtering); the raw torques stay
-available for validation.
+the measured velocities as slopes, velocities by a cubic spline, the other signals linearly; only gaps
+are actually filled when the log is already on the grid) and filters with a zero-phase Butterworth low-
+pass (``scipy.signal.filtfilt``, order 4, default cutoff :data:`DEFAULT_CUTOFF_HZ` for q, dq and ddq),
+and derives ddq as the central difference of the filtered dq. The torques are filtered with the same
+filter for identification (the regressor and the torque then see the same filter, Gautier's parallel
+filtering); the raw torques stay available for validation.
 """
 
 from __future__ import annotations
@@ -472,8 +472,11 @@ def _finish(
         if not repair:
             r = int(np.argmax(steps <= 0)) + 1
             raise DataError(f"{where}: time does not increase at row {r}: t = {t[r]:.9g} s twice")
-    T = float(period) if period is not None else float(np.median(steps[steps > 0])) if np.any(steps > 0) else 0.0
-    if T <= 0:
+    if period is not None:
+        T = float(period)
+    elif np.any(steps > 0):
+        T = _estimate_period(t, data["q"], data["dq"])
+    else:
         raise DataError(f"{where}: all time stamps are equal")
     ticks = steps / T
     irregular = np.abs(ticks - np.maximum(np.round(ticks), 1.0)) > _TICK_TOLERANCE
@@ -501,14 +504,41 @@ def _finish(
     return log
 
 
+def _step_durations(q: np.ndarray, dq: np.ndarray) -> np.ndarray:
+    """Duration of each step implied by the measured displacement and mean velocity [s] (NaN if at rest)."""
+    v = 0.5 * (dq[1:] + dq[:-1])
+    vv = np.sum(v * v, axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(vv > 0, np.sum(v * (q[1:] - q[:-1]), axis=1) / vv, np.nan)
+
+
+def _estimate_period(t: np.ndarray, q: np.ndarray, dq: np.ndarray) -> float:
+    """The sample period: the median host step, or, when the host steps are irregular, the typical step
+    duration implied by q and dq (the robot's own clock), adjusted so that a whole number of periods
+    spans the log by the host clock (which is right on average)."""
+    steps = np.diff(t)
+    T = float(np.median(steps[steps > 0]))
+    ticks = steps / T
+    if not np.any(np.abs(ticks - np.maximum(np.round(ticks), 1.0)) > _TICK_TOLERANCE):
+        return T
+    d = _step_durations(q, dq)
+    d = d[np.isfinite(d) & (d > 0)]
+    if d.size < 10:
+        return T
+    T_q = float(np.median(d))
+    one = d[(d > 0.5 * T_q) & (d < 1.5 * T_q)]  # the single-tick cluster
+    if one.size >= 10:
+        T_q = float(np.median(one))
+    total = (t[-1] - t[0]) / T_q
+    return float((t[-1] - t[0]) / max(round(total), 1)) if total > 0 else T
+
+
 def _retime(t: np.ndarray, q: np.ndarray, dq: np.ndarray, T: float, where: str) -> tuple[np.ndarray, str]:
     """Re-time samples on a grid of period T; see the module docstring."""
     steps = np.diff(t)
     v = 0.5 * (dq[1:] + dq[:-1])
     disp = q[1:] - q[:-1]
-    vv = np.sum(v * v, axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        est = np.where(vv > 0, np.sum(v * disp, axis=1) / vv / T, np.nan)
+    est = _step_durations(q, dq) / T
     ok = np.isfinite(est) & (np.round(est) >= 1) & (np.abs(est - np.round(est)) < _TICK_TOLERANCE)
     new_t = _align_ticks(t, np.nan_to_num(est), ok, T)
     lo, hi = steps.min() * 1e3, steps.max() * 1e3
@@ -623,7 +653,7 @@ def preprocess_log(
     Returns:
         A new log on the uniform grid with ``ddq`` filled (a ddq given in the log is kept, resampled).
     """
-    from scipy.interpolate import CubicHermiteSpline
+    from scipy.interpolate import CubicHermiteSpline, CubicSpline
     from scipy.signal import butter, filtfilt
 
     T = log.period if period is None else float(period)
@@ -638,14 +668,15 @@ def preprocess_log(
         k = int(np.floor((log.t[-1] - log.t[0]) / T + 1e-9)) + 1
         t = log.t[0] + T * np.arange(k)
         q = CubicHermiteSpline(log.t, log.q, log.dq, axis=0)(t)
-        dq = _interp(log.t, log.dq, t)
+        dq = CubicSpline(log.t, log.dq, axis=0)(t)
         tau = _interp(log.t, log.tau, t)
         ddq = None if log.ddq is None else _interp(log.t, log.ddq, t)
         wrench = None if log.wrench is None else _interp(log.t, log.wrench, t)
         on_grid = np.isin(np.round((log.t - log.t[0]) / T).astype(np.int64), np.arange(k)).sum()
         notes.append(
             f"resampled {len(log):,} samples to a uniform {T * 1e3:.4g} ms grid of {k:,} samples "
-            f"(q cubic Hermite with dq as slopes, other signals linear; {k - min(on_grid, k):,} grid points filled)"
+            f"(q cubic Hermite with dq as slopes, dq cubic spline, other signals linear; "
+            f"{k - min(on_grid, k):,} grid points filled)"
         )
     fs = 1.0 / T
     tau_raw = log.measured_torque if (log.is_uniform and period is None) else _interp(log.t, log.measured_torque, t)
@@ -656,7 +687,8 @@ def preprocess_log(
                 f"{0.5 * fs:.4g} Hz"
             )
         b, a = butter(order, cutoff_hz / (0.5 * fs))
-        padlen = min(3 * max(len(a), len(b)), t.size - 1)
+        # odd extension over two periods of the cutoff, so the edge transient of the filter dies out
+        padlen = min(max(3 * max(len(a), len(b)), int(round(2 * fs / cutoff_hz))), t.size - 1)
         q = filtfilt(b, a, q, axis=0, padlen=padlen)
         dq = filtfilt(b, a, dq, axis=0, padlen=padlen)
         if filter_torque:
