@@ -53,7 +53,8 @@ class Command(NamedTuple):
 
     Attributes:
         tau: commanded motor torque tau_d (n,) [Nm]; always finite.
-        residual: observer output tau_eps_hat (n,) [Nm] (before the compensation cut-off).
+        residual: observer output tau_eps_hat (n,) [Nm] that the collision detector looks at (the
+            detection observer's when two observers run in parallel), before the compensation cut-off.
         collision: True once a collision has been detected (latched until ``reset``).
         collided_joints: indices of joints whose |residual| exceeded the threshold this tick.
         mode: active control mode name (see :mod:`reflexarm.control.modes`).
