@@ -1,0 +1,196 @@
+"""Weighted least squares (18): recovery of known parameters, weighting, warnings, the model file."""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+
+from reflexarm.errors import IdentificationError, ModelError
+from reflexarm.ident import (
+    BatchRegressor,
+    FrictionParameters,
+    IllConditionedWarning,
+    PhysicalConsistencyWarning,
+    RobotLog,
+    compute_base_parameters,
+    identify_dynamics,
+    load_identified_model,
+    mass_matrix_margin,
+    optimize_excitation,
+    preprocess_log,
+    project_physically_consistent,
+    save_identified_model,
+)
+from reflexarm.ident.consistency import pseudo_inertia
+from reflexarm.sim import PAPER_NOISE
+
+#: RMS of the paper's torque noise, uniform on +-7.3e-2 Nm.
+TORQUE_NOISE_RMS = PAPER_NOISE.tau_m / np.sqrt(3)
+
+
+@pytest.fixture(scope="module")
+def setup(atlas):
+    base = compute_base_parameters(atlas)
+    # a short optimization (the optimizer itself is tested in test_ident_excitation.py): enough to bring
+    # the condition number from ~1e3 to ~1e2
+    design = optimize_excitation(atlas, base=base, n_harmonics=4, n_grid=100, n_samples=60, maxiter=12, seed=0)
+    validation = optimize_excitation(atlas, base=base, maxiter=0, seed=1).initial  # a different trajectory
+    assert design.condition_optimized < 0.2 * design.condition_initial
+    return atlas, base, design, validation
+
+
+def _simulate(robot, trajectory, *, noise=None, seed=0, friction=None):
+    """A robot that follows ``trajectory`` exactly: tau = Y(q, dq, ddq) pi + Phi_f (d_v, mu_C), eq. (14).
+
+    With ``noise`` (a SensorNoise), q, dq and tau are measured with its uniform noise; ddq is then not
+    measured (it comes from preprocess_log). Returns (log, true q, dq, ddq, true tau).
+    """
+    fr = FrictionParameters.from_model(robot.friction) if friction is None else friction
+    t = np.arange(0.0, trajectory.duration, 1e-3)
+    q, dq, ddq = trajectory.evaluate(t)
+    tau = BatchRegressor(robot).compute_regressor(q, dq, ddq) @ robot.inertial_parameters() + fr.compute_torque(dq)
+    if noise is None:
+        return RobotLog(t, q, dq, tau, ddq=ddq, source="exact"), (q, dq, ddq, tau)
+    rng = np.random.default_rng(seed)
+    meas = [x + rng.uniform(-lvl, lvl, x.shape) for x, lvl in ((q, noise.q), (dq, noise.dq), (tau, noise.tau_m))]
+    return RobotLog.from_arrays(t, *meas, source="noisy"), (q, dq, ddq, tau)
+
+
+@pytest.mark.parametrize("method", ["sequential", "combined"])
+def test_noise_free_recovery_of_the_true_base_parameters(setup, method):
+    robot, base, design, _ = setup
+    log, _ = _simulate(robot, design.trajectory.with_periods(2))
+    truth = FrictionParameters.from_model(robot.friction)
+    res = identify_dynamics(robot, log, method=method, friction=truth, base=base)
+    beta = base.base_from_standard(robot.inertial_parameters())
+    # exact data: the only error is round-off amplified by the condition number (~1e1 after
+    # equilibration, squared by the normal equations): 1e-6 relative is a loose bound
+    np.testing.assert_allclose(res.beta_b, beta, rtol=0, atol=1e-6 * np.linalg.norm(beta))
+    np.testing.assert_allclose(res.friction.parameters(), truth.parameters(), rtol=1e-6, atol=1e-9)
+    assert res.condition_number < 100
+
+
+@pytest.mark.parametrize("method", ["sequential", "combined"])
+def test_paper_noise_predicts_validation_torques_within_twice_the_noise(setup, method):
+    """Paper noise on q, dq and tau; ddq from the filtered dq. The identified model, evaluated along the
+    validation motion (a different trajectory), predicts the measured validation torques within 2x the
+    torque noise RMS on every joint, i.e. its own error is below ~1.7x the noise.
+
+    Rows with |dq_j| below the velocity noise level (5.5e-2 rad/s) are left out of the fit
+    (``min_speed``): there the measured velocity's sign, hence the Coulomb torque of up to 10 Nm, is a
+    coin flip, and those rows alone would bias the estimate by several times the noise.
+    """
+    robot, base, design, validation = setup
+    truth = FrictionParameters.from_model(robot.friction)
+    log, _ = _simulate(robot, design.trajectory.with_periods(2), noise=PAPER_NOISE, seed=1)
+    res = identify_dynamics(
+        robot, preprocess_log(log), method=method, friction=truth, base=base, min_speed=PAPER_NOISE.dq
+    )
+    vlog, (q, dq, ddq, _) = _simulate(robot, validation, noise=PAPER_NOISE, seed=2)
+    pred = res.compute_torque(robot, q, dq, ddq)
+    rmse = np.sqrt(np.mean((pred - vlog.tau) ** 2, axis=0))
+    assert np.all(rmse <= 2 * TORQUE_NOISE_RMS), f"validation RMSE / noise RMS: {rmse / TORQUE_NOISE_RMS}"
+
+
+def test_noise_variances_are_estimated_per_joint_and_weight_the_fit(setup):
+    robot, base, design, _ = setup
+    log, (q, dq, ddq, tau) = _simulate(robot, design.trajectory)
+    levels = np.array([0.5, 0.02, 0.02, 0.02, 0.02, 0.02, 0.02])  # joint 1 is 25x noisier
+    rng = np.random.default_rng(3)
+    noisy = RobotLog(log.t, q, dq, tau + rng.uniform(-levels, levels, tau.shape), ddq=ddq)
+    truth = FrictionParameters.from_model(robot.friction)
+    res = identify_dynamics(robot, noisy, method="sequential", friction=truth, base=base)
+    # the residual of the unweighted pass estimates each joint's variance (levels^2 / 3): 10^4 samples
+    # give ~2 % sampling error, and the unweighted fit leaks part of joint 1's noise into the shared
+    # parameters and so into the other joints' residuals (+10 % there): 15 %
+    np.testing.assert_allclose(res.noise_variance, levels**2 / 3, rtol=0.15)
+    ols = identify_dynamics(robot, noisy, method="sequential", friction=truth, base=base, noise_variance=None)
+    beta = base.base_from_standard(robot.inertial_parameters())
+    assert np.linalg.norm(res.beta_b - beta) < np.linalg.norm(ols.beta_b - beta)  # weighting helps
+
+
+def test_ill_conditioned_and_rank_deficient_regressors_warn_with_the_condition_number(setup):
+    robot, base, design, _ = setup
+    tr = design.trajectory
+    small = type(tr)(tr.base_frequency, 0.002 * tr.a, 0.002 * tr.b, tr.offset)  # barely moving
+    log, _ = _simulate(robot, small)
+    truth = FrictionParameters.from_model(robot.friction)
+    with pytest.warns(IllConditionedWarning, match=r"is ill-conditioned \(condition number [\d.e+]+ > 1e\+03\)"):
+        identify_dynamics(robot, log, method="sequential", friction=truth, base=base)
+    one = type(tr)(tr.base_frequency, tr.a * (np.arange(7) == 0)[:, None], tr.b * (np.arange(7) == 0)[:, None], tr.offset)
+    log1, _ = _simulate(robot, one)  # only the first joint moves
+    with pytest.warns(IllConditionedWarning, match=r"is rank deficient \(condition number .*\): \d+ parameter comb"):
+        res = identify_dynamics(robot, log1, method="sequential", friction=truth, base=base)
+    assert any("rank deficient by" in note for note in res.notes)
+
+
+def test_bad_requests_raise_with_the_reason(setup):
+    robot, base, design, _ = setup
+    log, _ = _simulate(robot, design.trajectory)
+    with pytest.raises(IdentificationError, match=r"method 'sequential' needs the pre-identified friction"):
+        identify_dynamics(robot, log, method="sequential", base=base)
+    with pytest.raises(IdentificationError, match=r"unknown identification method 'joint'; choose one of: sequential, combined"):
+        identify_dynamics(robot, log, method="joint", base=base)  # type: ignore[arg-type]
+    with pytest.raises(IdentificationError, match=r"raw: log has no ddq; run reflexarm.ident.preprocess_log first"):
+        identify_dynamics(robot, RobotLog(log.t, log.q, log.dq, log.tau, source="raw"), method="combined", base=base)
+
+
+def test_identified_model_file_roundtrip_gives_the_controller_the_identified_torques(setup, tmp_path):
+    robot, base, design, _ = setup
+    log, (q, dq, ddq, _) = _simulate(robot, design.trajectory)
+    truth = FrictionParameters.from_model(robot.friction)
+    res = identify_dynamics(robot, log, method="sequential", friction=truth, base=base)
+    path = save_identified_model(res, robot, tmp_path / "model.json")
+    model = load_identified_model(path)  # the robot comes from the file's source
+    assert model.joint_names == robot.joint_names
+    k = np.arange(0, q.shape[0], 997)
+    expected = res.compute_torque(robot, q[k], dq[k], ddq[k]) - res.friction.compute_torque(dq[k])
+    got = np.array([model.compute_inverse_dynamics(q[i], dq[i], ddq[i]) for i in k])
+    np.testing.assert_allclose(got, expected, atol=1e-8)
+    np.testing.assert_allclose(model.friction.coulomb, robot.friction.coulomb, atol=1e-8)
+    # an edited file is refused
+    doc = json.loads(path.read_text())
+    doc["standard_parameters"][15] += 0.5
+    bad = tmp_path / "edited.json"
+    bad.write_text(json.dumps(doc))
+    with pytest.raises(ModelError, match=r"edited\.json: the standard parameters do not reproduce the stored base"):
+        load_identified_model(bad, robot)
+    (tmp_path / "other.json").write_text("{}")
+    with pytest.raises(ModelError, match=r"other\.json: not a reflexarm identified model"):
+        load_identified_model(tmp_path / "other.json", robot)
+
+
+def test_inconsistent_estimate_is_refused_then_projected(setup, tmp_path):
+    """Corrupt a wrist inertia of an exact estimate so that M(q) is indefinite: saving warns, loading
+    refuses, and the projection restores positive definite pseudo-inertias at a small cost in fit."""
+    robot, base, design, _ = setup
+    log, _ = _simulate(robot, design.trajectory)
+    truth = FrictionParameters.from_model(robot.friction)
+    exact = identify_dynamics(robot, log, method="combined", base=base)
+    # the exact estimate is already consistent: the projection must leave it (almost) where it is
+    kept = project_physically_consistent(exact, robot)
+    np.testing.assert_allclose(kept.beta_b, exact.beta_b, atol=1e-6 * np.linalg.norm(exact.beta_b))
+    i = base.independent.tolist().index(robot.inertial_parameter_names().index("Iyy_l_arm_wry2"))
+    beta = exact.beta_b.copy()
+    beta[i] -= 0.05  # far below zero: the last link's inertia about its own axis becomes negative
+    from dataclasses import replace
+
+    bad = replace(exact, beta_b=beta, friction=truth)
+    with pytest.warns(PhysicalConsistencyWarning, match=r"M\(q\) is not positive definite"):
+        model = bad.to_robot_model(robot)
+    assert mass_matrix_margin(model) < 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PhysicalConsistencyWarning)
+        path = save_identified_model(bad, robot, tmp_path / "bad.json")
+    with pytest.raises(ModelError, match=r"bad\.json: the identified parameters give a mass matrix that is not pos"):
+        load_identified_model(path, robot)
+    fixed = project_physically_consistent(bad, robot)
+    assert mass_matrix_margin(fixed.to_robot_model(robot)) > 0
+    pi = fixed.physical_parameters
+    for k in range(robot.n):
+        assert np.linalg.eigvalsh(pseudo_inertia(pi[10 * k : 10 * k + 10]))[0] > 0
+    np.testing.assert_allclose(base.base_from_standard(pi), fixed.beta_b, atol=1e-10)
+    assert "projected onto physically consistent parameters" in fixed.notes[-1]
