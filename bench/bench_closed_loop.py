@@ -11,7 +11,7 @@ import time
 from reflexarm import load_robot
 from reflexarm.control import Controller
 from reflexarm.experiments.collision import EE_SETTINGS, ee_collision_trajectory, run_ee_collision
-from reflexarm.sim import PAPER_NOISE, Plant
+from reflexarm.sim import PAPER_NOISE, Plant, run_closed_loop
 
 SIM_SECONDS = 8.5
 
@@ -44,6 +44,12 @@ def main() -> dict[str, float]:
     for m, r in zip(ms, refs, strict=True):
         ctrl.step(m, r)
     t_ctrl = time.perf_counter() - t0
+    # the full loop in free motion: the demo trajectory without the block, runner and trace recording
+    plant.reset(traj.sample(0.0).q_d)
+    ctrl = Controller(robot, stiffness=300, observer_gain=5, threshold=11)
+    t0 = time.perf_counter()
+    run_closed_loop(plant, ctrl, traj, traj.duration)
+    t_free = time.perf_counter() - t0
     # the full demo run (Coll.Det): scene with the cinderblock, runner, trace recording
     t0 = time.perf_counter()
     tr = run_ee_collision(EE_SETTINGS[2], seed=0)
@@ -52,6 +58,7 @@ def main() -> dict[str, float]:
     res = {
         "plant_only_x_realtime": SIM_SECONDS / t_plant,
         "controller_only_x_realtime": SIM_SECONDS / t_ctrl,
+        "closed_loop_free_motion_x_realtime": traj.duration / t_free,
         "closed_loop_x_realtime": sim_t / t_loop,
         "plant_tick_us": t_plant / n * 1e6,
         "controller_tick_us": t_ctrl / n * 1e6,
@@ -65,6 +72,10 @@ def main() -> dict[str, float]:
     print(
         f"controller alone:                          {res['controller_tick_us']:.1f} us/tick = "
         f"{res['controller_only_x_realtime']:.1f}x real time"
+    )
+    print(
+        f"closed loop, free motion ({traj.duration:.1f} s):     {t_free / traj.duration * 1e3:.1f} us/tick = "
+        f"{res['closed_loop_free_motion_x_realtime']:.1f}x real time"
     )
     print(
         f"closed loop, demo Coll.Det run ({sim_t:.1f} s):  {res['closed_loop_tick_us']:.1f} us/tick = "
