@@ -120,7 +120,8 @@ def test_ill_conditioned_and_rank_deficient_regressors_warn_with_the_condition_n
     truth = FrictionParameters.from_model(robot.friction)
     with pytest.warns(IllConditionedWarning, match=r"is ill-conditioned \(condition number [\d.e+]+ > 1e\+03\)"):
         identify_dynamics(robot, log, method="sequential", friction=truth, base=base)
-    one = type(tr)(tr.base_frequency, tr.a * (np.arange(7) == 0)[:, None], tr.b * (np.arange(7) == 0)[:, None], tr.offset)
+    first = (np.arange(7) == 0)[:, None]
+    one = type(tr)(tr.base_frequency, tr.a * first, tr.b * first, tr.offset)
     log1, _ = _simulate(robot, one)  # only the first joint moves
     with pytest.warns(IllConditionedWarning, match=r"is rank deficient \(condition number .*\): \d+ parameter comb"):
         res = identify_dynamics(robot, log1, method="sequential", friction=truth, base=base)
@@ -132,7 +133,8 @@ def test_bad_requests_raise_with_the_reason(setup):
     log, _ = _simulate(robot, design.trajectory)
     with pytest.raises(IdentificationError, match=r"method 'sequential' needs the pre-identified friction"):
         identify_dynamics(robot, log, method="sequential", base=base)
-    with pytest.raises(IdentificationError, match=r"unknown identification method 'joint'; choose one of: sequential, combined"):
+    msg = r"unknown identification method 'joint'; choose one of: sequential, combined"
+    with pytest.raises(IdentificationError, match=msg):
         identify_dynamics(robot, log, method="joint", base=base)  # type: ignore[arg-type]
     with pytest.raises(IdentificationError, match=r"raw: log has no ddq; run reflexarm.ident.preprocess_log first"):
         identify_dynamics(robot, RobotLog(log.t, log.q, log.dq, log.tau, source="raw"), method="combined", base=base)

@@ -85,6 +85,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument(
         "--noise-variance", default="estimate", help="'estimate', 'none' or comma-separated sigma_j^2 [Nm^2]"
     )
+    d.add_argument(
+        "--no-projection",
+        action="store_true",
+        help="write the least-squares model even if M(q) is not positive definite (default: project it onto "
+        "physically consistent parameters first)",
+    )
     d.add_argument("--scenario", choices=("table1", "stribeck"), default="table1", help="plant friction (simulation)")
     d.add_argument("--excitation", default=None, help="excitation.json from 'reflexarm excite' (simulation)")
     d.add_argument("--maxiter", type=int, default=100, help="excitation optimizer iterations (simulation)")
@@ -235,7 +241,7 @@ def _identify_friction(args: argparse.Namespace) -> int:
             from reflexarm.ident import preprocess_log
 
             proc = preprocess_log(log)
-            intervals = segment_constant_velocity(proc.t, proc.dq[:, j])
+            intervals = segment_constant_velocity(proc.t, proc.dq[:, j], q=proc.q[:, j])
             if not intervals:
                 raise ConfigError(f"{Path(path).name}: no constant-velocity interval of joint {j + 1} found")
             pts = friction_points(robot, j, proc.t, proc.q, proc.dq, proc.tau, intervals)
@@ -328,6 +334,21 @@ def _load_friction(path: str | None) -> Any:
     return FrictionParameters(fr.viscous, fr.coulomb, None)  # offsets of single-joint runs are pose-specific
 
 
+def _for_controller(result: Any, robot: Any, nominal: Any, args: argparse.Namespace) -> Any:
+    """The result to write for the controller: projected onto consistent parameters if M(q) is indefinite."""
+    from reflexarm.ident import project_physically_consistent
+    from reflexarm.ident.consistency import is_physically_consistent
+
+    if getattr(args, "no_projection", False) or is_physically_consistent(result, robot):
+        return result
+    projected = project_physically_consistent(result, nominal)
+    print(
+        f"{result.method}: M(q) of the least-squares estimate is not positive definite everywhere; "
+        f"the model file holds the nearest consistent one ({projected.notes[-1]})"
+    )
+    return projected
+
+
 def _identify_dynamics(args: argparse.Namespace) -> int:
     if not args.log:
         return _dynamics_study(args)
@@ -381,7 +402,7 @@ def _identify_dynamics(args: argparse.Namespace) -> int:
             min_speed=args.min_speed,
             progress=not args.quiet,
         )
-        save_identified_model(results[m], robot, out / f"model_{m}.json")
+        save_identified_model(_for_controller(results[m], robot, robot, args), robot, out / f"model_{m}.json")
     summary: dict[str, Any] = {"robot": robot.name, "n_base": base.n_base, "methods": {}}
     for m, r in results.items():
         summary["methods"][m] = {
@@ -500,8 +521,17 @@ def _dynamics_study(args: argparse.Namespace) -> int:
     rel = {
         m: float(np.linalg.norm(r.beta_b - st.true_base) / np.linalg.norm(st.true_base)) for m, r in st.results.items()
     }
-    for m, r in st.results.items():
-        save_identified_model(r, robot, out / f"model_{m}.json", extra={"scenario": args.scenario})
+    from reflexarm.experiments.identification import NOMINAL_ERROR_LEVEL
+    from reflexarm.robots import perturb_model
+
+    nominal = perturb_model(robot, NOMINAL_ERROR_LEVEL, seed=args.seed)  # the model the study's user starts from
+    for m, r in st.results_moving.items():
+        save_identified_model(
+            _for_controller(r, robot, nominal, args),
+            robot,
+            out / f"model_{m}.json",
+            extra={"scenario": args.scenario, "min_speed": MOVING_SPEED},
+        )
     _write_json(
         out / "study.json",
         {

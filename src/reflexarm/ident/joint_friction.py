@@ -255,7 +255,7 @@ def segment_constant_velocity(
     position_window: tuple[float, float] | None = None,
     settle: float = DEFAULT_SETTLE_TIME,
     min_speed: float = 0.02,
-    tolerance: float = 0.1,
+    tolerance: float = 0.02,
     min_duration: float = 0.2,
     smooth: float = 0.05,
 ) -> list[slice]:
@@ -265,9 +265,10 @@ def segment_constant_velocity(
     start is used. With ``q`` (the joint's positions) and ``position_window`` (lo, hi), each interval is
     further cut to the samples inside that position range. Without ``windows``, intervals are found from
     the data: the velocity is smoothed (moving average over ``smooth`` seconds), split where its sign
-    changes or where it leaves ``tolerance`` (relative) of the interval's median, and intervals shorter
-    than ``min_duration`` [s] or slower than ``min_speed`` [rad/s] are dropped; ``settle`` seconds are
-    dropped at each start.
+    changes, and the longest run within ``tolerance`` (relative) or three noise standard deviations of
+    the median is kept; intervals shorter than ``min_duration`` [s] or slower than ``min_speed`` [rad/s]
+    are dropped; ``settle`` seconds are dropped at each start. With ``q`` and no ``position_window``,
+    the intervals are cut to the position range they all cover.
     """
     tt = np.asarray(t, dtype=float)
     v = np.asarray(dq, dtype=float).reshape(-1)
@@ -287,12 +288,15 @@ def segment_constant_velocity(
     moving = np.abs(vs) > min_speed
     sign = np.sign(vs) * moving
     edges = np.flatnonzero(np.diff(np.r_[0, sign, 0]) != 0)
+    # noise of the smoothed velocity (robust: MAD of the part the smoothing removed)
+    resid = v - vs
+    noise = 1.4826 * float(np.median(np.abs(resid - np.median(resid)))) / np.sqrt(k)
     for s0, s1 in zip(edges[:-1], edges[1:], strict=True):
         if sign[s0] == 0:
             continue
         seg = vs[s0:s1]
         med = np.median(seg)
-        steady = np.abs(seg - med) <= tolerance * abs(med)
+        steady = np.abs(seg - med) <= max(tolerance * abs(med), 3.0 * noise)
         # the longest run of steady samples
         runs = np.flatnonzero(np.diff(np.r_[0, steady.astype(int), 0]) != 0).reshape(-1, 2)
         if runs.size == 0:
@@ -302,6 +306,14 @@ def segment_constant_velocity(
         i1 = s0 + r1
         if (i1 - i0) * dt >= min_duration:
             out.append(slice(i0, i1))
+    if position_window is None and q is not None and len(out) > 1:
+        # the position range every interval covers: averaging all intervals over the same positions
+        # keeps a position-dependent model error (gravity) out of the velocity dependence
+        qj = np.asarray(q, dtype=float).reshape(-1)
+        lo = max(float(qj[sl].min()) for sl in out)
+        hi = min(float(qj[sl].max()) for sl in out)
+        if hi > lo:
+            position_window = (lo, hi)
     return _cut_to_positions(out, q, position_window)
 
 
