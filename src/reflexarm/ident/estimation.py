@@ -334,14 +334,12 @@ class _GramAccumulator:
         self.G = np.zeros((n, p + 1, p + 1))
         self.rows = np.zeros(n, dtype=np.int64)
 
-    def add(self, A: np.ndarray, b: np.ndarray, keep: np.ndarray | None = None) -> None:
-        """A: (m, n, p) rows per joint; b: (m, n); keep: (m, n) bool, rows to use (default all)."""
+    def add(self, M: np.ndarray, keep: np.ndarray | None = None) -> None:
+        """M: (n, m, p + 1) rows [A_j b_j] per joint; keep: (m, n) bool, rows to use (default all)."""
         for j in range(self.n):
-            M = np.column_stack([A[:, j, :], b[:, j]])
-            if keep is not None:
-                M = M[keep[:, j]]
-            self.G[j] += M.T @ M
-            self.rows[j] += M.shape[0]
+            Mj = M[j] if keep is None else M[j][keep[:, j]]
+            self.G[j] += Mj.T @ Mj
+            self.rows[j] += Mj.shape[0]
 
     def solve(self, weights: np.ndarray) -> _Solution:
         """min sum_j w_j^2 |A_j x - b_j|^2 (minimum-norm in equilibrated coordinates if rank deficient)."""
@@ -449,21 +447,25 @@ def identify_dynamics(
     n_fric = 0 if method == "sequential" else 2 * n
     p = nb + n_fric + (n if est_offset else 0)
 
-    def rows(lg: RobotLog, b_all: np.ndarray, sl: slice, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        Fb = base.select(Y)  # (m, n, nb)
+    def rows(lg: RobotLog, b_all: np.ndarray, sl: slice, Y: np.ndarray) -> np.ndarray:
+        """Rows [Phi_b (Phi_f) (offsets) | b] of (19), per joint: (n, m, p + 1)."""
+        m = Y.shape[0]
+        M = np.zeros((n, m, p + 1))
+        M[:, :, :nb] = np.take(Y, base.independent, axis=2).transpose(1, 0, 2)
         b = b_all[sl]
         dq = lg.dq[sl]
-        parts = [Fb]
-        if method == "combined":
-            parts.append(compute_friction_regressor(dq))
+        k = nb
+        idx = np.arange(n)
+        if method == "combined":  # eq. (15): each joint's friction columns act on its own rows only
+            M[idx, :, k + idx] = dq.T
+            M[idx, :, k + n + idx] = np.sign(dq).T
+            k += 2 * n
         elif fixed is not None:
             b = b - fixed.compute_torque(dq)  # eq. (16)
         if est_offset:
-            m = Fb.shape[0]
-            off = np.zeros((m, n, n))
-            off[:, np.arange(n), np.arange(n)] = 1.0
-            parts.append(off)
-        return np.concatenate(parts, axis=2), b
+            M[idx, :, k + idx] = 1.0
+        M[:, :, p] = b.T
+        return M
 
     # weights: given, estimated from an unweighted pass, or none
     given = None
@@ -491,11 +493,11 @@ def identify_dynamics(
                 sl, Y = next(chunks)
             except StopIteration:
                 break
-            A, b = rows(lg, b_all, sl, Y)
+            M = rows(lg, b_all, sl, Y)
             keep = np.abs(lg.dq[sl]) >= min_speed if min_speed > 0 else None
             t_reg += time.perf_counter() - clock
             clock = time.perf_counter()
-            acc.add(A, b, keep)
+            acc.add(M, keep)
             t_solve += time.perf_counter() - clock
     clock = time.perf_counter()
     notes: list[str] = []
