@@ -45,7 +45,7 @@ from reflexarm.ident.base_parameters import (
     warn_if_ill_conditioned,
 )
 from reflexarm.ident.logs import RobotLog
-from reflexarm.ident.regressor import BatchRegressor, compute_friction_regressor
+from reflexarm.ident.regressor import BatchRegressor
 from reflexarm.robots.friction import DEFAULT_VELOCITY_BAND, CoulombViscousFriction
 from reflexarm.robots.robot_model import RobotModel
 
