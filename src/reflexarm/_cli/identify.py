@@ -62,6 +62,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     f.add_argument("--speeds", default=None, help="comma-separated speeds [rad/s] (default 0.1,0.2,0.35,0.5,0.75,1)")
     f.add_argument("--scenario", choices=("table1", "stribeck"), default="table1", help="plant friction (simulation)")
     f.add_argument("--no-offset", action="store_true", help="fit Coulomb + viscous only (no offset)")
+    f.add_argument(
+        "--model-error",
+        type=float,
+        default=0.1,
+        help="simulation: the controller's (and the rigid-body removal's) model has uniform errors of this "
+        "level (default 0.1: +-10 %%, the paper's)",
+    )
     f.add_argument("--jobs", type=int, default=1, help="joints simulated in parallel (default 1)")
     add_common(f, default_out="results/friction")
     f.set_defaults(func=_identify_friction)
@@ -249,6 +256,7 @@ def _identify_friction(args: argparse.Namespace) -> int:
         friction = friction_from_fits(fits, robot.n)
     else:
         from reflexarm.experiments.identification import _scenario_extra, run_friction_experiments
+        from reflexarm.robots import perturb_model
 
         joints = _joints(args.joints, robot.n)
         _say(
@@ -260,6 +268,7 @@ def _identify_friction(args: argparse.Namespace) -> int:
             joints=joints,
             speeds=_floats(args.speeds, "--speeds"),
             offset=not args.no_offset,
+            model=perturb_model(robot, args.model_error, seed=args.seed),
             seed=args.seed,
             extra_joint_torque=_scenario_extra(robot, args.scenario),
             n_jobs=args.jobs,

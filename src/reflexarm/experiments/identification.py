@@ -356,6 +356,7 @@ class IdentificationStudy:
             (|dq_j| < :data:`MOVING_SPEED`) left out of the identification (``min_speed``).
         true_base: the plant's true base parameters.
         notes: the scenario's plant description.
+        plant_extra: the extra plant torque of the scenario (None for ``"table1"``).
     """
 
     scenario: str
@@ -371,6 +372,7 @@ class IdentificationStudy:
     validations_moving: dict[str, TorqueValidation]
     true_base: np.ndarray
     notes: dict[str, object] = field(default_factory=dict)
+    plant_extra: StribeckFriction | None = None
 
     def table(self, *, moving: bool = False) -> list[dict[str, object]]:
         """Table I analogue: per joint, validation MSE of both methods and the friction parameters.
@@ -522,6 +524,7 @@ def run_identification_study(
         validations_moving=validations_moving,
         true_base=base.base_from_standard(robot.inertial_parameters()),
         notes={"scenario": scenario, "extra_joint_torque": None if extra is None else extra.describe()},
+        plant_extra=extra,
     )
 
 

@@ -69,7 +69,7 @@ def plot_friction(
         ax.set_xlabel("dq [rad/s]")
         ax.set_ylabel("tau_f [Nm]" + (" (offset removed)" if f.offset is not None else ""))
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, loc="upper left")
+        ax.legend(fontsize=7, loc="lower right")
     for ax in list(axes.flat)[k:]:
         ax.set_visible(False)
     fig.suptitle("Single-joint friction identification (cf. Fig. 4)")
