@@ -196,3 +196,25 @@ def test_inconsistent_estimate_is_refused_then_projected(setup, tmp_path):
         assert np.linalg.eigvalsh(pseudo_inertia(pi[10 * k : 10 * k + 10]))[0] > 0
     np.testing.assert_allclose(base.base_from_standard(pi), fixed.beta_b, atol=1e-10)
     assert "projected onto physically consistent parameters" in fixed.notes[-1]
+
+
+def test_wrist_wrench_is_removed_as_external_torque(setup):
+    """Eq. (14): tau_m = Phi beta - tau_ext, tau_ext = J_sensor(q)^T wrench. A log with a wrist wrench
+    is identified exactly when the wrench is in the log, and biased when it is ignored."""
+    robot, base, design, _ = setup
+    log, (q, dq, ddq, tau) = _simulate(robot, design.trajectory)
+    k = np.arange(0, q.shape[0], 5)  # every 5th sample keeps the per-sample Jacobians cheap
+    rng = np.random.default_rng(4)
+    wrench = rng.normal(0.0, [5, 5, 5, 0.5, 0.5, 0.5], (k.size, 6)) + np.array([0, 0, -20.0, 0, 0, 0])
+    tau_ext = np.array([robot.compute_frame_jacobian(q[i]).T @ w for i, w in zip(k, wrench, strict=True)])
+    with_wrench = RobotLog(log.t[k], q[k], dq[k], tau[k] - tau_ext, ddq=ddq[k], wrench=wrench)
+    truth = FrictionParameters.from_model(robot.friction)
+    beta = base.base_from_standard(robot.inertial_parameters())
+    res = identify_dynamics(robot, with_wrench, method="sequential", friction=truth, base=base)
+    np.testing.assert_allclose(res.beta_b, beta, atol=1e-6 * np.linalg.norm(beta))
+    from dataclasses import replace
+
+    ignored = identify_dynamics(
+        robot, replace(with_wrench, wrench=None), method="sequential", friction=truth, base=base
+    )
+    assert np.linalg.norm(ignored.beta_b - beta) > 0.05 * np.linalg.norm(beta)

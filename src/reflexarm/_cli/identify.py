@@ -207,7 +207,10 @@ def _excite(args: argparse.Namespace) -> int:
         maxiter=args.maxiter,
         seed=args.seed,
     )
-    _write_json(out / "excitation.json", {"robot": robot.name, "n_base": base.n_base, **design.to_dict()})
+    _write_json(
+        out / "excitation.json",
+        {"robot": robot.name, "n_base": base.n_base, "base_parameters": base.explain(), **design.to_dict()},
+    )
     fig = plot_excitation(design, out / "excitation.png", joint_names=robot.joint_names)
     print(f"base parameters: {base.n_base} of {base.n_standard}")
     print(
