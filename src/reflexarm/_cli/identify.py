@@ -213,6 +213,7 @@ def _excite(args: argparse.Namespace) -> int:
     )
     fig = plot_excitation(design, out / "excitation.png", joint_names=robot.joint_names)
     print(f"base parameters: {base.n_base} of {base.n_standard}")
+    print(base.explain())
     print(
         f"condition number of the base regressor: {design.condition_initial:.4g} (start) -> "
         f"{design.condition_optimized:.4g} (optimized, {design.iterations} iterations)"
