@@ -82,7 +82,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--log", action="append", default=[], help="identification log (.csv/.parquet/.npz); repeatable")
     d.add_argument("--validation-log", default=None, help="a different log to validate on")
     d.add_argument(
-        "--split", type=float, default=None, help="identify on this first fraction of --log, validate on the rest"
+        "--split",
+        type=float,
+        default=None,
+        help="identify on this first fraction of the (repaired) samples of --log, validate on the rest",
     )
     d.add_argument("--method", choices=("sequential", "combined", "both"), default="both")
     d.add_argument("--friction", default=None, help="friction.json from 'identify friction' (needed for sequential)")
@@ -206,6 +209,7 @@ def _excite(args: argparse.Namespace) -> int:
         position_margin=args.margin,
         maxiter=args.maxiter,
         seed=args.seed,
+        progress=not args.quiet,
     )
     _write_json(
         out / "excitation.json",

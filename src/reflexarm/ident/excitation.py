@@ -270,6 +270,7 @@ def optimize_excitation(
     maxiter: int = 100,
     seed: int = 0,
     initial: FourierTrajectory | None = None,
+    progress: bool = False,
 ) -> ExcitationDesign:
     """Optimize a Fourier excitation trajectory for the condition number of the base regressor.
 
@@ -288,6 +289,7 @@ def optimize_excitation(
         maxiter: optimizer iterations.
         seed: seed of the random initial coefficients (unless ``initial`` is given).
         initial: start from this trajectory instead of a random one.
+        progress: show a progress bar over the optimizer iterations.
 
     Raises:
         ConfigError: bad bounds (non-positive, margin larger than a joint's range).
@@ -371,15 +373,31 @@ def optimize_excitation(
         start = FourierTrajectory(base_frequency, initial.a, initial.b, initial.offset)
         x0 = par.pack(start.a, start.b, start.offset)
     cond0 = float(np.exp(log_cond(x0)))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        res = scipy.optimize.minimize(
-            log_cond,
-            x0,
-            method="SLSQP",
-            constraints=[{"type": "ineq", "fun": margins, "jac": lambda x: A_in}],
-            options={"maxiter": int(maxiter), "ftol": 1e-6},
-        )
+    bar = None
+    if progress and maxiter > 0:
+        from tqdm import tqdm
+
+        bar = tqdm(total=int(maxiter), desc="excitation", unit="it", leave=False)
+
+    def step(x: np.ndarray) -> None:
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(cond=f"{np.exp(log_cond(x)):.3g}")
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            res = scipy.optimize.minimize(
+                log_cond,
+                x0,
+                method="SLSQP",
+                constraints=[{"type": "ineq", "fun": margins, "jac": lambda x: A_in}],
+                options={"maxiter": int(maxiter), "ftol": 1e-6},
+                callback=step,
+            )
+    finally:
+        if bar is not None:
+            bar.close()
     x = res.x if np.all(np.isfinite(res.x)) else x0
     if np.min(margins(x)) < -1e-6 or log_cond(x) > log_cond(x0):
         # infeasible end point or no improvement: keep the better feasible one
