@@ -338,3 +338,17 @@ def test_damping_update_uses_the_full_mass_matrix(atlas):
         D = imp.update_damping(q).copy()
         expected = modal_damping(atlas.compute_mass_matrix(q), imp.stiffness, imp.damping_ratio)
         np.testing.assert_allclose(D, expected, rtol=1e-10, atol=1e-12)
+
+
+def test_compliant_reaction_drops_compensation_and_reset_restores_it(atlas):
+    robot = frictionless(atlas)
+    push = np.zeros(robot.n)
+    push[0] = 25.0
+    plant = RigidBodyPlant(robot, tau_ext=lambda t: push if 0.3 <= t < 0.8 else np.zeros(robot.n))
+    plant.reset(robot.home)
+    ctrl = Controller(robot, stiffness=150, observer_gain=10, threshold=11, reaction="compliant", kappa_eps=1)
+    _, _, cmds = run(plant, ctrl, lambda t: Reference.hold(robot.home), 1200)
+    assert cmds[0].mode == "precise_stiff"
+    assert cmds[-1].collision and cmds[-1].mode == "compliant" and ctrl.kappa_eps == 0
+    ctrl.reset()
+    assert ctrl.kappa_eps == 1 and ctrl.mode == "precise_stiff" and not ctrl.reacted

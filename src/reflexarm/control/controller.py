@@ -107,6 +107,7 @@ class Controller:
             raise ConfigError(f"switch_time must be a non-negative number of seconds; got {switch_time!r}")
         self.switch_time = float(switch_time)
         self._eps_weight = float(self.kappa_eps)  # ramped kappa_eps actually applied
+        self._kappa_eps_before_reaction = self.kappa_eps
 
         model = self.robot.pin_model
         self._model = model
@@ -182,7 +183,12 @@ class Controller:
         return (self.detection_observer or self.observer).residual
 
     def reset(self) -> None:
-        """Clear observer states, the latched collision and reaction; the next step re-initialises."""
+        """Clear observer states, the latched collision and reaction; the next step re-initialises.
+
+        After a ``"compliant"`` reaction the kappa_eps active before it is restored.
+        """
+        if self.reacted and self.reaction == "compliant":
+            self.kappa_eps = self._kappa_eps_before_reaction
         self._started = False
         self.reacted = False
         self.last_fault = ""
@@ -281,6 +287,7 @@ class Controller:
                 if not self.reacted and self.reaction != "none":
                     self.reacted = True
                     if self.reaction == "compliant":
+                        self._kappa_eps_before_reaction = self.kappa_eps
                         self.set_switches(kappa_eps=0)
             detected = self.detector.detected
         self._last_q[:] = q
