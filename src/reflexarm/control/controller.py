@@ -91,9 +91,13 @@ class Controller:
         self.robot = self.impedance.robot  # the private copy
         n = self.robot.n
         self.n = n
-        self.observer = MomentumObserver(n, observer_gain, self.dt)
+        # observer states live in one array the compiled tick updates: rows 0-2 compensation, 3-5 detection
+        self._obs = np.zeros((6, n))
+        self.observer = MomentumObserver(n, observer_gain, self.dt, _state=self._obs[0:3])
         self.detection_observer = (
-            None if detection_observer_gain is None else MomentumObserver(n, detection_observer_gain, self.dt)
+            None
+            if detection_observer_gain is None
+            else MomentumObserver(n, detection_observer_gain, self.dt, _state=self._obs[3:6])
         )
         self.detector = None if threshold is None else CollisionDetector(n, threshold)
         if reaction not in REACTIONS:
@@ -114,10 +118,8 @@ class Controller:
         self._data_g = model.createData()
         self._data_c = model.createData()
         self._data_j = model.createData()
-        self._model0 = model.copy()
-        self._model0.gravity.linear = np.zeros(3)
+        self._model0 = self.impedance.model_no_gravity  # M(q) dq as a zero-gravity RNEA
         self._data_p = self._model0.createData()
-        self._data_ff = self._model0.createData()
         self._sensor_id = self.robot.sensor_frame_id
         # parameters and state of the compiled tick, see control/_kernels.py
         self._gains = np.zeros((6, n))
@@ -128,12 +130,6 @@ class Controller:
         self._gains[_k.THRESHOLD_ROW] = np.inf if self.detector is None else self.detector.threshold
         self._gains[_k.COULOMB_ROW] = self.robot.friction.coulomb
         self._gains[_k.VISCOUS_ROW] = self.robot.friction.viscous
-        self._obs = np.zeros((6, n))
-        self.observer = MomentumObserver(n, self.observer.observer_gain, self.dt, _state=self._obs[0:3])
-        if self.detection_observer is not None:
-            self.detection_observer = MomentumObserver(
-                n, self.detection_observer.observer_gain, self.dt, _state=self._obs[3:6]
-            )
         self._flags = np.zeros(_k.N_FLAGS)
         self._flags[_k.DT] = self.dt
         self._flags[_k.INV_BAND] = 1.0 / self.robot.friction.velocity_band
@@ -240,7 +236,7 @@ class Controller:
         g = pin.computeGeneralizedGravity(model, self._data_g, q)
         C = pin.computeCoriolisMatrix(model, self._data_c, q, dq)
         p = pin.rnea(self._model0, self._data_p, q, self._zeros, dq)  # M(q) dq
-        ff = pin.rnea(self._model0, self._data_ff, q_d, self._zeros, ddq_d)  # M(q_d) ddq_d
+        ff = self.impedance.compute_feedforward(q_d, ddq_d)  # M(q_d) ddq_d
         J = (
             pin.computeFrameJacobian(model, self._data_j, q, self._sensor_id, pin.LOCAL)
             if self.kappa_ext

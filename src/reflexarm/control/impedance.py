@@ -90,9 +90,9 @@ class JointImpedanceController:
         self.damping_update_period = int(damping_update_period)
         self._model = self.robot.pin_model
         self._data = self._model.createData()
-        self._model0 = self._model.copy()
-        self._model0.gravity.linear = np.zeros(3)
-        self._data_ff = self._model0.createData()
+        self.model_no_gravity = self._model.copy()  # for M(q) x products as RNEA(q, 0, x)
+        self.model_no_gravity.gravity.linear = np.zeros(3)
+        self._data_ff = self.model_no_gravity.createData()
         self._zeros = np.zeros(n)
         self.damping = np.zeros((n, n))
         self._M = np.zeros((n, n))
@@ -106,11 +106,6 @@ class JointImpedanceController:
     @property
     def damping_ratio(self) -> np.ndarray:
         return self.gains.damping_ratio
-
-    def set_stiffness(self, stiffness: npt.ArrayLike) -> None:
-        """Change K at run time (the damping follows at the next update)."""
-        self.gains = ImpedanceGains.create(self.n, stiffness, self.gains.damping_ratio)
-        self._calls = 0
 
     def reset(self) -> None:
         self._calls = 0
@@ -132,7 +127,7 @@ class JointImpedanceController:
 
     def compute_feedforward(self, q_d: np.ndarray, ddq_d: np.ndarray) -> np.ndarray:
         """M_hat(q_d) ddq_d [Nm] (one RNEA with gravity off and zero velocity)."""
-        return pin.rnea(self._model0, self._data_ff, q_d, self._zeros, ddq_d)
+        return pin.rnea(self.model_no_gravity, self._data_ff, q_d, self._zeros, ddq_d)
 
     def compute_torque(
         self,
