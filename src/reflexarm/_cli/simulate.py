@@ -5,8 +5,19 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from typing import TYPE_CHECKING
 
-from reflexarm._cli.common import add_common, format_table, out_dir
+from reflexarm._cli.common import add_common, add_model_options, format_table, model_choice, out_dir
+
+if TYPE_CHECKING:
+    from reflexarm.robots import RobotModel
+
+_PAPER_COLUMNS = [("quantity", "", "{}"), ("paper", "paper", "{}"), ("ours", "ours", "{}")]
+
+_BLOCK_HELP = (
+    "cinderblock variant: paper (concrete on wood, friction 0.6: the Stiff arm slides it) or tipping "
+    "(table friction 0.9: the Stiff arm tips it over as in Fig. 7 b) (default paper)"
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -16,6 +27,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="end-effector collision with a cinderblock on the Atlas arm: Stiff / Compliant / Coll.Det (Figs. 7-8)",
     )
     add_common(p, default_out="results/demo")
+    add_model_options(p)
+    p.add_argument("--block", choices=("paper", "tipping"), default="paper", help=_BLOCK_HELP)
     p.set_defaults(func=_demo)
 
     s = sub.add_parser("simulate", help="run one of the paper's simulated collision experiments")
@@ -23,22 +36,37 @@ def register(sub: argparse._SubParsersAction) -> None:
     ssub.required = True
     e = ssub.add_parser("ee-collision", help="the demo's experiment (Figs. 7-8)")
     add_common(e, default_out="results/ee-collision")
+    add_model_options(e)
+    e.add_argument("--block", choices=("paper", "tipping"), default="paper", help=_BLOCK_HELP)
     e.set_defaults(func=_demo)
     lc = ssub.add_parser("link-collision", help="a stick pushes the elbow during a joint motion (Figs. 9-10)")
     add_common(lc, default_out="results/link-collision")
+    add_model_options(lc)
     lc.set_defaults(func=_link)
     fm = ssub.add_parser("free-motion", help="false-alarm check: the demo trajectory without obstacle")
     add_common(fm, default_out="results/free-motion")
+    add_model_options(fm)
     fm.add_argument("--duration", type=float, default=60.0, help="simulated time [s] (default 60)")
     fm.add_argument("--threshold", type=float, default=11.0, help="zeta [Nm] (default 11)")
     fm.set_defaults(func=_free)
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from reflexarm.experiments.collision import EE_SETTINGS, run_ee_collision, summarize_ee_collision, write_outputs
+    from reflexarm.experiments.collision import (
+        EE_SETTINGS,
+        ROBOT,
+        compare_with_paper,
+        run_ee_collision,
+        summarize_ee_collision,
+        write_outputs,
+    )
     from reflexarm.experiments.plots import plot_fig8
+    from reflexarm.robots import load_robot
 
+    choice = model_choice(args)
+    model = choice.build(load_robot(ROBOT))
     out = out_dir(args)
+    print(f"controller model: {choice.label()}; sensor noise: the paper's; cinderblock: {args.block}", file=sys.stderr)
     traces, rows = [], []
     for setting in EE_SETTINGS:
         detection = (
@@ -50,7 +78,10 @@ def _demo(args: argparse.Namespace) -> int:
             f"[{setting.name}] k = {setting.stiffness:g} Nm/rad, detection {detection}",
             file=sys.stderr,
         )
-        tr = run_ee_collision(setting, seed=args.seed, progress=not args.quiet)
+        tr = run_ee_collision(
+            setting, model=model, model_error=0.0, block=args.block, seed=args.seed, progress=not args.quiet
+        )
+        tr.meta["controller_model"] = choice.describe()
         traces.append(tr)
         rows.append(summarize_ee_collision(tr))
     write_outputs(out, "ee_collision", traces, rows)
@@ -72,24 +103,34 @@ def _demo(args: argparse.Namespace) -> int:
             ],
         )
     )
+    print("\nthe paper (Sec. III-A, Figs. 7-8) beside this run:")
+    print(format_table(compare_with_paper(rows), _PAPER_COLUMNS))
     print(f"\nwrote {out}/ (traces *.npz, ee_collision_summary.json, {fig.name})")
     return 0
 
 
 def _link(args: argparse.Namespace) -> int:
     from reflexarm.experiments.collision import (
+        ROBOT,
+        compare_with_paper,
         model_torque,
         run_link_collision,
         summarize_link_collision,
         write_outputs,
     )
     from reflexarm.experiments.plots import plot_fig10
+    from reflexarm.robots import load_robot
 
+    choice = model_choice(args)
+    model = choice.build(load_robot(ROBOT))
+    print(f"controller model: {choice.label()}; sensor noise: the paper's", file=sys.stderr)
     out = out_dir(args)
-    tr = run_link_collision(seed=args.seed, progress=not args.quiet)
+    tr = run_link_collision(model=model, model_error=0.0, seed=args.seed, progress=not args.quiet)
+    tr.meta["controller_model"] = choice.describe()
     row = summarize_link_collision(tr)
     write_outputs(out, "link_collision", [tr], [row])
-    fig = plot_fig10(tr, model_torque(tr), out / "fig10_link_collision.png")
+    # tau_mdl of Fig. 10 is the controller's model torque
+    fig = plot_fig10(tr, model_torque(tr, model), out / "fig10_link_collision.png")
     print(
         format_table(
             [row],
@@ -102,6 +143,8 @@ def _link(args: argparse.Namespace) -> int:
             ],
         )
     )
+    print("\nthe paper (Sec. III-B, Figs. 9-10) beside this run:")
+    print(format_table(compare_with_paper([], row), _PAPER_COLUMNS))
     print(f"\nwrote {out}/ (trace, link_collision_summary.json, {fig.name})")
     return 0
 
@@ -110,7 +153,24 @@ def _free(args: argparse.Namespace) -> int:
     from reflexarm.experiments.collision import free_motion_false_alarms
 
     out = out_dir(args)
-    res = free_motion_false_alarms(args.duration, threshold=args.threshold, seed=args.seed, progress=not args.quiet)
+    choice = model_choice(args)
+    res = free_motion_false_alarms(
+        args.duration,
+        threshold=args.threshold,
+        seed=args.seed,
+        progress=not args.quiet,
+        model_error=choice.level,
+        model_seed=choice.seed,
+        model=None if choice.file is None else choice.build(_robot()),
+    )
+    res["controller_model"] = choice.describe()  # type: ignore[assignment]
     (out / "free_motion.json").write_text(json.dumps(res, indent=2))
     print(json.dumps(res, indent=2))
     return 0
+
+
+def _robot() -> RobotModel:
+    from reflexarm.experiments.collision import ROBOT
+    from reflexarm.robots import load_robot
+
+    return load_robot(ROBOT)

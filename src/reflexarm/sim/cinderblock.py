@@ -30,7 +30,10 @@ PADDING_SOLIMP = (0.7, 0.95, 0.02, 0.5, 2.0)
 #: 15 kg block sinks only micrometres into its support (2 um measured) and the displacement since reset
 #: is the block's own motion, not contact settling.
 HARD_SOLREF = (0.004, 1.0)
-#: Coulomb friction of concrete on the table (sliding, torsional, rolling).
+#: Coulomb friction of concrete on the table (sliding, torsional, rolling). The sliding coefficient is the
+#: ``friction`` argument of :class:`Cinderblock`; 0.6 is concrete on wood. A higher one (0.9, e.g. a
+#: rough or rubber-topped table) holds the block's base while the arm pushes high on its side, so it
+#: tips instead of sliding (Fig. 7 b).
 BLOCK_FRICTION = (0.6, 0.005, 0.0001)
 
 
@@ -52,6 +55,8 @@ class Cinderblock(Scene):
         mass: [kg].
         padding: styrofoam thickness on the sides and top [m].
         table_height: height of the table top [m]; 0 puts the block on the floor without a table.
+        friction: sliding friction coefficient between the block and its support (table or floor) [-];
+            MuJoCo takes the larger of the two geoms' coefficients, so it is set on both.
         table_size: (x, y) extent of the table top [m].
         yaw: rotation of the block about the vertical axis [rad].
         name: body name (unique per plant); extras are recorded as ``{name}_pos`` and ``{name}_quat``.
@@ -64,6 +69,7 @@ class Cinderblock(Scene):
         mass: float = 15.0,
         padding: float = 0.03,
         table_height: float = 0.75,
+        friction: float = BLOCK_FRICTION[0],
         *,
         table_size: npt.ArrayLike = (0.8, 0.8),
         yaw: float = 0.0,
@@ -87,6 +93,9 @@ class Cinderblock(Scene):
         self.table_height = float(table_height)
         if not math.isfinite(self.table_height) or self.table_height < 0.0:
             raise ConfigError(f"table_height must be >= 0 [m]; got {table_height!r}")
+        self.friction = float(friction)
+        if not math.isfinite(self.friction) or self.friction <= 0.0:
+            raise ConfigError(f"friction must be a positive coefficient [-]; got {friction!r}")
         self.table_size = _finite(table_size, "table_size")
         if self.table_size.shape != (2,) or np.any(self.table_size <= 0.0):
             raise ConfigError(f"table_size must be two positive lengths [m]; got {np.asarray(table_size).tolist()}")
@@ -111,7 +120,7 @@ class Cinderblock(Scene):
                 contype=CONTACT_WORLD | CONTACT_ARM,
                 conaffinity=CONTACT_WORLD,
                 solref=list(HARD_SOLREF),
-                friction=list(BLOCK_FRICTION),
+                friction=[self.friction, *BLOCK_FRICTION[1:]],
                 rgba=[0.55, 0.4, 0.25, 1.0],
             )
         z = self.table_height + self.lift + sz / 2.0
@@ -137,7 +146,7 @@ class Cinderblock(Scene):
             contype=CONTACT_WORLD,
             conaffinity=CONTACT_WORLD,
             solref=list(HARD_SOLREF),
-            friction=list(BLOCK_FRICTION),
+            friction=[self.friction, *BLOCK_FRICTION[1:]],
             mass=self.mass,
             rgba=[0.5, 0.5, 0.5, 1.0],
         )
@@ -170,6 +179,7 @@ class Cinderblock(Scene):
             "mass": self.mass,
             "padding": self.padding,
             "table_height": self.table_height,
+            "friction": self.friction,
             "yaw": self.yaw,
         }
 
