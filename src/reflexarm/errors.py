@@ -10,7 +10,9 @@ __all__ = [
     "ConfigError",
     "DataError",
     "IdentificationError",
+    "ImplausibleDataError",
     "ModelError",
+    "NonFiniteEstimateError",
     "ReflexArmError",
     "SimulationError",
 ]
@@ -34,6 +36,24 @@ class DataError(ReflexArmError, ValueError):
 
 class IdentificationError(ReflexArmError):
     """An identification problem cannot be solved as posed."""
+
+
+class ImplausibleDataError(DataError):
+    """Logged values beyond a plausibility bound; ``samples`` holds the offending cells (source, row,
+    time, column, value, bound), the first ones found."""
+
+    def __init__(self, message: str, samples: tuple[object, ...] = ()) -> None:
+        super().__init__(message)
+        self.samples = samples
+
+
+class NonFiniteEstimateError(IdentificationError):
+    """Identification produced NaN/inf parameters; ``samples`` holds the rows that most likely caused it
+    (source, row, time, column, value, typical magnitude of that column)."""
+
+    def __init__(self, message: str, samples: tuple[object, ...] = ()) -> None:
+        super().__init__(message)
+        self.samples = samples
 
 
 class SimulationError(ReflexArmError):
