@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -11,6 +12,8 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from reflexarm.errors import ModelError
+from reflexarm.robots._loading import build_pinocchio_model
+from reflexarm.robots._mjcf import RobotFileWarning
 from reflexarm.robots.friction import CoulombViscousFriction
 
 __all__ = ["RobotModel", "builtin_robots", "load_robot"]
@@ -114,81 +117,19 @@ def load_robot(
     return RobotModel.from_file(path, ee_frame=ee_frame, sensor_frame=sensor_frame, friction=friction)
 
 
-def _build_pinocchio_model(path: Path) -> pin.Model:
-    if not path.is_file():
-        raise ModelError(f"robot file {str(path)!r} does not exist")
-    suffix = path.suffix.lower()
-    try:
-        if suffix == ".urdf":
-            return pin.buildModelFromUrdf(str(path))
-        if suffix in (".xml", ".mjcf"):
-            model = pin.buildModelFromMJCF(str(path))
-    except Exception as e:  # pinocchio raises RuntimeError/ValueError/IndexError with terse text
-        raise ModelError(f"cannot parse robot file {str(path)!r}: {e}") from e
-    if suffix in (".xml", ".mjcf"):
-        _align_mjcf_root(model, path)
-        return model
-    raise ModelError(f"robot file {str(path)!r}: unknown format {suffix!r}; use .urdf or MJCF .xml")
-
-
-def _align_mjcf_root(model: pin.Model, path: Path) -> None:
-    """Restore the placement of a fixed (joint-less) root body that Pinocchio's MJCF parser drops.
-
-    ``pin.buildModelFromMJCF`` ignores ``pos``/``quat`` of a joint-less body directly under
-    ``<worldbody>``: a torso mounted at a height or tilted would silently get wrong frame poses and,
-    if rotated, wrong gravity torques. MuJoCo compiles the same file (resolving defaults, angle units
-    and every orientation syntax); its world pose of the first moving body is the reference. The
-    correction is applied to the first joint and every frame attached to the universe, then all body
-    frames are checked against MuJoCo at q = 0.
-    """
-    import mujoco  # local: only needed for MJCF files
-
-    try:
-        mj = mujoco.MjModel.from_xml_path(str(path))
-    except Exception as e:
-        raise ModelError(f"cannot parse robot file {str(path)!r}: {e}") from e
-    mj_data = mujoco.MjData(mj)
-    mujoco.mj_kinematics(mj, mj_data)
-    data = model.createData()
-    q0 = pin.neutral(model)
-    pin.framesForwardKinematics(model, data, q0)
-
-    def mj_pose(name: str) -> pin.SE3 | None:
-        bid = mujoco.mj_name2id(mj, mujoco.mjtObj.mjOBJ_BODY, name)
-        if bid < 0:
-            return None
-        return pin.SE3(mj_data.xmat[bid].reshape(3, 3).copy(), mj_data.xpos[bid].copy())
-
-    if model.njoints > 1:
-        first_body = next((f for f in model.frames if f.type == pin.FrameType.BODY and f.parentJoint == 1), None)
-        ref = mj_pose(first_body.name) if first_body is not None else None
-        if ref is not None and first_body is not None:
-            fid = model.getFrameId(first_body.name)
-            correction = ref * data.oMf[fid].inverse()
-            if not correction.isIdentity(1e-12):
-                model.jointPlacements[1] = correction * model.jointPlacements[1]
-                for f in model.frames:
-                    if f.parentJoint == 0 and f.name != "universe":
-                        f.placement = correction * f.placement
-                data = model.createData()
-                pin.framesForwardKinematics(model, data, q0)
-    for i, f in enumerate(model.frames):
-        if f.type != pin.FrameType.BODY:
-            continue
-        ref = mj_pose(f.name)
-        if ref is not None and not ref.isApprox(data.oMf[i], 1e-9):
-            raise ModelError(
-                f"robot file {str(path)!r}: Pinocchio and MuJoCo place body {f.name!r} differently "
-                f"({data.oMf[i].translation.tolist()} vs {ref.translation.tolist()}); unsupported MJCF construct"
-            )
-
-
 class RobotModel:
     """Rigid-joint arm model (1): M(q), C(q, dq), g(q), frame Jacobians, friction tau_f(dq), regressor.
 
     A fixed-base serial chain of 1-DoF (revolute or prismatic) joints. The joint order is the model's.
     All quantities are SI. The object owns its Pinocchio model and data; use :meth:`copy` for a second
     independent instance (e.g. for another thread).
+
+    Joint springs (MJCF ``stiffness``/``springref``) are part of the potential term of (1): the methods
+    ``compute_gravity``, ``compute_nonlinear_effects``, ``compute_inverse_dynamics`` and
+    ``compute_motor_torque`` include ``K_s (q - q_s)`` (see :meth:`compute_spring_torque`); the raw
+    Pinocchio functions on :attr:`pin_model` and the inertial regressor do not (Pinocchio has no springs).
+    ``notes`` lists what was dropped from the file or is not modelled (each also given as a
+    :class:`RobotFileWarning` when the file is loaded).
     """
 
     def __init__(
@@ -201,12 +142,24 @@ class RobotModel:
         name: str = "",
         source: Path | None = None,
         home: npt.ArrayLike | None = None,
+        spring_stiffness: npt.ArrayLike | None = None,
+        spring_reference: npt.ArrayLike | None = None,
+        notes: tuple[str, ...] | list[str] = (),
     ) -> None:
         where = f" in {str(source)!r}" if source else ""
         if model.nq != model.nv:
+            unbounded = [
+                model.names[j] for j in range(1, model.njoints) if model.joints[j].shortname().startswith("JointModelRUB")
+            ]
+            hint = (
+                f"; joint(s) {unbounded} are unbounded (continuous) revolute joints with nq=2: load the file with "
+                "load_robot/RobotModel.from_file, which reads them as revolute joints with infinite limits"
+                if unbounded
+                else " (remove the free/ball joints)"
+            )
             raise ModelError(
                 f"robot{where} has nq={model.nq} != nv={model.nv}: only fixed-base arms with 1-DoF "
-                "joints are supported (remove the free/ball joints)"
+                f"joints are supported{hint}"
             )
         if model.nv == 0:
             raise ModelError(f"robot{where} has no joints")
@@ -242,6 +195,10 @@ class RobotModel:
             raise ModelError(f"friction model has {friction.n} joints; robot{where} has {n}")
         self.friction = friction
         self.home = np.zeros(n) if home is None else np.asarray(home, dtype=float).copy()
+        self._spring_k = _joint_vector(spring_stiffness, n, "spring_stiffness", where, nonnegative=True)
+        self._spring_q = _joint_vector(spring_reference, n, "spring_reference", where)
+        self._has_springs = bool(np.any(self._spring_k != 0.0))
+        self.notes = tuple(notes)
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -255,17 +212,24 @@ class RobotModel:
         name: str = "",
         home: npt.ArrayLike | None = None,
     ) -> RobotModel:
-        """Load a URDF or MJCF file (see :func:`load_robot`)."""
+        """Load a URDF or MJCF file (see :func:`load_robot`); notes are given as :class:`RobotFileWarning`."""
         p = Path(path)
-        return cls(
-            _build_pinocchio_model(p),
+        model, loaded = build_pinocchio_model(p)
+        robot = cls(
+            model,
             ee_frame=ee_frame,
             sensor_frame=sensor_frame,
             friction=friction,
             name=name or p.stem,
             source=p,
             home=home,
+            spring_stiffness=loaded.spring_stiffness,
+            spring_reference=loaded.spring_reference,
+            notes=loaded.notes,
         )
+        for note in robot.notes:
+            warnings.warn(note, RobotFileWarning, stacklevel=3)
+        return robot
 
     def copy(self) -> RobotModel:
         """An independent copy (own Pinocchio model and data)."""
@@ -277,6 +241,9 @@ class RobotModel:
             name=self.name,
             source=self.source,
             home=self.home,
+            spring_stiffness=self._spring_k,
+            spring_reference=self._spring_q,
+            notes=self.notes,
         )
 
     def with_friction(self, friction: CoulombViscousFriction) -> RobotModel:
@@ -355,6 +322,21 @@ class RobotModel:
             raise ModelError(f"unknown frame {frame!r}; frames are: {', '.join(self.frame_names)}")
         return int(self._model.getFrameId(frame))
 
+    @property
+    def spring_stiffness(self) -> np.ndarray:
+        """Joint spring stiffness K_s (n,) [Nm/rad or N/m] (MJCF ``stiffness``; 0 without springs)."""
+        return self._spring_k.copy()
+
+    @property
+    def spring_reference(self) -> np.ndarray:
+        """Joint spring rest positions q_s (n,) [rad or m] (MJCF ``springref``)."""
+        return self._spring_q.copy()
+
+    @property
+    def has_springs(self) -> bool:
+        """Whether any joint has a spring (then :meth:`compute_spring_torque` is not zero)."""
+        return self._has_springs
+
     # ------------------------------------------------------------------ dynamics (1)
     def _check_q(self, q: npt.ArrayLike, name: str = "q") -> np.ndarray:
         arr = np.asarray(q, dtype=float)
@@ -371,19 +353,34 @@ class RobotModel:
         """C(q, dq) with M_dot - 2 C skew-symmetric (n, n)."""
         return np.array(pin.computeCoriolisMatrix(self._model, self._data, self._check_q(q), self._check_q(dq, "dq")))
 
+    def compute_spring_torque(self, q: npt.ArrayLike, out: np.ndarray | None = None) -> np.ndarray:
+        """Joint spring torque K_s (q - q_s) (n,) [Nm], the torque the motors need to hold the springs.
+
+        ``out``: optional (n,) float array to write into (no allocation; for a control loop).
+        """
+        arr = self._check_q(q)
+        res = np.empty(self.n) if out is None else out
+        np.subtract(arr, self._spring_q, out=res)
+        np.multiply(res, self._spring_k, out=res)
+        return res
+
     def compute_gravity(self, q: npt.ArrayLike) -> np.ndarray:
-        """g(q) [Nm]."""
-        return np.array(pin.computeGeneralizedGravity(self._model, self._data, self._check_q(q)))
+        """g(q) [Nm]: the potential term of (1), gravity plus joint springs K_s (q - q_s)."""
+        qa = self._check_q(q)
+        g = np.array(pin.computeGeneralizedGravity(self._model, self._data, qa))
+        return g + self.compute_spring_torque(qa) if self._has_springs else g
 
     def compute_nonlinear_effects(self, q: npt.ArrayLike, dq: npt.ArrayLike) -> np.ndarray:
-        """C(q, dq) dq + g(q) [Nm]."""
-        return np.array(pin.nonLinearEffects(self._model, self._data, self._check_q(q), self._check_q(dq, "dq")))
+        """C(q, dq) dq + g(q) [Nm] (g with the joint springs)."""
+        qa = self._check_q(q)
+        h = np.array(pin.nonLinearEffects(self._model, self._data, qa, self._check_q(dq, "dq")))
+        return h + self.compute_spring_torque(qa) if self._has_springs else h
 
     def compute_inverse_dynamics(self, q: npt.ArrayLike, dq: npt.ArrayLike, ddq: npt.ArrayLike) -> np.ndarray:
-        """M ddq + C dq + g (rigid body only, no friction) [Nm]."""
-        return np.array(
-            pin.rnea(self._model, self._data, self._check_q(q), self._check_q(dq, "dq"), self._check_q(ddq, "ddq"))
-        )
+        """M ddq + C dq + g (rigid body and joint springs, no friction) [Nm]."""
+        qa = self._check_q(q)
+        tau = np.array(pin.rnea(self._model, self._data, qa, self._check_q(dq, "dq"), self._check_q(ddq, "ddq")))
+        return tau + self.compute_spring_torque(qa) if self._has_springs else tau
 
     def compute_motor_torque(self, q: npt.ArrayLike, dq: npt.ArrayLike, ddq: npt.ArrayLike) -> np.ndarray:
         """tau_m of (1) with tau_ext = 0: M ddq + C dq + g + tau_f(dq) [Nm]."""
@@ -419,7 +416,10 @@ class RobotModel:
         return [f"{p}_{j}" for j in self.joint_names for p in INERTIAL_PARAMETER_NAMES]
 
     def compute_regressor(self, q: npt.ArrayLike, dq: npt.ArrayLike, ddq: npt.ArrayLike) -> np.ndarray:
-        """Joint-torque regressor Y(q, dq, ddq), (n, 10 n): ``Y @ inertial_parameters() == rnea``."""
+        """Joint-torque regressor Y(q, dq, ddq), (n, 10 n): ``Y @ inertial_parameters() == rnea``.
+
+        Rigid body only: with joint springs, ``compute_inverse_dynamics == Y @ pi + compute_spring_torque``.
+        """
         return np.array(
             pin.computeJointTorqueRegressor(
                 self._model, self._data, self._check_q(q), self._check_q(dq, "dq"), self._check_q(ddq, "ddq")
@@ -428,3 +428,16 @@ class RobotModel:
 
     def __repr__(self) -> str:
         return f"RobotModel({self.name!r}, n={self.n}, ee_frame={self.ee_frame!r}, sensor_frame={self.sensor_frame!r})"
+
+
+def _joint_vector(
+    value: npt.ArrayLike | None, n: int, name: str, where: str, *, nonnegative: bool = False
+) -> np.ndarray:
+    if value is None:
+        return np.zeros(n)
+    arr = np.array(value, dtype=float).reshape(-1) if np.ndim(value) else np.full(n, float(value))  # type: ignore[arg-type]
+    if arr.shape != (n,) or not np.all(np.isfinite(arr)) or (nonnegative and np.any(arr < 0.0)):
+        raise ModelError(
+            f"{name}{where} must be a finite{' non-negative' if nonnegative else ''} ({n},) array; got {value!r}"
+        )
+    return arr

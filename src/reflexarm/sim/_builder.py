@@ -3,12 +3,19 @@
 The MuJoCo model is compiled from the same URDF/MJCF file as the controller's Pinocchio model, then
 completed with what the simulation needs: sites for the end-effector and sensor frames when the file
 has none, the wrist force/torque sensors, the true joint friction and the scene's bodies.
+
+Motors are ideal torque sources: the file's own actuators (position servos and the like, e.g. the
+Menagerie arms' ``<general>`` servos) are removed, with the sensors that read them and the keyframes'
+``ctrl``, and a :class:`~reflexarm.robots.RobotFileWarning` names them; so is MuJoCo's body gravity
+compensation (``gravcomp``), an actuation trick the controller does itself. MJCF mesh files that are
+absent are dropped with their geoms, as for URDF (see ``reflexarm.robots._mjcf``).
 """
 
 from __future__ import annotations
 
+import warnings
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import mujoco
@@ -16,6 +23,7 @@ import numpy as np
 import pinocchio as pin
 
 from reflexarm.errors import ModelError
+from reflexarm.robots._mjcf import RobotFileWarning, load_mjcf_spec
 from reflexarm.robots.friction import CoulombViscousFriction
 from reflexarm.robots.robot_model import RobotModel
 
@@ -50,6 +58,7 @@ class BuildInfo:
     ee_site: str
     sensor_site: str
     is_urdf: bool
+    notes: list[str] = field(default_factory=list)
 
 
 def load_spec(path: Path) -> tuple[mujoco.MjSpec, bool]:
@@ -57,11 +66,10 @@ def load_spec(path: Path) -> tuple[mujoco.MjSpec, bool]:
     if not path.is_file():
         raise ModelError(f"robot file {str(path)!r} does not exist")
     is_urdf = path.suffix.lower() == ".urdf"
+    if not is_urdf:
+        return load_mjcf_spec(path)[0], False  # the mesh note was given when the RobotModel was loaded
     try:
-        if is_urdf:
-            spec = mujoco.MjSpec.from_string(urdf_for_mujoco(path.read_text(), path))
-        else:
-            spec = mujoco.MjSpec.from_file(str(path))
+        spec = mujoco.MjSpec.from_string(urdf_for_mujoco(path.read_text(), path))
     except ModelError:
         raise
     except Exception as e:  # MuJoCo raises ValueError with the parser's text
@@ -177,6 +185,34 @@ def _joint_names(spec: mujoco.MjSpec, robot: RobotModel) -> list[str]:
     return list(names)
 
 
+def _remove_actuation(spec: mujoco.MjSpec, path: Path) -> list[str]:
+    """Remove the file's actuators (and what refers to them) and body gravity compensation; say which."""
+    notes = []
+    actuators = [a.name or f"#{i}" for i, a in enumerate(spec.actuators)]
+    if actuators:
+        names = {a.name for a in spec.actuators}
+        for sensor in list(spec.sensors):
+            if sensor.objtype == mujoco.mjtObj.mjOBJ_ACTUATOR or (
+                sensor.type == mujoco.mjtSensor.mjSENS_ACTUATORFRC and sensor.objname in names
+            ):
+                spec.delete(sensor)
+        for actuator in list(spec.actuators):
+            spec.delete(actuator)
+        for key in spec.keys:
+            key.ctrl = []
+            key.act = []
+        notes.append(
+            f"robot file {str(path)!r}: the plant removed the file's {len(actuators)} actuator(s) "
+            f"{actuators}; its motors are ideal torque sources driven by the controller's command"
+        )
+    gravcomp = [b.name for b in spec.bodies if b.gravcomp != 0.0]
+    if gravcomp:
+        for body in spec.bodies:
+            body.gravcomp = 0.0
+        notes.append(f"robot file {str(path)!r}: the plant removed body gravity compensation (gravcomp) on {gravcomp}")
+    return notes
+
+
 def _set_friction(
     spec: mujoco.MjSpec, joint_names: list[str], friction: CoulombViscousFriction | None, timestep: float
 ) -> None:
@@ -205,6 +241,9 @@ def build_robot_spec(
     path = Path(robot.source)
     spec, is_urdf = load_spec(path)
     joint_names = _joint_names(spec, robot)
+    notes = _remove_actuation(spec, path)
+    for note in notes:
+        warnings.warn(note, RobotFileWarning, stacklevel=4)
     if is_urdf:
         # URDF has no collision masks: give the arm the built-in convention (no self-collision).
         for geom in spec.geoms:
@@ -227,4 +266,4 @@ def build_robot_spec(
         name=SENSOR_TORQUE, type=mujoco.mjtSensor.mjSENS_TORQUE, objtype=mujoco.mjtObj.mjOBJ_SITE, objname=sensor_site
     )
     spec.option.timestep = timestep
-    return spec, BuildInfo(joint_names, sites[robot.ee_frame], sensor_site, is_urdf)
+    return spec, BuildInfo(joint_names, sites[robot.ee_frame], sensor_site, is_urdf, notes)

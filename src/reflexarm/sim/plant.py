@@ -44,7 +44,9 @@ class Plant:
 
     The MuJoCo model is compiled from ``robot.source`` (the same file the Pinocchio model was read from),
     completed with the wrist force/torque sensor and the scene. Motors are ideal torque sources: the
-    commanded torque goes to ``qfrc_applied`` unchanged and is held over the control period.
+    commanded torque goes to ``qfrc_applied`` unchanged and is held over the control period. The file's own
+    actuators (position servos etc.) and body ``gravcomp`` are removed, with a ``RobotFileWarning`` naming
+    them (listed in :attr:`notes`).
 
     Timing: :meth:`step` advances ``control_period`` in ``control_period / timestep`` physics substeps.
     Positions and velocities in :meth:`measure` are those at :attr:`time`. Force quantities (the wrist
@@ -127,6 +129,8 @@ class Plant:
         m = self._model
         self._data = mujoco.MjData(m)
         self.is_urdf = info.is_urdf
+        #: What the build removed from the file (actuators, gravcomp), each also given as a RobotFileWarning.
+        self.notes = tuple(info.notes)
 
         # ---- index maps (arm joints in the Pinocchio order)
         jids = np.array([m.joint(j).id for j in info.joint_names])
@@ -148,7 +152,8 @@ class Plant:
         self._torque_adr = int(m.sensor_adr[m.sensor(SENSOR_TORQUE).id])
         first_arm_body = int(m.jnt_bodyid[jids[0]])
         self._arm_bodies = _subtree(m, first_arm_body)
-        self._gravity = np.array(m.opt.gravity, dtype=float)
+        gravity_off = int(m.opt.disableflags) & int(mujoco.mjtDisableBit.mjDSBL_GRAVITY)
+        self._gravity = np.zeros(3) if gravity_off else np.array(m.opt.gravity, dtype=float)
 
         # ---- preallocated buffers and cached views into MjData (they share memory with it)
         d = self._data

@@ -1,0 +1,190 @@
+"""Building the controller's Pinocchio model from a URDF or MJCF file, faithfully (private).
+
+- URDF ``continuous`` joints: Pinocchio builds them as unbounded revolute joints (cos/sin, nq=2, nv=1).
+  A real arm and MuJoCo report such a joint as one angle, so they are read as revolute joints with the
+  same axis and infinite position limits (nq = nv = 1); their effort and velocity limits are kept.
+- MJCF: the joint facts both sides must share (armature, damping, frictionloss, springs, effort limits,
+  gravity) come from MuJoCo's compiled model (see ``_mjcf.py``); a joint-less root body's placement,
+  which Pinocchio's parser drops, is restored; then M(q) and g(q) are compared with MuJoCo's, so a
+  construct one parser reads differently from the other is refused instead of silently giving two
+  different robots.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pinocchio as pin
+
+from reflexarm.errors import ModelError
+from reflexarm.robots._mjcf import compile_mjcf, joint_facts
+
+__all__ = ["LoadedFile", "build_pinocchio_model"]
+
+#: Finite stand-in for an unbounded position limit while Pinocchio parses the rewritten URDF (urdfdom
+#: refuses "inf"); replaced by +-inf right after parsing.
+_UNBOUNDED = 1e300
+
+#: M(q) and g(q) of Pinocchio and MuJoCo must agree to this relative tolerance (relative to the largest
+#: entry, floor 1). Both evaluate the same exact expressions in double precision (~1e-14 observed); a
+#: misread placement, axis, inertia or armature shows up at 1e-3 or more.
+AGREEMENT_RTOL = 1e-8
+
+
+@dataclass
+class LoadedFile:
+    """What a file gives beyond the Pinocchio model: joint springs and notes for the user."""
+
+    spring_stiffness: np.ndarray
+    spring_reference: np.ndarray
+    notes: list[str] = field(default_factory=list)
+
+
+def build_pinocchio_model(path: Path) -> tuple[pin.Model, LoadedFile]:
+    """The Pinocchio model of a URDF or MJCF file and the file's joint springs and notes."""
+    if not path.is_file():
+        raise ModelError(f"robot file {str(path)!r} does not exist")
+    suffix = path.suffix.lower()
+    if suffix == ".urdf":
+        model = _build_urdf(path)
+        return model, LoadedFile(np.zeros(model.nv), np.zeros(model.nv))
+    if suffix in (".xml", ".mjcf"):
+        return _build_mjcf(path)
+    raise ModelError(f"robot file {str(path)!r}: unknown format {suffix!r}; use .urdf or MJCF .xml")
+
+
+# ---------------------------------------------------------------------- URDF
+def _build_urdf(path: Path) -> pin.Model:
+    try:
+        text = path.read_text()
+        root = ET.fromstring(text)
+    except (OSError, UnicodeDecodeError, ET.ParseError) as e:
+        raise ModelError(f"cannot parse robot file {str(path)!r}: {e}") from e
+    continuous = [j for j in root.iter("joint") if j.get("type") == "continuous"]
+    try:
+        if not continuous:
+            return pin.buildModelFromUrdf(str(path))
+        original = pin.buildModelFromXML(text)
+        for joint in continuous:
+            joint.set("type", "revolute")
+            limit = joint.find("limit")
+            if limit is None:
+                limit = ET.SubElement(joint, "limit", effort="1", velocity="1")
+            limit.set("lower", repr(-_UNBOUNDED))
+            limit.set("upper", repr(_UNBOUNDED))
+        model = pin.buildModelFromXML(ET.tostring(root, encoding="unicode"))
+    except Exception as e:  # pinocchio raises RuntimeError/ValueError with terse text
+        raise ModelError(f"cannot parse robot file {str(path)!r}: {e}") from e
+    names = {j.get("name") for j in continuous}
+    for j in range(1, model.njoints):
+        if model.names[j] not in names:
+            continue
+        iq, iv, jo = model.idx_qs[j], model.idx_vs[j], original.getJointId(model.names[j])
+        model.lowerPositionLimit[iq] = -np.inf
+        model.upperPositionLimit[iq] = np.inf
+        ov = original.idx_vs[jo]
+        model.effortLimit[iv] = original.effortLimit[ov]
+        model.velocityLimit[iv] = original.velocityLimit[ov]
+    return model
+
+
+# ---------------------------------------------------------------------- MJCF
+def _build_mjcf(path: Path) -> tuple[pin.Model, LoadedFile]:
+    try:
+        model = pin.buildModelFromMJCF(str(path))
+    except Exception as e:
+        raise ModelError(f"cannot parse robot file {str(path)!r}: {e}") from e
+    mj, notes = compile_mjcf(path)
+    _align_mjcf_root(model, mj, path)
+    names = list(model.names)[1:]
+    if model.nq != model.nv or any(model.nvs[j] != 1 for j in range(1, model.njoints)):
+        return model, LoadedFile(np.zeros(model.nv), np.zeros(model.nv), notes)  # RobotModel refuses it
+    facts = joint_facts(mj, names, path)
+    model.armature = facts.armature
+    model.damping = facts.damping
+    model.friction = facts.frictionloss
+    model.gravity.linear = facts.gravity
+    given = np.isfinite(facts.effort_limit)
+    limits = np.asarray(model.effortLimit, dtype=float).copy()
+    limits[given] = facts.effort_limit[given]
+    model.effortLimit = limits
+    _check_agreement(model, mj, names, path)
+    return model, LoadedFile(facts.stiffness, facts.springref, notes + facts.notes)
+
+
+def _align_mjcf_root(model: pin.Model, mj: mujoco.MjModel, path: Path) -> None:
+    """Restore the placement of a fixed (joint-less) root body that Pinocchio's MJCF parser drops.
+
+    ``pin.buildModelFromMJCF`` ignores ``pos``/``quat`` of a joint-less body directly under
+    ``<worldbody>``: a torso mounted at a height or tilted would silently get wrong frame poses and,
+    if rotated, wrong gravity torques. MuJoCo's world pose of the first moving body is the reference. The
+    correction is applied to the first joint and every frame attached to the universe, then all body
+    frames are checked against MuJoCo at q = 0.
+    """
+    mj_data = mujoco.MjData(mj)
+    mujoco.mj_kinematics(mj, mj_data)
+    data = model.createData()
+    q0 = pin.neutral(model)
+    pin.framesForwardKinematics(model, data, q0)
+
+    def mj_pose(name: str) -> pin.SE3 | None:
+        bid = mujoco.mj_name2id(mj, mujoco.mjtObj.mjOBJ_BODY, name)
+        if bid < 0:
+            return None
+        return pin.SE3(mj_data.xmat[bid].reshape(3, 3).copy(), mj_data.xpos[bid].copy())
+
+    if model.njoints > 1:
+        first_body = next((f for f in model.frames if f.type == pin.FrameType.BODY and f.parentJoint == 1), None)
+        ref = mj_pose(first_body.name) if first_body is not None else None
+        if ref is not None and first_body is not None:
+            fid = model.getFrameId(first_body.name)
+            correction = ref * data.oMf[fid].inverse()
+            if not correction.isIdentity(1e-12):
+                model.jointPlacements[1] = correction * model.jointPlacements[1]
+                for f in model.frames:
+                    if f.parentJoint == 0 and f.name != "universe":
+                        f.placement = correction * f.placement
+                data = model.createData()
+                pin.framesForwardKinematics(model, data, q0)
+    for i, f in enumerate(model.frames):
+        if f.type != pin.FrameType.BODY:
+            continue
+        ref = mj_pose(f.name)
+        if ref is not None and not ref.isApprox(data.oMf[i], 1e-9):
+            raise ModelError(
+                f"robot file {str(path)!r}: Pinocchio and MuJoCo place body {f.name!r} differently "
+                f"({data.oMf[i].translation.tolist()} vs {ref.translation.tolist()}); unsupported MJCF construct"
+            )
+
+
+def _check_agreement(model: pin.Model, mj: mujoco.MjModel, names: list[str], path: Path) -> None:
+    """M(q) and g(q) of both readings at three seeded configurations inside the limits."""
+    jids = [mujoco.mj_name2id(mj, mujoco.mjtObj.mjOBJ_JOINT, n) for n in names]
+    qadr, dofs = mj.jnt_qposadr[jids], mj.jnt_dofadr[jids]
+    lo = np.where(np.isfinite(model.lowerPositionLimit), model.lowerPositionLimit, -np.pi)
+    hi = np.where(np.isfinite(model.upperPositionLimit), model.upperPositionLimit, np.pi)
+    rng = np.random.default_rng(0)
+    d = mujoco.MjData(mj)
+    data = model.createData()
+    M_mj = np.zeros((mj.nv, mj.nv))
+    for q in (np.zeros(model.nq), rng.uniform(lo, hi), rng.uniform(lo, hi)):
+        d.qpos[:] = mj.qpos0
+        d.qpos[qadr] = q
+        d.qvel[:] = 0.0
+        mujoco.mj_forward(mj, d)
+        mujoco.mj_fullM(mj, d, M_mj)
+        M = pin.crba(model, data, q)
+        M = np.triu(M) + np.triu(M, 1).T
+        g = pin.computeGeneralizedGravity(model, data, q)
+        for label, a, b in (("M(q)", M, M_mj[np.ix_(dofs, dofs)]), ("g(q)", g, d.qfrc_bias[dofs])):
+            err = float(np.abs(a - b).max())
+            if not err <= AGREEMENT_RTOL * max(1.0, float(np.abs(b).max())):
+                raise ModelError(
+                    f"robot file {str(path)!r}: Pinocchio and MuJoCo read different dynamics ({label} differs by "
+                    f"{err:.3g} at q={np.round(q, 4).tolist()}); an MJCF construct one of them does not support "
+                    "(e.g. inertia from geoms, a ref angle, a non-serial structure)"
+                )
