@@ -103,7 +103,7 @@ def _drop_missing_meshes(spec: mujoco.MjSpec, path: Path) -> list[str]:
             raise ModelError(
                 f"robot file {str(path)!r}: body {body.name!r} takes its mass and inertia from mesh geom(s) "
                 f"whose file is missing ({', '.join(str(missing[m]) for m in lost)}); provide the mesh files "
-                "or give the body an <inertial> element (and <compiler inertiafromgeom=\"auto\"/>)"
+                'or give the body an <inertial> element (and <compiler inertiafromgeom="auto"/>)'
             )
     for g in dropped:
         spec.delete(g)

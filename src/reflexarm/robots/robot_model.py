@@ -149,7 +149,9 @@ class RobotModel:
         where = f" in {str(source)!r}" if source else ""
         if model.nq != model.nv:
             unbounded = [
-                model.names[j] for j in range(1, model.njoints) if model.joints[j].shortname().startswith("JointModelRUB")
+                model.names[j]
+                for j in range(1, model.njoints)
+                if model.joints[j].shortname().startswith("JointModelRUB")
             ]
             hint = (
                 f"; joint(s) {unbounded} are unbounded (continuous) revolute joints with nq=2: load the file with "
