@@ -151,13 +151,15 @@ EE_MOVE_TIME = 6.0  # [s]: peak hand speed ~0.12 m/s, the paper's "moderate velo
 EE_BLOCK = dict(position=(0.70, 0.225), table_height=0.585, mass=20.0)
 
 #: Cinderblock variants of the demo (``block=`` of :func:`run_ee_collision`, ``--block`` of the CLI).
-#: "paper" is the demo's default: concrete on wood (friction 0.6), the Stiff arm slides the block.
-#: "tipping": a table with friction 0.9 (rough/rubber top) holds the block's base, so the Stiff arm's push
-#: on the block's upper side tips it over as in Fig. 7 b. Compliant/Coll.Det push less (see the README's
-#: table for what they show on it).
+#: "paper" is the demo's default: a 0.39 x 0.19 x 0.19 m, 20 kg block, concrete on wood (friction 0.6);
+#: the Stiff arm slides it ~6 cm. "tipping": the same mass, 0.29 m tall, on a table with friction 0.9
+#: (a rough or rubber top): the friction holds the base and the hand's push acts higher above it, so the
+#: Stiff arm tips the block over (tilt ~60 deg at the end, model/noise seeds 0-2) as in Fig. 7 b. Each change
+#: alone is not enough (measured: friction 0.9 at 0.19 m tilts it 14 deg; 0.29 m at friction 0.6 slides
+#: it). Compliant and Coll.Det show the same forces on both blocks (they do not reach the tipping load).
 EE_BLOCKS: dict[str, dict[str, object]] = {
     "paper": dict(EE_BLOCK),
-    "tipping": dict(EE_BLOCK, friction=0.9),
+    "tipping": dict(EE_BLOCK, friction=0.9, size=(0.39, 0.19, 0.29)),
 }
 
 
