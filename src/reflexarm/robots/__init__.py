@@ -1,5 +1,6 @@
 """What the controller knows: robot models over Pinocchio, friction models, shipped robot files."""
 
+from reflexarm.robots._mjcf import RobotFileWarning
 from reflexarm.robots.friction import CoulombViscousFriction
 from reflexarm.robots.perturbation import ModelPerturbation, perturb_model
 from reflexarm.robots.robot_model import RobotModel, builtin_robots, load_robot
@@ -7,6 +8,7 @@ from reflexarm.robots.robot_model import RobotModel, builtin_robots, load_robot
 __all__ = [
     "CoulombViscousFriction",
     "ModelPerturbation",
+    "RobotFileWarning",
     "RobotModel",
     "builtin_robots",
     "load_robot",

@@ -108,6 +108,8 @@ def _build_mjcf(path: Path) -> tuple[pin.Model, LoadedFile]:
     model.damping = facts.damping
     model.friction = facts.frictionloss
     model.gravity.linear = facts.gravity
+    model.lowerPositionLimit = facts.lower_limit
+    model.upperPositionLimit = facts.upper_limit
     given = np.isfinite(facts.effort_limit)
     limits = np.asarray(model.effortLimit, dtype=float).copy()
     limits[given] = facts.effort_limit[given]

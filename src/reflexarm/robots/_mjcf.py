@@ -42,6 +42,8 @@ class JointFacts:
     frictionloss: np.ndarray
     stiffness: np.ndarray
     springref: np.ndarray
+    lower_limit: np.ndarray  # -inf for an unlimited joint
+    upper_limit: np.ndarray
     effort_limit: np.ndarray  # inf where the file gives none
     gravity: np.ndarray
     notes: list[str] = field(default_factory=list)
@@ -155,6 +157,8 @@ def joint_facts(mj: mujoco.MjModel, joint_names: list[str], path: Path) -> Joint
         frictionloss=np.zeros(n) if no_constraint else np.array(mj.dof_frictionloss[dofs], dtype=float),
         stiffness=np.zeros(n) if off(mujoco.mjtDisableBit.mjDSBL_SPRING) else np.array(mj.jnt_stiffness[jids]),
         springref=np.array(mj.qpos_spring[qadr], dtype=float),
+        lower_limit=np.where(mj.jnt_limited[jids], mj.jnt_range[jids, 0], -np.inf),
+        upper_limit=np.where(mj.jnt_limited[jids], mj.jnt_range[jids, 1], np.inf),
         effort_limit=_effort_limits(mj, jids),
         gravity=np.zeros(3) if off(mujoco.mjtDisableBit.mjDSBL_GRAVITY) else np.array(mj.opt.gravity, dtype=float),
     )
