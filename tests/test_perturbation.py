@@ -8,6 +8,7 @@ import pytest
 
 from reflexarm.errors import ConfigError
 from reflexarm.robots import ModelPerturbation, perturb_model
+from reflexarm.robots.perturbation import achieved_model_error, measure_model_error, radius_of_gyration
 
 
 def link_quantities(robot):
@@ -75,7 +76,10 @@ def test_each_quantity_is_scaled_by_its_own_factor(atlas):
     for k, ((m0, c0, I0, R0), (m1, c1, I1, _)) in enumerate(zip(true_q, pert_q, strict=True)):
         # tolerances: a 3x3 eigendecomposition round trip in double precision
         np.testing.assert_allclose(m1, m0 * p.mass[k], rtol=1e-12, err_msg=f"mass of link {k}")
-        np.testing.assert_allclose(c1, c0 * p.com[k], rtol=1e-10, atol=1e-14, err_msg=f"COM of link {k}")
+        # COM: the factor acts on c where |c| >= rho (the paper's relative factor), on rho elsewhere
+        rho = np.sqrt(I0.sum() / (2 * m0))
+        scale = np.where(np.abs(c0) >= rho, c0, rho)
+        np.testing.assert_allclose(c1, c0 + (p.com[k] - 1) * scale, rtol=1e-10, atol=1e-14, err_msg=f"COM of link {k}")
         if k not in clipped:
             # principal moments scaled (eigh returns ascending moments; the factors follow the true order)
             np.testing.assert_allclose(
@@ -116,23 +120,82 @@ def test_flat_body_is_clipped_to_the_triangle_inequality(atlas):
     np.testing.assert_allclose(c, a + b, rtol=1e-9)
 
 
-def test_perturbed_model_differs_in_dynamics_by_about_the_level(atlas):
-    # gravity torque of the perturbed model: relative change bounded by the combined mass x COM factors
-    level = 0.1
-    q = atlas.home
-    g0 = atlas.compute_gravity(q)
-    diffs = [np.abs(perturb_model(atlas, level, seed=s).compute_gravity(q) - g0).max() for s in range(10)]
-    assert 0.0 < max(diffs) <= ((1 + level) ** 2 - 1) * np.abs(g0).sum()
-    # and the regressor identity still holds for the perturbed model (it is a valid Pinocchio model)
-    pert = perturb_model(atlas, level, seed=1)
+def test_zero_com_coordinates_move_on_the_radius_of_gyration(atlas):
+    # shx (link 1) has its COM exactly on the joint origin: a relative factor could not move it. At level
+    # p each coordinate moves by (f - 1) * rho with rho the link's radius of gyration.
+    inertia = atlas.pin_model.inertias[2]
+    assert np.all(np.asarray(inertia.lever) == 0.0)
+    rho = radius_of_gyration(float(inertia.mass), np.asarray(inertia.inertia))
+    # rho from the principal moments 0.00319, 0.00583, 0.00583 kg m^2 and 3.899 kg (the model file)
+    np.testing.assert_allclose(rho, np.sqrt((0.00319 + 2 * 0.00583) / (2 * 3.899)), rtol=2e-3)
+    for level in (0.01, 0.1, 0.3):
+        p = ModelPerturbation.draw(atlas.n, level, seed=7)
+        moved = np.asarray(p.apply(atlas).pin_model.inertias[2].lever)
+        np.testing.assert_allclose(moved, (p.com[1] - 1) * rho, rtol=1e-10)
+        assert np.abs(moved).max() > 0.25 * level * rho  # the draw of seed 7 is not tiny on all three
+
+
+def test_perturbed_model_is_a_valid_pinocchio_model(atlas):
+    pert = perturb_model(atlas, 0.3, seed=1)
     rng = np.random.default_rng(0)
+    q = atlas.home
     dq, ddq = rng.normal(size=(2, atlas.n))
+    # regressor identity of the perturbed parameters (atol: sums of ~70 products of O(10) numbers)
     np.testing.assert_allclose(
         pert.compute_regressor(q, dq, ddq) @ pert.inertial_parameters(),
         pert.compute_inverse_dynamics(q, dq, ddq),
         atol=1e-9,
     )
     assert isinstance(pert.pin_model.inertias[1], pin.Inertia)
+
+
+LEVELS = (0.01, 0.1, 0.3)
+SEEDS = range(10)
+
+
+@pytest.fixture(scope="module")
+def achieved(atlas):
+    """{(level, seed): ModelErrorSize} over 100 seeded states (the same states for every draw)."""
+    return {(p, s): achieved_model_error(atlas, p, seed=s, n_states=100) for p in LEVELS for s in SEEDS}
+
+
+def test_achieved_error_grows_with_the_level_for_every_seed(achieved):
+    # common random numbers: the same seed is the same pattern scaled by p, so the error of g and M grows
+    # with p for every draw (first order in p; the p^2 mass x COM terms are 30x smaller at p = 0.3)
+    for s in SEEDS:
+        g = [achieved[p, s].gravity_median for p in LEVELS]
+        m = [achieved[p, s].mass_matrix_median for p in LEVELS]
+        assert g[0] < g[1] < g[2], f"seed {s}: gravity error {g} does not grow with {LEVELS}"
+        assert m[0] < m[1] < m[2], f"seed {s}: mass-matrix error {m} does not grow with {LEVELS}"
+
+
+@pytest.mark.parametrize("level", LEVELS)
+def test_achieved_error_lies_in_the_derived_band(achieved, level):
+    # Band for the median over seeds of (median over states of the relative error) / p.
+    # A quantity that is a sum of N contributions a_k, each changed by p * u_k with independent
+    # u_k ~ U(-1, 1) (variance 1/3), changes by p * sqrt(sum a_k^2 / 3) (RMS). With the contributions
+    # adding up coherently (all links' weights pull down, all inertias are positive), the relative change
+    # lies between p / sqrt(3 N) (N equal contributions) and p / sqrt(3) (one contribution dominating).
+    # g(q) depends on 4 factors per link (mass, 3 COM coordinates): N = 28; M(q) on all 7: N = 49.
+    # Measured (Atlas, these seeds and states): 0.25 p for g and 0.18 p for M at every level.
+    n = 7
+    g = np.median([achieved[level, s].gravity_median for s in SEEDS]) / level
+    m = np.median([achieved[level, s].mass_matrix_median for s in SEEDS]) / level
+    assert 1 / np.sqrt(3 * 4 * n) <= g <= 1 / np.sqrt(3), f"gravity error / level = {g:.3f} at p = {level}"
+    assert 1 / np.sqrt(3 * 7 * n) <= m <= 1 / np.sqrt(3), f"mass-matrix error / level = {m:.3f} at p = {level}"
+
+
+def test_measure_model_error_of_the_true_model_is_zero_and_of_a_scaled_mass_is_exact(atlas):
+    exact = measure_model_error(atlas, atlas, n_states=20)
+    assert exact.gravity_max == 0.0 and exact.mass_matrix_max == 0.0
+    # every mass and principal moment x 1.1, COM unchanged: g and M scale by exactly 1.1 (relative error 0.1)
+    p = ModelPerturbation.draw(atlas.n, 0.0, 0)
+    scaled = ModelPerturbation(0.1, 0, p.mass * 1.1, p.com, p.inertia * 1.1, p.coulomb, p.viscous)
+    e = measure_model_error(atlas, scaled.apply(atlas), n_states=20)
+    # tolerance: eigendecomposition round trip of each link inertia (double precision)
+    np.testing.assert_allclose(
+        [e.gravity_median, e.gravity_max, e.mass_matrix_median, e.mass_matrix_max], 0.1, rtol=1e-9
+    )
 
 
 @pytest.mark.parametrize(
