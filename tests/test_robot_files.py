@@ -18,7 +18,8 @@ from reflexarm.control import Controller
 from reflexarm.errors import ModelError
 from reflexarm.ident.regressor import BatchRegressor
 from reflexarm.robots import RobotFileWarning, RobotModel, load_robot
-from reflexarm.sim import Plant, SensorNoise, run_closed_loop
+from reflexarm.signals import Reference
+from reflexarm.sim import PAPER_NOISE, Plant, SensorNoise, run_closed_loop
 from reflexarm.sim.trajectory import JointTrajectory
 
 #: Pinocchio and MuJoCo evaluate the same exact expressions in double precision (see
@@ -289,3 +290,64 @@ def test_an_unbounded_joint_built_by_hand_is_refused_with_the_way_out(tmp_path: 
     model = pin.buildModelFromXML(CONTINUOUS_URDF)
     with pytest.raises(ModelError, match=r"joint\(s\) \['j1', 'j3'\] are unbounded \(continuous\) revolute joints"):
         RobotModel(model, ee_frame="tool")
+
+
+# ---------------------------------------------------------------------- the Menagerie arms, as shipped
+MENAGERIE = Path(__file__).resolve().parents[1].parent / "shared" / "reference" / "menagerie"
+
+#: Issue 8's target for the residual of an arm held at rest with the paper's sensor noise [Nm]. With an
+#: exact model and no noise it is ~0 (asserted below at 1e-6 Nm); the paper's velocity and torque noise
+#: alone gives 1.3-1.7 Nm on the iiwa's first joint over seeds 0-5 (K_o M(q) dq_noise).
+REST_RESIDUAL = 2.0
+#: A 50 N push down on link 6: ~15 Nm on joint 2 against zeta = 11 Nm, so the first-order residual (K_o =
+#: 5 1/s) crosses after about -ln(1 - 11/15) / 5 = 0.26 s; 0.5 s leaves room for the arm yielding.
+PUSH = np.array([0.0, 0.0, -50.0])
+MAX_DETECTION_TIME = 0.5
+
+ARMS = {
+    "iiwa14": (13, [0.0, 0.785398, 0.0, -1.5708, 0.0, 0.0, 0.0]),  # mesh files, the file's "home" keyframe
+    "panda_nohand": (59, [0.0, 0.0, 0.0, -1.57079, 0.0, 1.57079, -0.7853]),
+}
+
+
+def _rest_then_push(robot: RobotModel, plant: Plant, home: np.ndarray) -> tuple[np.ndarray, float | None]:
+    """Hold ``home`` for 2 s, then push link 6 for 1 s. Returns the largest |residual| per joint at rest
+    and the detection delay after the push [s] (None if never detected)."""
+    plant.reset(home)
+    controller = Controller(robot)
+    reference = Reference(home, np.zeros(robot.n), np.zeros(robot.n))
+    at_rest = np.zeros(robot.n)
+    for k in range(3000):
+        if k == 2000:
+            plant.apply_external_force(PUSH, body="link6")
+        cmd = controller.step(plant.measure(), reference)
+        assert cmd.fault == "", f"tick {k}: {cmd.fault}"
+        plant.step(cmd.tau)
+        if k < 2000:
+            assert not cmd.collision, f"false collision at rest, tick {k}, residual {cmd.residual}"
+            at_rest = np.maximum(at_rest, np.abs(cmd.residual))
+        elif cmd.collision:
+            return at_rest, (k - 2000) * plant.control_period
+    return at_rest, None
+
+
+@pytest.mark.skipif(not MENAGERIE.is_dir(), reason=f"Menagerie files not available at {MENAGERIE}")
+@pytest.mark.parametrize("name", sorted(ARMS))
+def test_menagerie_arm_as_shipped_holds_still_and_detects_a_push(name: str) -> None:
+    from test_model_agreement import check_agreement
+
+    n_meshes, home = ARMS[name]
+    with pytest.warns(RobotFileWarning, match=rf"{n_meshes} mesh file\(s\) not found"):
+        # the files have no wrist force/torque site: the sensor frame defaults to the flange site
+        robot = load_robot(MENAGERIE / f"{name}.xml", ee_frame="attachment_site")
+    with pytest.warns(RobotFileWarning, match=r"removed the file's 7 actuator\(s\) \['actuator1', "):
+        plant = Plant(robot, noise=SensorNoise.none())
+    with pytest.warns(RobotFileWarning, match=r"removed the file's 7 actuator"):
+        noisy = Plant(robot, noise=PAPER_NOISE, seed=0)
+    worst = check_agreement(robot, plant, n_states=30)
+    assert max(worst.values()) <= ATOL, worst
+    exact, _ = _rest_then_push(robot, plant, np.array(home))
+    assert exact.max() < 1e-6, exact  # Nm: same model on both sides, only the observer's round-off
+    at_rest, delay = _rest_then_push(robot, noisy, np.array(home))
+    assert at_rest.max() < REST_RESIDUAL, at_rest
+    assert delay is not None and delay < MAX_DETECTION_TIME, delay
