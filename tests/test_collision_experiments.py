@@ -211,3 +211,66 @@ def test_no_false_alarm_in_60_s_of_free_motion_under_model_error():
     assert res["duration_s"] >= 59.9
     assert res["false_alarm_ticks"] == 0
     assert max(res["max_abs_residual_Nm"]) < 11.0
+
+
+@pytest.fixture
+def saved_figures(monkeypatch):
+    """Every matplotlib Figure saved while the test runs (the plot functions close theirs after saving)."""
+    from matplotlib.figure import Figure
+
+    figures = []
+    original = Figure.savefig
+
+    def savefig(self, *args, **kwargs):
+        figures.append(self)
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", savefig)
+    return figures
+
+
+def _lines(ax):
+    return {ln.get_label(): ln for ln in ax.get_lines() if not ln.get_label().startswith("_")}
+
+
+def test_fig8_draws_force_residual_and_q1_of_each_run_with_threshold_and_detection(ee_runs, saved_figures, tmp_path):
+    from reflexarm.experiments.plots import plot_fig8
+
+    traces, rows = ee_runs
+    path = plot_fig8(list(traces.values()), tmp_path / "fig8.png")
+    assert path.is_file()
+    (fig,) = saved_figures
+    force_ax, residual_ax, q_ax = fig.axes
+    assert force_ax.get_ylabel() == "|f_ext,EE| [N]"
+    assert residual_ax.get_ylabel() == "residual joint 1 [Nm]"
+    assert q_ax.get_ylabel() == "q_1 [rad]" and q_ax.get_xlabel() == "t [s]"
+    for name, tr in traces.items():
+        np.testing.assert_array_equal(_lines(force_ax)[name].get_ydata(), np.linalg.norm(tr.f_ext_ee, axis=1))
+        np.testing.assert_array_equal(_lines(residual_ax)[name].get_ydata(), tr.residual[:, 0])
+        np.testing.assert_array_equal(_lines(q_ax)[name].get_ydata(), tr.q[:, 0])
+    np.testing.assert_array_equal(_lines(q_ax)["q_d,1"].get_ydata(), traces["Stiff"].q_d[:, 0])
+    # the threshold +-zeta on the residual panel, and the Coll.Det detection time marked on every panel
+    flat = [tuple(ln.get_ydata()) for ln in residual_ax.get_lines() if ln.get_label().startswith("_")]
+    assert (11.0, 11.0) in flat and (-11.0, -11.0) in flat
+    t_det = rows["Coll.Det"]["detection_s"]
+    for ax in fig.axes:
+        assert any(tuple(ln.get_xdata()) == (t_det, t_det) for ln in ax.get_lines())
+
+
+def test_fig10_draws_q1_model_torque_residual_and_motor_torque(link_run, saved_figures, tmp_path):
+    from reflexarm.experiments.collision import model_torque
+    from reflexarm.experiments.plots import plot_fig10
+
+    tr, row = link_run
+    tau_mdl = model_torque(tr)
+    plot_fig10(tr, tau_mdl, tmp_path / "fig10.png")
+    (fig,) = saved_figures
+    top, bottom = fig.axes
+    assert set(_lines(top)) == {"q_1", "q_d,1"}
+    assert set(_lines(bottom)) == {"tau_mdl,1", "residual_1", "tau_m,1"}
+    np.testing.assert_array_equal(_lines(bottom)["residual_1"].get_ydata(), tr.residual[:, 0])
+    np.testing.assert_array_equal(_lines(bottom)["tau_mdl,1"].get_ydata(), tau_mdl[:, 0])
+    np.testing.assert_array_equal(_lines(bottom)["tau_m,1"].get_ydata(), tr.tau_m[:, 0])
+    assert bottom.get_ylabel() == "[Nm]" and bottom.get_xlabel() == "t [s]"
+    t_det = row["detection_s"]
+    assert any(tuple(ln.get_xdata()) == (t_det, t_det) for ln in bottom.get_lines())
