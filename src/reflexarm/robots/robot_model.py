@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 import warnings
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -12,58 +11,16 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from reflexarm.errors import ModelError
+from reflexarm.robots._builtin import _BUILTINS, BuiltinRobot
 from reflexarm.robots._loading import build_pinocchio_model
 from reflexarm.robots._mjcf import RobotFileWarning
 from reflexarm.robots.friction import CoulombViscousFriction
 
 __all__ = ["RobotModel", "builtin_robots", "load_robot"]
 
-ASSETS = Path(__file__).resolve().parent / "assets"
-
 #: Inertial parameters per link, in Pinocchio's order (about the joint frame origin):
 #: m, m*c_x, m*c_y, m*c_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz.
 INERTIAL_PARAMETER_NAMES = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
-
-
-@dataclass(frozen=True)
-class BuiltinRobot:
-    """A robot shipped with reflexarm."""
-
-    name: str
-    file: str
-    ee_frame: str
-    sensor_frame: str
-    home: tuple[float, ...]
-    description: str
-    velocity_limit: tuple[float, ...] = ()  # MJCF has no joint velocity limits: given here [rad/s]
-
-    @property
-    def path(self) -> Path:
-        return ASSETS / self.file
-
-
-_BUILTINS: dict[str, BuiltinRobot] = {
-    "atlas_v5_left_arm": BuiltinRobot(
-        name="atlas_v5_left_arm",
-        file="atlas_v5_left_arm.xml",
-        ee_frame="ee",
-        sensor_frame="wrist_ft",
-        home=(-0.3, -1.1, 1.6, 1.2, 0.0, 0.2, 0.0),
-        description="Atlas v5 left arm (4 hydraulic + 3 electric joints), torso fixed upright, "
-        "true friction from Table I of the paper",
-        velocity_limit=(12.0, 12.0, 12.0, 12.0, 10.0, 10.0, 10.0),
-    ),
-    "panda": BuiltinRobot(
-        name="panda",
-        file="panda.xml",
-        ee_frame="ee",
-        sensor_frame="wrist_ft",
-        home=(0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785),
-        description="Franka Emika Panda (no hand), kinematics of the Franka description, "
-        "inertial values of Gaz et al. 2019",
-        velocity_limit=(2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61),
-    ),
-}
 
 
 def builtin_robots() -> dict[str, BuiltinRobot]:
