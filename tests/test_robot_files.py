@@ -124,6 +124,21 @@ def test_joint_springs_and_the_files_gravity_are_in_the_models_gravity_term(tmp_
     assert _hold_with_model_gravity(robot, plant, np.array([0.7, -0.5]), ticks=300) < 1e-6
 
 
+def test_springs_survive_copies_and_model_errors(tmp_path: Path) -> None:
+    from reflexarm.robots import perturb_model
+
+    robot = load_robot(_write(tmp_path, "spring_arm.xml", SPRING_ARM), ee_frame="tip")
+    q = np.array([0.4, -0.3])
+    for other in (robot.copy(), robot.with_inertial_parameters(robot.inertial_parameters()), perturb_model(robot, 0.1)):
+        assert other.has_springs
+        np.testing.assert_array_equal(other.compute_spring_torque(q), robot.compute_spring_torque(q))
+    # the rigid-body regressor leaves the springs out, as documented (ddq = 0: it leaves the armature
+    # out too, while Pinocchio's rnea adds armature * ddq)
+    Y = robot.compute_regressor(q, q, np.zeros(2))
+    tau = robot.compute_inverse_dynamics(q, q, np.zeros(2))
+    np.testing.assert_allclose(Y @ robot.inertial_parameters() + robot.compute_spring_torque(q), tau, atol=ATOL)
+
+
 def test_damping_frictionloss_and_armature_are_the_same_on_both_sides(tmp_path: Path) -> None:
     robot = load_robot(_write(tmp_path, "spring_arm.xml", SPRING_ARM), ee_frame="tip")
     plant = Plant(robot, noise=SensorNoise.none())
