@@ -2,12 +2,22 @@
 
 All three are timed in the same process on the same sequence of states, so the printed ratios do not
 depend on how fast this machine is. Run with ``make bench`` (or ``python bench/bench_controller.py``).
+
+``python bench/bench_controller.py --baseline DIR`` times Controller.step of this checkout against the
+one of another checkout ``DIR`` (e.g. ``git worktree add /tmp/base <commit>``): two subprocesses, one
+per checkout, time one pass of the same states in turn, ``--rounds`` times per configuration; it prints
+the medians and the median of the paired ratios (this checkout / DIR).
 """
 
 from __future__ import annotations
 
+import argparse
+import os
+import subprocess
+import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -39,12 +49,15 @@ def states(robot, n=N_STATES, seed=0):
     return out
 
 
-def time_per_call(fn: Callable[[Measurement, Reference], object], seq) -> np.ndarray:
-    """Per-call wall times [s] over REPEATS passes of the sequence."""
+def time_per_call(fn: Callable[[Measurement, Reference], object], seq, reset: Callable[[], None] | None = None):
+    """Per-call wall times [s] over REPEATS passes of the sequence (``reset`` before each pass: the time
+    stamps start again, which a controller that checks them would refuse without a reset)."""
     ts = np.empty(len(seq) * REPEATS)
     k = 0
     clock = time.perf_counter
     for _ in range(REPEATS):
+        if reset is not None:
+            reset()
         for m, r in seq:
             t0 = clock()
             fn(m, r)
@@ -125,10 +138,10 @@ def main() -> dict[str, float]:
         naive = make_naive(robot, efc)
         # warm up, then interleave the three so drifts in machine load hit all of them alike
         for fn in (ctrl.step, floor, naive):
-            time_per_call(fn, seq[:200])
+            time_per_call(fn, seq[:200], ctrl.reset if fn == ctrl.step else None)
         t_step, t_floor, t_naive = [], [], []
         for _ in range(3):
-            t_step.append(time_per_call(ctrl.step, seq))
+            t_step.append(time_per_call(ctrl.step, seq, ctrl.reset))
             t_floor.append(time_per_call(floor, seq))
             t_naive.append(time_per_call(naive, seq))
         s, f, nv = (np.concatenate(x) * 1e6 for x in (t_step, t_floor, t_naive))
@@ -144,5 +157,75 @@ def main() -> dict[str, float]:
     return results
 
 
+CONFIGS = (
+    ("detection (kappa_eps=0)", dict(kappa_eps=0, kappa_ext=0, reaction="none")),
+    ("DC + EFC (kappa_eps=kappa_ext=1)", dict(kappa_eps=1, kappa_ext=1, reaction="none")),
+)
+
+
+def serve() -> None:
+    """Subprocess mode of ``--baseline``: for each config index read on stdin, time one pass of the states
+    (after a reset) and print its median step time [us]."""
+    robot = load_robot("atlas_v5_left_arm")
+    seq = states(robot)
+    ctrls = [Controller(robot, stiffness=300, observer_gain=5, threshold=11, **kw) for _, kw in CONFIGS]
+    for c in ctrls:
+        time_per_call(c.step, seq[:500], c.reset)
+    print("ready", flush=True)
+    for line in sys.stdin:
+        c = ctrls[int(line)]
+        print(float(np.median(time_per_call(c.step, seq, c.reset)) * 1e6), flush=True)
+
+
+def compare(baseline: Path, rounds: int) -> dict[str, float]:
+    """This checkout's step medians against ``baseline``'s: two subprocesses time one pass each in turn
+    (order alternating), so drifts in machine load hit both alike; the ratio is the median of the paired
+    per-pass ratios."""
+    here = Path(__file__).resolve().parents[1] / "src"
+    procs = {}
+    for name, src in (("baseline", baseline / "src"), ("this", here)):
+        env = dict(os.environ, PYTHONPATH=str(src))
+        procs[name] = subprocess.Popen(
+            [sys.executable, __file__, "--serve"], env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+        )
+    for proc in procs.values():
+        assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
+    times: dict[str, dict[int, list[float]]] = {name: {i: [] for i in range(len(CONFIGS))} for name in procs}
+    order = list(procs)
+    for k in range(rounds):
+        for i in range(len(CONFIGS)):
+            for name in order if k % 2 == 0 else order[::-1]:
+                proc = procs[name]
+                assert proc.stdin is not None and proc.stdout is not None
+                proc.stdin.write(f"{i}\n")
+                proc.stdin.flush()
+                times[name][i].append(float(proc.stdout.readline()))
+    for proc in procs.values():
+        assert proc.stdin is not None
+        proc.stdin.close()
+        proc.wait()
+    print(f"Controller.step median [us] over {rounds} paired passes of {N_STATES * REPEATS} calls")
+    print(f"this = {here.parent}, baseline = {baseline}")
+    print(f"{'configuration':34s} {'baseline':>9s} {'this':>9s} {'this/baseline':>14s} {'(quartiles)':>14s}")
+    ratios = {}
+    for i, (label, _) in enumerate(CONFIGS):
+        b, t = np.array(times["baseline"][i]), np.array(times["this"][i])
+        r = t / b
+        ratios[label] = float(np.median(r))
+        q1, q3 = np.percentile(r, [25, 75])
+        print(f"{label:34s} {np.median(b):9.2f} {np.median(t):9.2f} {np.median(r):14.3f} {q1:6.3f}-{q3:.3f}")
+    return ratios
+
+
 if __name__ == "__main__":
-    main()
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--baseline", type=Path, help="another checkout to compare Controller.step against")
+    parser.add_argument("--rounds", type=int, default=20, help="paired passes per configuration")
+    parser.add_argument("--serve", action="store_true", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.serve:
+        serve()
+    elif args.baseline is not None:
+        compare(args.baseline, args.rounds)
+    else:
+        main()

@@ -14,6 +14,7 @@ __all__ = [
     "ModelError",
     "NonFiniteEstimateError",
     "ReflexArmError",
+    "SignalError",
     "SimulationError",
 ]
 
@@ -58,3 +59,20 @@ class NonFiniteEstimateError(IdentificationError):
 
 class SimulationError(ReflexArmError):
     """The simulated plant failed (diverged, unknown scene, bad scene parameters)."""
+
+
+class SignalError(ReflexArmError, ValueError):
+    """A signal given to a real-time call has the wrong type or shape (a programming error, raised at once).
+
+    Attributes:
+        signal: the signal's name, e.g. ``"measurement dq"`` or ``"reference q_d"``.
+        received: what was received (a shape, a dtype or a type name).
+        expected: what was expected.
+    """
+
+    def __init__(self, signal: str, received: object, expected: str, detail: str = "") -> None:
+        self.signal = signal
+        self.received = received
+        self.expected = expected
+        message = f"{signal} must be {expected}; got {received}"
+        super().__init__(message + (f" ({detail})" if detail else ""))

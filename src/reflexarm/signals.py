@@ -58,7 +58,10 @@ class Command(NamedTuple):
         collision: True once a collision has been detected (latched until ``reset``).
         collided_joints: indices of joints whose |residual| exceeded the threshold this tick.
         mode: active control mode name (see :mod:`reflexarm.control.modes`).
-        fault: non-empty when the measurement was unusable (NaN/inf) and a safe command was sent.
+        fault: non-empty when the tick's inputs broke the controller's contract (or its observer is
+            invalid) and the safe command was sent: names the signal, the component, the value and the bound.
+        saturated: joints whose torque was limited this tick (``torque_limit`` or ``torque_rate_limit``).
+        fault_code: 0, or the fault's code (``reflexarm.control.contract.FAULT_CODES``).
     """
 
     tau: np.ndarray
@@ -67,3 +70,5 @@ class Command(NamedTuple):
     collided_joints: tuple[int, ...]
     mode: str
     fault: str
+    saturated: tuple[int, ...] = ()
+    fault_code: int = 0

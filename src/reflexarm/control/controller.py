@@ -1,7 +1,8 @@
 """Controller: impedance control (2) + momentum observer (4)-(6) + collision detection (12) and reaction (13).
 
 One object behind ``step(measurement, reference) -> Command``. The dynamics terms are evaluated once per
-tick and shared by the control law and the observer(s).
+tick and shared by the control law and the observer(s); the input contract, the observers, the control
+law and the torque bounds run in one compiled pass (:mod:`reflexarm.control._kernels`).
 """
 
 from __future__ import annotations
@@ -12,9 +13,18 @@ import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
-from reflexarm._validation import as_positive_scalar, as_switch
+from reflexarm._validation import as_positive_scalar, as_switch, as_vector
 from reflexarm.control import _kernels as _k
+from reflexarm.control._setup import check_period_band, fill_work, resolve_torque_limit
 from reflexarm.control.collision import CollisionDetector
+from reflexarm.control.contract import (
+    InputBounds,
+    TimingStats,
+    convert_inputs,
+    describe_fault,
+    shape_error,
+    timing_stats,
+)
 from reflexarm.control.impedance import JointImpedanceController
 from reflexarm.control.momentum_observer import MomentumObserver
 from reflexarm.errors import ConfigError
@@ -33,16 +43,52 @@ MODES = (
     "precise_stiff",  # kappa_eps = 1, kappa_ext = 0: closed loop (10)
     "precise_ee_compliant",  # kappa_eps = kappa_ext = 1: closed loop (11)
     "gravity_compensation",  # reaction (13)
-    "fault",  # unusable measurement: safe command
+    "fault",  # unusable input or invalid observer: safe command
 )
 
 
 class Controller:
     """Joint impedance controller with momentum observer, disturbance compensation and collision handling.
 
+    **The input contract of** :meth:`step` (checked in this order, before any state changes):
+
+    1. *Type and shape* (programming errors, raised as :class:`~reflexarm.errors.SignalError` naming the
+       signal): ``measurement`` unpacks to ``(t, q, dq, tau_m, wrench, gravity)`` and ``reference`` to
+       ``(q_d, dq_d, ddq_d)``; t is a real number; q, dq, tau_m, q_d, dq_d, ddq_d have shape (n,), wrench
+       (6,), gravity (3,); values are real (integer or floating dtypes, lists of numbers). Complex, bool,
+       str and object values raise. Float64 arrays go straight into the compiled tick; anything else is
+       converted once to contiguous float64 first (a few microseconds more, never a recompilation).
+    2. *Values* (run-time faults: the tick returns the **safe command**, ``Command.mode == "fault"``,
+       ``Command.fault`` naming the signal, the component, the value and the bound, ``fault_code`` one of
+       :data:`~reflexarm.control.contract.FAULT_CODES`): t finite and strictly later than the last accepted
+       stamp; every component finite; q and q_d within the joint limits +- ``position_margin``; |dq| and
+       |dq_d| <= ``velocity_factor`` x velocity limit; |tau_m| <= ``torque_factor`` x torque limit; wrist
+       force/moment components <= ``max_force``/``max_moment``; | |gravity| - |model gravity| | <=
+       ``gravity_tolerance``; |ddq_d| <= ``max_acceleration`` (all :class:`InputBounds`, readable per joint
+       in :attr:`signal_bounds`); the model's terms at this state finite and M(q) positive definite on a
+       damping-update tick.
+    3. A rejected tick changes nothing: observers, damping matrix, last accepted time and position, the
+       model's gravity and the detector are exactly as before it. The safe command is gravity compensation
+       at the last accepted position (zero torque before the first), bounded like every command.
+
+    **Recovery.** A measurement or reference fault lasts one tick: the next valid tick is controlled
+    normally (the observer then integrates the period since the last accepted stamp, clipped to the band).
+    An *invalid observer* (a non-finite state, which the bounds above are meant to make impossible) latches:
+    every command is then the safe command with ``fault`` saying detection is off and ``collision=True``
+    (an invalid residual never reports "no collision") until :meth:`reset`, as a robot needs an explicit
+    error recovery after a reflex.
+
+    **Bounded torque.** Every command (control law, reaction and safe command) is limited per joint to
+    +-``torque_limit``; with ``torque_rate_limit`` its change per tick is limited to
+    ``torque_rate_limit * dt`` as well (not on the first command after construction). Joints limited this
+    tick are listed in :attr:`Command.saturated`.
+
+    **Time.** The observer integrates the measured period ``t - t_last_accepted`` clipped to
+    ``[period_band[0] * dt, period_band[1] * dt]``; :attr:`timing` reports the periods seen.
+
     Args:
         robot: the controller's model (M_hat, C_hat, g_hat, tau_f_hat, Jacobian of the wrist sensor
-            frame); a private copy is kept, so the caller's object is never modified.
+            frame, joint/velocity/effort limits); a private copy is kept.
         stiffness: K [Nm/rad], positive, scalar or (n,).
         damping_ratio: modal damping D_xi [-], scalar or (n,).
         observer_gain: K_o [1/s] of the observer used for compensation and detection.
@@ -58,8 +104,15 @@ class Controller:
         residual_limit: cut-off of the observer output used for compensation [Nm] (paper: 30).
         switch_time: kappa_eps changes are ramped linearly over this time [s] so that a switch causes
             no torque jump (bumpless); 0 switches at once.
-        dt: control period [s] (default 1 kHz).
+        dt: nominal control period [s] (default 1 kHz).
         damping_update_period: see :class:`JointImpedanceController`.
+        torque_limit: saturation of the command [Nm]: ``"model"`` (default) the model's effort limits
+            (joints without a finite positive one are not saturated, with a warning naming them); a
+            scalar or (n,) positive array; or ``None`` for no saturation.
+        torque_rate_limit: largest change of the command [Nm/s] (scalar or (n,)), or ``None`` (default).
+        input_bounds: the plausibility bounds (:class:`InputBounds`; default: its defaults).
+        period_band: (low, high) multiples of ``dt`` the integrated period is clipped to;
+            ``observer_gain * dt * high`` must stay below 1.
     """
 
     def __init__(
@@ -79,6 +132,10 @@ class Controller:
         switch_time: float = 0.1,
         dt: float = 1e-3,
         damping_update_period: int = 10,
+        torque_limit: npt.ArrayLike | str | None = "model",
+        torque_rate_limit: npt.ArrayLike | None = None,
+        input_bounds: InputBounds | None = None,
+        period_band: tuple[float, float] = (0.5, 2.0),
     ) -> None:
         self.dt = as_positive_scalar(dt, "dt")
         self.impedance = JointImpedanceController(
@@ -91,13 +148,15 @@ class Controller:
         self.robot = self.impedance.robot  # the private copy
         n = self.robot.n
         self.n = n
-        # observer states live in one array the compiled tick updates: rows 0-2 compensation, 3-5 detection
-        self._obs = np.zeros((6, n))
-        self.observer = MomentumObserver(n, observer_gain, self.dt, _state=self._obs[0:3])
+        # all parameters and state of the compiled tick live in one array (see control/_kernels.py)
+        self._work = w = np.zeros(_k.layout_size(n))
+        self._rows = rows = w[_k.N_HEADER : _k.N_HEADER + _k.N_ROWS * n].reshape(_k.N_ROWS, n)
+        self._mats = w[_k.N_HEADER + _k.N_ROWS * n :].reshape(_k.N_MATS, n, n)
+        self.observer = MomentumObserver(n, observer_gain, self.dt, _state=rows[_k.INT_ROW : _k.INT_ROW + 3])
         self.detection_observer = (
             None
             if detection_observer_gain is None
-            else MomentumObserver(n, detection_observer_gain, self.dt, _state=self._obs[3:6])
+            else MomentumObserver(n, detection_observer_gain, self.dt, _state=rows[_k.INT_DET_ROW : _k.INT_DET_ROW + 3])
         )
         self.detector = None if threshold is None else CollisionDetector(n, threshold)
         if reaction not in REACTIONS:
@@ -110,43 +169,62 @@ class Controller:
         if not (isinstance(switch_time, (int, float)) and math.isfinite(switch_time) and switch_time >= 0):
             raise ConfigError(f"switch_time must be a non-negative number of seconds; got {switch_time!r}")
         self.switch_time = float(switch_time)
+        gains = [self.observer.observer_gain]
+        if self.detection_observer is not None:
+            gains.append(self.detection_observer.observer_gain)
+        self.period_band = check_period_band(period_band, self.dt, gains)
+        self.input_bounds = InputBounds() if input_bounds is None else input_bounds
+        if not isinstance(self.input_bounds, InputBounds):
+            raise ConfigError(f"input_bounds must be an InputBounds; got {type(input_bounds).__name__}")
+        self.torque_limit = resolve_torque_limit(self.robot, torque_limit)
+        self.torque_rate_limit = (
+            None if torque_rate_limit is None else as_vector(torque_rate_limit, n, "torque_rate_limit", positive=True)
+        )
         self._eps_weight = float(self.kappa_eps)  # ramped kappa_eps actually applied
         self._kappa_eps_before_reaction = self.kappa_eps
 
         model = self.robot.pin_model
         self._model = model
-        self._data_g = model.createData()
-        self._data_c = model.createData()
-        self._data_j = model.createData()
-        self._model0 = self.impedance.model_no_gravity  # M(q) dq as a zero-gravity RNEA
-        self._data_p = self._model0.createData()
+        self._data_g, self._data_c, self._data_j, self._data_m = (model.createData() for _ in range(4))
+        self._model0 = self.impedance.model_no_gravity  # M(q) x as a zero-gravity RNEA
+        self._data_p, self._data_ff = self._model0.createData(), self._model0.createData()
         self._sensor_id = self.robot.sensor_frame_id
-        # parameters and state of the compiled tick, see control/_kernels.py
-        self._gains = np.zeros((6, n))
-        self._gains[_k.K_ROW] = self.impedance.gains.stiffness
-        self._gains[_k.KO_ROW] = self.observer.observer_gain
-        if self.detection_observer is not None:
-            self._gains[_k.KO_DET_ROW] = self.detection_observer.observer_gain
-        self._gains[_k.THRESHOLD_ROW] = np.inf if self.detector is None else self.detector.threshold
-        self._gains[_k.COULOMB_ROW] = self.robot.friction.coulomb
-        self._gains[_k.VISCOUS_ROW] = self.robot.friction.viscous
-        self._flags = np.zeros(_k.N_FLAGS)
-        self._flags[_k.DT] = self.dt
-        self._flags[_k.INV_BAND] = 1.0 / self.robot.friction.velocity_band
-        self._flags[_k.LIMIT] = self.residual_limit
-        self._flags[_k.USE_DET] = float(self.detection_observer is not None)
         self._zeros = np.zeros(n)
         self._zeros6n = np.zeros((6, n))
-        self._tau = np.zeros(n)
-        self._over = np.zeros(n, dtype=np.bool_)
-        self._gravity = np.asarray(model.gravity.linear, dtype=float).copy()
-        self._last_q = np.zeros(n)
-        self._has_last_q = False
-        self._started = False
+        self._M = self._mats[_k.M_MAT]
+        self.impedance.damping = self._mats[_k.D_MAT]  # one damping matrix, updated by the tick
+        self._gravity = np.asarray(model.gravity.linear, dtype=float).copy()  # last accepted
+        self._gravity_in_model = self._gravity.copy()  # what the model holds now (may be a candidate)
+        self._gravity_staged = False
+        self._damping_countdown = 0
+        self._damping_period = self.impedance.damping_update_period
+        self._converting = False
+        self._tau_out = self._rows[_k.TAU_ROW]  # the last command sent
+        self._r_det = self.detection_residual
         self.reacted = False
         self.last_fault = ""
+        fill_work(self)
+        self._set_switch_flags()
+        self._update_mode()
 
-    # ------------------------------------------------------------------ run-time switches
+    def _set_switch_flags(self) -> None:
+        w = self._work
+        w[_k.KAPPA_F] = self.kappa_f
+        w[_k.KAPPA_EXT] = self.kappa_ext
+        w[_k.EPS_WEIGHT] = self._eps_weight
+        self._gravity_mode = self.reacted and self.reaction == "gravity"
+        w[_k.GRAVITY_MODE] = float(self._gravity_mode)
+
+    def _update_mode(self) -> None:
+        if self.reacted and self.reaction == "gravity":
+            self._mode = "gravity_compensation"
+        elif not self.kappa_eps:
+            self._mode = "compliant"
+        else:
+            self._mode = "precise_ee_compliant" if self.kappa_ext else "precise_stiff"
+        self._set_switch_flags()
+
+    # ------------------------------------------------------------------ run-time switches and facts
     def set_switches(
         self, *, kappa_f: int | None = None, kappa_eps: int | None = None, kappa_ext: int | None = None
     ) -> None:
@@ -163,29 +241,49 @@ class Controller:
                 self._eps_weight = float(self.kappa_eps)
         if kappa_ext is not None:
             self.kappa_ext = as_switch(kappa_ext, "kappa_ext")
+        self._update_mode()
 
     @property
     def mode(self) -> str:
-        """Active mode name (see :data:`MODES`)."""
-        if self.reacted and self.reaction == "gravity":
-            return "gravity_compensation"
-        if not self.kappa_eps:
-            return "compliant"
-        return "precise_ee_compliant" if self.kappa_ext else "precise_stiff"
+        """Active mode name (see :data:`MODES`; ``"fault"`` appears only in commands)."""
+        return self._mode
 
     @property
     def detection_residual(self) -> np.ndarray:
         """The residual the detector looks at."""
         return (self.detection_observer or self.observer).residual
 
+    @property
+    def timing(self) -> TimingStats:
+        """Measured control periods since the last :meth:`reset` (see :class:`TimingStats`)."""
+        return timing_stats(self._work)
+
+    @property
+    def signal_bounds(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """The plausibility bounds per signal as (low, high) arrays (copies)."""
+        r, w = self._rows, self._work
+        dq = r[_k.DQ_MAX_ROW].copy()
+        ddq = r[_k.DDQ_MAX_ROW].copy()
+        tau_m = r[_k.TAU_M_MAX_ROW].copy()
+        wrench = np.array([w[_k.FORCE_MAX]] * 3 + [w[_k.MOMENT_MAX]] * 3)
+        g = np.array([max(w[_k.G_NORM] - w[_k.G_TOL], 0.0)]), np.array([w[_k.G_NORM] + w[_k.G_TOL]])
+        q = r[_k.Q_LO_ROW].copy(), r[_k.Q_HI_ROW].copy()
+        return {"q": q, "q_d": q, "dq": (-dq, dq), "dq_d": (-dq, dq), "ddq_d": (-ddq, ddq),
+                "tau_m": (-tau_m, tau_m), "wrench": (-wrench, wrench), "|gravity|": g}  # fmt: skip
+
+    @property
+    def observer_invalid(self) -> bool:
+        """True once the observer state became invalid (latched until :meth:`reset`)."""
+        return bool(self._work[_k.OBS_INVALID])
+
     def reset(self) -> None:
-        """Clear observer states, the latched collision and reaction; the next step re-initialises.
+        """Clear observer states, the latched collision, reaction and observer fault, the clock and its
+        statistics; the next step re-initialises.
 
         After a ``"compliant"`` reaction the kappa_eps active before it is restored.
         """
         if self.reacted and self.reaction == "compliant":
             self.kappa_eps = self._kappa_eps_before_reaction
-        self._started = False
         self.reacted = False
         self.last_fault = ""
         self.observer.reset()
@@ -194,108 +292,130 @@ class Controller:
         if self.detector is not None:
             self.detector.reset()
         self.impedance.reset()
+        self._damping_countdown = 0
+        w = self._work
+        for key in (_k.STARTED, _k.HAS_T, _k.LAST_T, _k.OBS_INVALID, _k.UPDATE_DAMPING,
+                    _k.T_COUNT, _k.T_SUM, _k.T_MIN, _k.T_MAX, _k.T_CLIPPED):  # fmt: skip
+            w[key] = 0.0
         self._eps_weight = float(self.kappa_eps)
+        self._update_mode()
 
     # ------------------------------------------------------------------ the tick
-    def _safe_command(self, fault: str) -> Command:
-        """Gravity compensation at the last valid state, or zero torque if there is none."""
-        self.last_fault = fault
-        if not self._has_last_q:
-            tau = np.zeros(self.n)
-        else:
-            self._model.gravity.linear = self._gravity
-            tau = np.array(pin.computeGeneralizedGravity(self._model, self._data_g, self._last_q))
-            if not np.all(np.isfinite(tau)):
-                tau = np.zeros(self.n)
-        r = self.detection_residual.copy()
-        collided = self.detector.detected if self.detector is not None else False
-        return Command(tau, r, collided, (), "fault", fault)
-
     def step(self, measurement: Measurement, reference: Reference) -> Command:
         """One control tick: eq. (2) with the observer (4)-(6), detection (12) and reaction (13).
 
-        A measurement or reference containing NaN/inf yields a safe command (gravity compensation from
-        the last valid state, or zero torque) with :attr:`Command.fault` naming the bad signal; the
-        observer is frozen for that tick. No NaN torque ever leaves this method.
+        Inputs are checked against the contract of the class docstring before any state changes. A bad
+        value gives the safe command with :attr:`Command.fault` naming the signal and the bound; a wrong
+        type or shape raises :class:`~reflexarm.errors.SignalError`. No NaN torque and no torque beyond
+        ``torque_limit`` ever leaves this method.
         """
-        t, q, dq, tau_m, wrench, gravity = measurement
-        q_d, dq_d, ddq_d = reference
-        if q.shape != (self.n,) or dq.shape != (self.n,) or tau_m.shape != (self.n,) or wrench.shape != (6,):
-            raise ConfigError(
-                f"measurement shapes must be q, dq, tau_m ({self.n},) and wrench (6,); got "
-                f"{np.shape(q)}, {np.shape(dq)}, {np.shape(tau_m)}, {np.shape(wrench)}"
+        try:
+            t, q, dq, tau_m, wrench, gravity = measurement
+            q_d, dq_d, ddq_d = reference
+            gm = self._gravity_in_model
+            if gravity[0] != gm[0] or gravity[1] != gm[1] or gravity[2] != gm[2]:
+                gm[:] = gravity  # a candidate: restored by _reject if the tick is not accepted
+                self._gravity_staged = True
+                self._model.gravity.linear = gm
+            model = self._model
+            g = pin.computeGeneralizedGravity(model, self._data_g, q)
+            C = pin.computeCoriolisMatrix(model, self._data_c, q, dq)
+            p = pin.rnea(self._model0, self._data_p, q, self._zeros, dq)  # M(q) dq
+            ff = pin.rnea(self._model0, self._data_ff, q_d, self._zeros, ddq_d)  # M(q_d) ddq_d
+            J = (
+                pin.computeFrameJacobian(model, self._data_j, q, self._sensor_id, pin.LOCAL)
+                if self.kappa_ext
+                else self._zeros6n
             )
-        model = self._model
-        gv = self._gravity
-        if gravity[0] != gv[0] or gravity[1] != gv[1] or gravity[2] != gv[2]:
-            if not math.isfinite(gravity[0] + gravity[1] + gravity[2]):
-                return self._fault(measurement, reference)
-            gv[:] = gravity
-            model.gravity.linear = gv
-
-        g = pin.computeGeneralizedGravity(model, self._data_g, q)
-        C = pin.computeCoriolisMatrix(model, self._data_c, q, dq)
-        p = pin.rnea(self._model0, self._data_p, q, self._zeros, dq)  # M(q) dq
-        ff = self.impedance.compute_feedforward(q_d, ddq_d)  # M(q_d) ddq_d
-        J = (
-            pin.computeFrameJacobian(model, self._data_j, q, self._sensor_id, pin.LOCAL)
-            if self.kappa_ext
-            else self._zeros6n
-        )
-        flags = self._flags
-        if not self._started:  # p(0): the integral of (4) starts here, nothing to integrate yet
-            if not math.isfinite(sum(p.tolist())):
-                return self._fault(measurement, reference)
-            self.observer.reset(p)
-            if self.detection_observer is not None:
-                self.detection_observer.reset(p)
-            flags[_k.INTEGRATE] = 0.0
-        else:
-            flags[_k.INTEGRATE] = 1.0
-        # bumpless kappa_eps ramp
-        w = self._eps_weight
-        if w != self.kappa_eps:
-            inc = self.dt / self.switch_time
-            w = min(w + inc, 1.0) if self.kappa_eps > w else max(w - inc, 0.0)
-            self._eps_weight = w
-        flags[_k.EPS_WEIGHT] = w
-        flags[_k.KAPPA_F] = self.kappa_f
-        flags[_k.KAPPA_EXT] = self.kappa_ext
-        gravity_mode = self.reacted and self.reaction == "gravity"
-        flags[_k.GRAVITY_MODE] = gravity_mode
-        if not gravity_mode:
-            self.impedance.maybe_update_damping(q)
-        tau = self._tau
-        status = _k.controller_tick(
-            q, dq, tau_m, wrench, q_d, dq_d, g, C, p, ff, J, self.impedance.damping,
-            self._gains, self._obs, flags, tau, self._over,
-        )  # fmt: skip
+            w = self._work
+            if self._eps_weight != self.kappa_eps:  # bumpless kappa_eps ramp (committed when accepted)
+                inc = self.dt / self.switch_time
+                e = self._eps_weight
+                w[_k.EPS_WEIGHT] = min(e + inc, 1.0) if self.kappa_eps > e else max(e - inc, 0.0)
+            if self._damping_countdown == 0 and not self._gravity_mode:
+                self._M[:] = pin.crba(model, self._data_m, q)  # upper triangle; the tick mirrors it
+                w[_k.UPDATE_DAMPING] = 1.0
+            status = _k.controller_tick(t, q, dq, tau_m, wrench, gravity, q_d, dq_d, ddq_d, g, C, p, ff, J, w)
+        except Exception:  # not float64 arrays of the right shapes: convert once (or raise SignalError)
+            if self._converting:  # converted inputs failed as well: a genuine error, not the caller's
+                raise
+            self._restore_gravity()
+            args = convert_inputs(measurement, reference, self.n)
+            self._converting = True
+            try:
+                return self.step(Measurement(*args[:6]), Reference(*args[6:]))
+            finally:
+                self._converting = False
         if status < 0:
-            return self._fault(measurement, reference)
-        self._started = True
+            return self._reject(status)
+        if self._gravity_staged:
+            self._gravity[:] = gm
+            self._gravity_staged = False
+        if self._eps_weight != self.kappa_eps:
+            self._eps_weight = float(w[_k.EPS_WEIGHT])
+        if not self._gravity_mode:
+            self._damping_countdown = (self._damping_countdown or self._damping_period) - 1
+        self.last_fault = ""
+        if status == 0:
+            det = self.detector
+            detected = det.detected if det is not None else False
+            return Command(self._tau_out.copy(), self._r_det.copy(), detected, (), self._mode, "")
+        return self._with_events(status, t)
 
+    def _restore_gravity(self) -> None:
+        """Put the last accepted gravity back into the model (after a candidate was not accepted)."""
+        if self._gravity_staged:
+            self._gravity_in_model[:] = self._gravity
+            self._model.gravity.linear = self._gravity_in_model
+            self._gravity_staged = False
+
+    def _with_events(self, status: int, t: float) -> Command:
+        """An accepted tick with threshold crossings and/or a bounded torque."""
+        rows = self._rows
+        n_over = status & ((1 << _k.SAT_SHIFT) - 1)
+        saturated = tuple(np.flatnonzero(rows[_k.SAT_ROW]).tolist()) if status >> _k.SAT_SHIFT else ()
         collided: tuple[int, ...] = ()
         detected = False
         if self.detector is not None:
-            if status > 0:
-                collided = tuple(np.flatnonzero(self._over).tolist())
-                self.detector.record(collided, t)
+            if n_over:
+                collided = tuple(np.flatnonzero(rows[_k.OVER_ROW]).tolist())
+                self.detector.record(collided, float(t))
                 if not self.reacted and self.reaction != "none":
                     self.reacted = True
                     if self.reaction == "compliant":
                         self._kappa_eps_before_reaction = self.kappa_eps
                         self.set_switches(kappa_eps=0)
+                    self._update_mode()
             detected = self.detector.detected
-        self._last_q[:] = q
-        self._has_last_q = True
-        self.last_fault = ""
-        return Command(tau.copy(), self.detection_residual.copy(), detected, collided, self.mode, "")
+        tau = rows[_k.TAU_ROW].copy()
+        return Command(tau, self.detection_residual.copy(), detected, collided, self.mode, "", saturated)
 
-    def _fault(self, measurement: Measurement, reference: Reference) -> Command:
-        """Name what is wrong with this tick's inputs and return the safe command."""
-        named = [
-            (f"measurement {name}", v)
-            for name, v in zip(("q", "dq", "tau_m", "wrench", "gravity"), measurement[1:], strict=True)
-        ] + [(f"reference {name}", v) for name, v in zip(("q_d", "dq_d", "ddq_d"), reference, strict=True)]
-        bad = [name for name, v in named if not np.all(np.isfinite(v))]
-        return self._safe_command("non-finite " + ", ".join(bad) if bad else "non-finite model terms")
+    def _reject(self, code: int) -> Command:
+        """The safe command for a rejected tick: gravity compensation at the last accepted position."""
+        w, rows = self._work, self._rows
+        w[_k.UPDATE_DAMPING] = 0.0
+        self._restore_gravity()
+        w[_k.EPS_WEIGHT] = self._eps_weight
+        if code == _k.BAD_SHAPE:
+            raise shape_error(w)
+        fault = describe_fault(code, w)
+        tau = np.zeros(self.n)
+        if w[_k.HAS_LAST_Q]:
+            g = pin.computeGeneralizedGravity(self._model, self._data_g, rows[_k.LAST_Q_ROW])
+            if np.all(np.isfinite(g)):
+                tau[:] = g
+        bounded = tau.copy()
+        if w[_k.HAS_PREV_TAU]:
+            prev, step = rows[_k.TAU_ROW], rows[_k.TAU_STEP_ROW]
+            np.clip(bounded, prev - step, prev + step, out=bounded)
+        np.clip(bounded, -rows[_k.TAU_MAX_ROW], rows[_k.TAU_MAX_ROW], out=bounded)
+        saturated = tuple(np.flatnonzero(bounded != tau).tolist())
+        rows[_k.TAU_ROW] = bounded
+        w[_k.HAS_PREV_TAU] = 1.0
+        self.last_fault = fault
+        if code == _k.OBSERVER_INVALID:
+            collision = True  # detection is off: never report "no collision"
+        else:
+            collision = self.detector.detected if self.detector is not None else False
+        residual = self.detection_residual.copy()
+        return Command(bounded.copy(), residual, collision, (), "fault", fault, saturated, code)

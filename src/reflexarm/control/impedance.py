@@ -49,9 +49,11 @@ def modal_damping(mass_matrix: np.ndarray, stiffness: np.ndarray, damping_ratio:
     if not np.all(np.isfinite(M)) or np.any(np.linalg.eigvalsh(M) <= 0.0):
         raise ConfigError("mass matrix is not symmetric positive definite")
     out = np.empty_like(M)
-    return _kernels.modal_damping_into(
+    if not _kernels.modal_damping_into(
         M, np.asarray(stiffness, dtype=float), np.asarray(damping_ratio, dtype=float), out
-    )
+    ):
+        raise ConfigError("mass matrix is not symmetric positive definite")
+    return out
 
 
 class JointImpedanceController:
@@ -96,7 +98,7 @@ class JointImpedanceController:
         self._zeros = np.zeros(n)
         self.damping = np.zeros((n, n))
         self._M = np.zeros((n, n))
-        self._lower = np.tril_indices(n, -1)
+        self.damping_ok = True  # False after an update_damping refused an unusable M(q)
         self._calls = 0
 
     @property
@@ -111,19 +113,26 @@ class JointImpedanceController:
         self._calls = 0
 
     def update_damping(self, q: np.ndarray) -> np.ndarray:
-        """Recompute D from M(q) now (in place) and return it."""
-        M = pin.crba(self._model, self._data, q)  # upper triangle filled
-        Ms = self._M
-        Ms[:] = M
-        Ms[self._lower] = Ms.T[self._lower]  # mirror the upper triangle (crba leaves the lower stale)
-        _kernels.modal_damping_into(Ms, self.gains.stiffness, self.gains.damping_ratio, self.damping)
+        """Recompute D from M(q) now (in place) and return it.
+
+        Never raises on bad values: if q or M(q) is unusable (non-finite, not positive definite) D stays
+        as it was and :attr:`damping_ok` is False.
+        """
+        M = pin.crba(self._model, self._data, q)  # upper triangle filled; the kernel reads only that
+        self._M[:] = M
+        self.damping_ok = bool(
+            _kernels.modal_damping_into(self._M, self.gains.stiffness, self.gains.damping_ratio, self.damping)
+        )
         return self.damping
 
-    def maybe_update_damping(self, q: np.ndarray) -> None:
-        """Update D if this call falls on the damping update period."""
+    def maybe_update_damping(self, q: np.ndarray) -> bool:
+        """Update D if this call falls on the damping update period; False if that update was refused."""
+        ok = True
         if self._calls % self.damping_update_period == 0:
             self.update_damping(q)
+            ok = self.damping_ok
         self._calls += 1
+        return ok
 
     def compute_feedforward(self, q_d: np.ndarray, ddq_d: np.ndarray) -> np.ndarray:
         """M_hat(q_d) ddq_d [Nm] (one RNEA with gravity off and zero velocity)."""

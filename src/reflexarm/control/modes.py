@@ -258,7 +258,8 @@ class ModeSupervisor:
             if wanted != self._task_mode:
                 self.select(wanted)
         cmd = self.controller.step(measurement, reference)
-        new_collision = cmd.collision and not self._collision_seen
+        # a fault command may say collision=True (invalid observer): that is logged as a fault
+        new_collision = cmd.collision and not cmd.fault and not self._collision_seen
         if new_collision:
             # logged even when the mode does not change (reaction "none", or already compliant)
             det = self.controller.detector
