@@ -48,6 +48,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_model_options(fm)
     fm.add_argument("--duration", type=float, default=60.0, help="simulated time [s] (default 60)")
     fm.add_argument("--threshold", type=float, default=11.0, help="zeta [Nm] (default 11)")
+    fm.add_argument(
+        "--motion",
+        choices=("demo", "hydraulic"),
+        default="demo",
+        help="demo: shz swings along the demo's path; hydraulic: all four hydraulic joints move (default demo)",
+    )
     fm.set_defaults(func=_free)
     vt = ssub.add_parser(
         "velocity-tracking",
@@ -185,6 +191,7 @@ def _free(args: argparse.Namespace) -> int:
         model_error=choice.level,
         model_seed=choice.seed,
         model=None if choice.file is None else choice.build(_robot()),
+        motion=args.motion,
     )
     res["controller_model"] = choice.describe()  # type: ignore[assignment]
     (out / "free_motion.json").write_text(json.dumps(res, indent=2))

@@ -42,6 +42,7 @@ __all__ = [
     "compare_with_paper",
     "controller_model",
     "free_motion_false_alarms",
+    "free_motion_trajectory",
     "link_collision_trajectory",
     "run_ee_collision",
     "run_link_collision",
@@ -166,6 +167,35 @@ EE_BLOCKS: dict[str, dict[str, object]] = {
 def ee_collision_trajectory(start: np.ndarray = EE_START, goal: np.ndarray = EE_GOAL) -> JointTrajectory:
     """Hold 0.5 s, move in EE_MOVE_TIME, hold 2 s at the goal."""
     return JointTrajectory(np.array([start, start, goal, goal]), np.array([0.5, EE_MOVE_TIME, 2.0]))
+
+
+#: Free-motion trajectories for the false-alarm check: "demo" swings shz back and forth along the demo's
+#: path (the other joints hold); "hydraulic" cycles through postures that move all four hydraulic joints
+#: at once (shz, shx, ely, elx; hand speeds up to ~0.3 m/s), the friction-dominated motion the paper's
+#: threshold had to tolerate. Each segment lasts EE_MOVE_TIME + 0.5 s.
+FREE_MOTIONS = ("demo", "hydraulic")
+HYDRAULIC_WAYPOINTS = np.array(
+    [
+        [0.55, -1.3, 1.57, 1.57, 0.0, 0.0, 0.0],
+        [-0.45, -0.9, 1.2, 1.1, 0.0, 0.0, 0.0],
+        [0.2, -0.5, 2.0, 0.6, 0.0, 0.0, 0.0],
+        [-0.3, -1.2, 1.0, 1.9, 0.0, 0.0, 0.0],
+    ]
+)
+
+
+def free_motion_trajectory(duration: float, motion: str = "demo") -> JointTrajectory:
+    """A trajectory of at least ``duration`` s that cycles through the waypoints of ``motion`` (see
+    :data:`FREE_MOTIONS`), starting and ending each cycle at :data:`EE_START`."""
+    if motion not in FREE_MOTIONS:
+        raise ConfigError(f"unknown free motion {motion!r}; choose one of: {', '.join(FREE_MOTIONS)}")
+    cycle = [EE_GOAL] if motion == "demo" else list(HYDRAULIC_WAYPOINTS[1:])
+    seg = EE_MOVE_TIME + 0.5
+    k = max(1, int(np.ceil(duration / (seg * (len(cycle) + 1)))))
+    way = [EE_START]
+    for _ in range(k):
+        way += [*cycle, EE_START]
+    return JointTrajectory(np.array(way), np.full(len(way) - 1, seg))
 
 
 def link_collision_trajectory() -> JointTrajectory:
@@ -364,20 +394,17 @@ def free_motion_false_alarms(
     model_error: float | None = None,
     model_seed: int = 0,
     model: RobotModel | None = None,
+    motion: str = "demo",
 ) -> dict[str, float]:
     """Run the demo trajectory back and forth without obstacle for ``duration`` s with detection on.
 
     Returns the number of detections (false alarms) and the largest |residual| per joint. The controller's
-    model is chosen by ``model_error``/``model_seed``/``model`` as in :func:`run_ee_collision`.
+    model is chosen by ``model_error``/``model_seed``/``model`` as in :func:`run_ee_collision`; ``motion``
+    picks the path (:func:`free_motion_trajectory`).
     """
     robot = load_robot(ROBOT)
     ctrl_model, _model_info = controller_model(robot, model_error, model_seed, model)
-    k = int(np.ceil(duration / (2 * EE_MOVE_TIME + 1.0)))
-    way = [EE_START]
-    for _ in range(k):
-        way += [EE_GOAL, EE_START]
-    durs = [EE_MOVE_TIME + 0.5] * (len(way) - 1)
-    traj = JointTrajectory(np.array(way), np.array(durs))
+    traj = free_motion_trajectory(duration, motion)
     plant = Plant(robot, noise=noise, seed=seed)
     plant.reset(EE_START)
     ctrl = Controller(ctrl_model, stiffness=300.0, observer_gain=5.0, threshold=threshold, reaction="none")
