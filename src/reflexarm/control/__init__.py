@@ -2,6 +2,7 @@
 reaction (13) and the composed :class:`Controller`. Never imports :mod:`reflexarm.sim`."""
 
 from reflexarm.control.collision import CollisionDetector
+from reflexarm.control.contract import FAULT_CODES, InputBounds, TimingStats
 from reflexarm.control.controller import MODES, REACTIONS, Controller
 from reflexarm.control.impedance import ImpedanceGains, JointImpedanceController, modal_damping
 from reflexarm.control.modes import CONTROL_MODES, ControlMode, ModeSchedule, ModeSupervisor, ModeTransition
@@ -10,6 +11,7 @@ from reflexarm.control.observer import DisturbanceObserver
 
 __all__ = [
     "CONTROL_MODES",
+    "FAULT_CODES",
     "MODES",
     "REACTIONS",
     "CollisionDetector",
@@ -17,10 +19,12 @@ __all__ = [
     "Controller",
     "DisturbanceObserver",
     "ImpedanceGains",
+    "InputBounds",
     "JointImpedanceController",
     "ModeSchedule",
     "ModeSupervisor",
     "ModeTransition",
     "MomentumObserver",
+    "TimingStats",
     "modal_damping",
 ]

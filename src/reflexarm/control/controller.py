@@ -272,6 +272,12 @@ class Controller:
                 "tau_m": (-tau_m, tau_m), "wrench": (-wrench, wrench), "|gravity|": g}  # fmt: skip
 
     @property
+    def observer_state(self) -> np.ndarray:
+        """Copy of both observers' states (6, n): integral, p(0), residual of the compensation observer,
+        then of the detection observer (zeros when there is none). A rejected tick leaves it unchanged."""
+        return self._rows[_k.INT_ROW : _k.R_DET_ROW + 1].copy()
+
+    @property
     def observer_invalid(self) -> bool:
         """True once the observer state became invalid (latched until :meth:`reset`)."""
         return bool(self._work[_k.OBS_INVALID])

@@ -1,0 +1,285 @@
+"""The input contract of Controller.step, one test per finding 1-7 of issue 8 (each failed on the main of
+the time), plus the documented choices around it (recovery, saturation reporting, timing statistics)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from controller_checks import detected_as_by_a_fresh_controller, settled_plant
+from reflexarm.control import Controller, InputBounds, JointImpedanceController
+from reflexarm.control import _kernels as _k
+from reflexarm.errors import ConfigError, SignalError
+from reflexarm.robots import CoulombViscousFriction
+from reflexarm.signals import Measurement, Reference
+
+DT = 1e-3
+
+
+def good(robot, k=0, **over):
+    """A plausible measurement at tick k: the arm at rest at home, holding against gravity."""
+    base = dict(
+        t=k * DT,
+        q=robot.home.copy(),
+        dq=np.zeros(robot.n),
+        tau_m=robot.compute_gravity(robot.home),
+        wrench=np.zeros(6),
+        gravity=np.array([0.0, 0.0, -9.81]),
+    )
+    base.update(over)
+    return Measurement(**base)
+
+
+def frictionless(robot):
+    return robot.with_friction(CoulombViscousFriction.zeros(robot.n))
+
+
+# ---------------------------------------------------------------- finding 1
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_nonfinite_q_on_a_damping_update_tick_gives_the_safe_command(atlas, bad):
+    # the 10th tick recomputes D from M(q) (Cholesky): it used to raise numpy.linalg.LinAlgError
+    ctrl = Controller(atlas, damping_update_period=10)
+    ref = Reference.hold(atlas.home)
+    for k in range(10):
+        assert ctrl.step(good(atlas, k), ref).fault == ""
+    D = ctrl.impedance.damping.copy()
+    q = atlas.home.copy()
+    q[2] = bad
+    cmd = ctrl.step(good(atlas, 10, q=q), ref)
+    assert cmd.mode == "fault" and "measurement q[2]" in cmd.fault
+    np.testing.assert_array_equal(ctrl.impedance.damping, D)  # the damping update did not happen
+    assert ctrl.step(good(atlas, 11), ref).fault == ""
+    # the impedance law on its own refuses the update without raising and keeps the old D
+    imp = JointImpedanceController(atlas, stiffness=300)
+    D0 = imp.update_damping(atlas.home).copy()
+    assert imp.maybe_update_damping(np.full(atlas.n, np.nan)) is False
+    np.testing.assert_array_equal(imp.damping, D0)
+
+
+# ---------------------------------------------------------------- finding 2
+ABSURD = [("dq", 1e200), ("tau_m", 1e150), ("wrench", 1e300), ("gravity", 1e300), ("q", 1e300)]
+
+
+@pytest.mark.parametrize("kappa_eps", [0, 1])
+@pytest.mark.parametrize("field, value", ABSURD)
+def test_an_absurd_sample_neither_poisons_the_observer_nor_silences_detection(atlas, field, value, kappa_eps):
+    robot = frictionless(atlas)
+
+    def make():
+        return Controller(robot, stiffness=300, observer_gain=5, threshold=11, kappa_eps=kappa_eps)
+
+    ctrl = make()
+    plant = settled_plant(robot, robot.home)
+    ref = Reference.hold(robot.home)
+    for k in range(300):
+        m = plant.measure()
+        if k % 50 == 25:
+            before = ctrl.observer_state
+            arr = np.array(getattr(m, field), dtype=float)
+            arr[-1] = value
+            cmd = ctrl.step(m._replace(**{field: arr}), ref)
+            assert cmd.mode == "fault" and f"measurement {field}" in cmd.fault, cmd.fault
+            np.testing.assert_array_equal(ctrl.observer_state, before)  # frozen exactly
+        else:
+            cmd = ctrl.step(m, ref)
+            assert cmd.fault == "" and not cmd.collision
+        plant.step(cmd.tau)
+    mine, fresh = detected_as_by_a_fresh_controller(plant, ctrl, make)
+    assert mine is not None and mine == fresh, (mine, fresh)
+
+
+@pytest.mark.parametrize("kappa_eps", [0, 1])
+def test_an_invalid_observer_state_is_reported_in_every_command_until_reset(atlas, kappa_eps):
+    # the bounds make a non-finite observer state unreachable from inputs; a numerical blow-up is injected
+    ctrl = Controller(atlas, kappa_eps=kappa_eps, reaction="none")
+    ref = Reference.hold(atlas.home)
+    ctrl.step(good(atlas, 0), ref)
+    ctrl.observer.residual[3] = np.nan
+    for k in range(1, 20):
+        q = atlas.home + 0.01 * k
+        cmd = ctrl.step(good(atlas, k, q=q), ref)
+        assert cmd.mode == "fault" and "detection is off until reset()" in cmd.fault
+        assert cmd.fault_code == _k.OBSERVER_INVALID
+        assert cmd.collision  # never "no collision" from an invalid residual
+        np.testing.assert_allclose(cmd.tau, atlas.compute_gravity(q), atol=1e-9)  # at the current position
+    assert ctrl.observer_invalid
+    ctrl.reset()  # the documented recovery
+    cmd = ctrl.step(good(atlas, 100), ref)
+    assert cmd.fault == "" and not cmd.collision and not ctrl.observer_invalid
+
+
+# ---------------------------------------------------------------- finding 3
+@pytest.mark.parametrize("field", ["q_d", "dq_d", "ddq_d"])
+def test_the_reference_shape_is_checked(atlas, field):
+    ctrl = Controller(atlas)
+    ref = Reference.hold(atlas.home)._replace(**{field: np.zeros(3)})
+    with pytest.raises(SignalError, match=rf"reference {field} must be a real vector of shape \(7,\); got shape") as e:
+        ctrl.step(good(atlas), ref)
+    assert e.value.signal == f"reference {field}"
+    np.testing.assert_array_equal(ctrl.observer_state, np.zeros((6, atlas.n)))
+
+
+# ---------------------------------------------------------------- finding 4
+@pytest.mark.parametrize(
+    "field, value, message",
+    [
+        (
+            "gravity",
+            np.array([0.0, -9.81]),
+            r"measurement gravity must be a real vector of shape \(3,\); got shape \(2,\)",
+        ),
+        ("gravity", np.array([[0.0, 0.0, -9.81]]), r"measurement gravity .* got shape \(1, 3\)"),
+        ("q", np.zeros(6), r"measurement q must be a real vector of shape \(7,\); got shape \(6,\)"),
+        ("q", np.zeros(7, dtype=complex), r"measurement q .* got dtype complex128 \(complex, bool, str and object"),
+        ("dq", np.array(["0"] * 7), r"measurement dq .* got dtype <U1"),
+        ("tau_m", np.array([None] * 7), r"measurement tau_m .* got dtype object"),
+        ("wrench", np.zeros(6, dtype=bool), r"measurement wrench .* got dtype bool"),
+        ("t", "0.0", r"measurement t must be a real number \[s\]; got str"),
+        ("t", None, r"measurement t must be a real number \[s\]; got NoneType"),
+    ],
+)
+def test_wrong_types_and_shapes_raise_a_package_error_naming_the_signal(atlas, field, value, message):
+    ctrl = Controller(atlas)
+    ref = Reference.hold(atlas.home)
+    ctrl.step(good(atlas, 0), ref)
+    before = ctrl.observer_state
+    with pytest.raises(SignalError, match=message):
+        ctrl.step(good(atlas, 1)._replace(**{field: value}), ref)
+    np.testing.assert_array_equal(ctrl.observer_state, before)
+    assert ctrl.step(good(atlas, 1), ref).fault == ""  # nothing of the raised tick stayed behind
+
+
+def test_lists_are_converted_and_a_non_measurement_raises(atlas):
+    a, b = Controller(atlas), Controller(atlas)
+    ref = Reference.hold(atlas.home)
+    m = good(atlas)
+    listed = Measurement(0, *(v.tolist() for v in m[1:]))
+    np.testing.assert_array_equal(a.step(listed, Reference(*(v.tolist() for v in ref))).tau, b.step(m, ref).tau)
+    with pytest.raises(SignalError, match=r"measurement must be a Measurement\(t, q, dq, tau_m, wrench, gravity\)"):
+        a.step(m[:5], ref)  # type: ignore[arg-type]
+    with pytest.raises(SignalError, match=r"reference must be a Reference\(q_d, dq_d, ddq_d\); got float"):
+        a.step(m, 1.0)  # type: ignore[arg-type]
+
+
+# ---------------------------------------------------------------- finding 5
+def test_torque_is_bounded_by_the_effort_limits_and_saturation_is_reported(atlas):
+    limit = atlas.effort_limit
+    ctrl = Controller(atlas, stiffness=300)
+    q_d = atlas.home.copy()
+    q_d[0] += 0.5  # 300 Nm/rad x 0.5 rad = 150 Nm asked of a joint limited to 87 Nm
+    cmd = ctrl.step(good(atlas), Reference.hold(q_d))
+    assert cmd.fault == "" and cmd.saturated == (0,)
+    assert cmd.tau[0] == limit[0]
+    # a +10 rad glitch on q1 (it gave -3000 Nm) and q = 1e300 (3e302 Nm) are faults with bounded torque
+    for q in (atlas.home + np.eye(atlas.n)[0] * 10.0, np.full(atlas.n, 1e300)):
+        cmd = ctrl.step(good(atlas, ctrl.timing.n_periods + 1, q=q), Reference.hold(atlas.home))
+        assert cmd.mode == "fault" and "measurement q[0]" in cmd.fault and "position_margin" in cmd.fault
+        assert np.all(np.abs(cmd.tau) <= limit)
+    # explicit limits and the opt-out
+    assert np.all(Controller(atlas, torque_limit=10.0).torque_limit == 10.0)
+    assert np.all(np.isinf(Controller(atlas, torque_limit=None).torque_limit))
+    with pytest.raises(ConfigError, match="torque_limit must be 'model', None or a positive value; got 'max'"):
+        Controller(atlas, torque_limit="max")
+
+
+def test_torque_rate_limit_bounds_the_change_per_tick(atlas):
+    rate = 2000.0  # [Nm/s] -> 2 Nm per 1 ms tick
+    ctrl = Controller(atlas, stiffness=300, torque_rate_limit=rate)
+    ref = Reference.hold(atlas.home)
+    first = ctrl.step(good(atlas, 0), ref)  # the first command is not rate limited
+    q_d = atlas.home + 0.05
+    taus = [first.tau] + [ctrl.step(good(atlas, k), Reference.hold(q_d)).tau for k in range(1, 20)]
+    steps = np.abs(np.diff(taus, axis=0))
+    assert steps.max() <= rate * DT * (1 + 1e-12)  # tolerance: one rounding of prev + step
+    assert steps.max() >= rate * DT * (1 - 1e-12)  # and it did bind (15 Nm asked at once)
+
+
+def test_a_robot_without_effort_limits_warns_and_can_be_given_one(atlas):
+    robot = atlas.copy()
+    robot.pin_model.effortLimit = np.full(robot.n, np.inf)
+    with pytest.warns(UserWarning, match=r"no finite positive effort limit for joint\(s\) \['l_arm_shz'"):
+        ctrl = Controller(robot)
+    assert np.all(np.isinf(ctrl.torque_limit))
+    assert np.all(Controller(robot, torque_limit=50.0).torque_limit == 50.0)
+
+
+# ---------------------------------------------------------------- finding 6
+@pytest.mark.parametrize("dtype", [np.float32, np.int64, "list"])
+def test_other_dtypes_never_compile_a_new_specialization(atlas, dtype):
+    kernel = _k.controller_tick
+    n_signatures = len(kernel.signatures)
+    ctrl, ref_ctrl = Controller(atlas), Controller(atlas)
+    ref = Reference.hold(atlas.home)
+    for k in range(3):
+        m = good(atlas, k, q=np.round(atlas.home, 0), tau_m=np.round(atlas.compute_gravity(atlas.home)))
+        conv = Measurement(m.t, *(v.tolist() if dtype == "list" else v.astype(dtype) for v in m[1:]))
+        exact = Measurement(m.t, *(np.asarray(v, dtype=float) for v in conv[1:]))
+        np.testing.assert_array_equal(ctrl.step(conv, ref).tau, ref_ctrl.step(exact, ref).tau)
+    assert len(kernel.signatures) == n_signatures == 1
+
+
+# ---------------------------------------------------------------- finding 7
+@pytest.mark.parametrize("t", [np.nan, 0.002, 0.0015, -1.0])
+def test_nan_repeated_or_backwards_time_stamps_are_faults(atlas, t):
+    ctrl = Controller(atlas)
+    ref = Reference.hold(atlas.home)
+    for k in range(3):
+        ctrl.step(good(atlas, k), ref)
+    before = ctrl.observer_state
+    cmd = ctrl.step(good(atlas, t=t), ref)
+    assert cmd.mode == "fault" and "measurement t" in cmd.fault
+    np.testing.assert_array_equal(ctrl.observer_state, before)
+    assert ctrl.step(good(atlas, 3), ref).fault == ""
+
+
+def test_the_observer_integrates_the_measured_period_within_its_band(atlas):
+    # a constant external torque seen through a jittery clock: the residual follows the discrete law
+    # r_k = r_(k-1) + k_o h_k (tau_ext - r_(k-1)) with h_k the measured period clipped to [0.5, 2] dt
+    k_o = 20.0
+    ctrl = Controller(atlas, observer_gain=k_o, threshold=None)
+    ref = Reference.hold(atlas.home)
+    tau_ext = np.linspace(-3.0, 3.0, atlas.n)
+    g = atlas.compute_gravity(atlas.home)
+    rng = np.random.default_rng(4)
+    periods = rng.uniform(0.6, 1.4, 200) * DT
+    periods[[50, 120]] = 7 * DT  # two stalls: clipped to 2 dt
+    periods[80] = 0.1 * DT  # a burst: clipped to 0.5 dt
+    t, r = 0.0, np.zeros(atlas.n)
+    ctrl.step(good(atlas, t=t, tau_m=g - tau_ext), ref)  # at rest: tau_m - g = -tau_ext
+    for h in periods:
+        t += h
+        cmd = ctrl.step(good(atlas, t=t, tau_m=g - tau_ext), ref)
+        r = r + k_o * np.clip(h, 0.5 * DT, 2 * DT) * (tau_ext - r)
+        # tolerance: round-off of t and of the integral over 200 ticks
+        np.testing.assert_allclose(cmd.residual, r, rtol=1e-9, atol=1e-10)
+    timing = ctrl.timing
+    assert timing.n_periods == 200 and timing.clipped == 3 and timing.band == (0.5 * DT, 2 * DT)
+    assert timing.max_period == pytest.approx(7 * DT) and timing.min_period == pytest.approx(0.1 * DT)
+    assert timing.mean_period == pytest.approx(periods.mean())
+
+
+def test_plausibility_bounds_are_named_settable_and_let_sensor_noise_through(atlas):
+    b = InputBounds(velocity_factor=2.0, max_force=100.0)
+    ctrl = Controller(atlas, input_bounds=b)
+    ref = Reference.hold(atlas.home)
+    cmd = ctrl.step(good(atlas, wrench=np.array([0.0, 150.0, 0.0, 0.0, 0.0, 0.0])), ref)
+    assert cmd.fault == "measurement wrench[1] = 150 N outside the plausible [-100, 100] N (InputBounds.max_force)"
+    bounds = ctrl.signal_bounds
+    np.testing.assert_array_equal(bounds["dq"][1], 2.0 * atlas.velocity_limit)
+    with pytest.raises(ConfigError, match="InputBounds.max_force must be a finite positive number; got -1"):
+        InputBounds(max_force=-1)
+    # 30x the paper's sensor noise on every signal stays inside the default bounds
+    ctrl = Controller(atlas)
+    rng = np.random.default_rng(0)
+    for k in range(200):
+        u = lambda n, level: rng.uniform(-30 * level, 30 * level, n)  # noqa: E731
+        m = good(
+            atlas,
+            k,
+            q=atlas.home + u(7, 3.4e-4),
+            dq=u(7, 5.5e-2),
+            tau_m=atlas.compute_gravity(atlas.home) + u(7, 7.3e-2),
+            wrench=np.concatenate([u(3, 2.3), u(3, 0.23)]),
+            gravity=np.array([0.0, 0.0, -9.81]) + u(3, 2e-4),
+        )
+        assert ctrl.step(m, ref).fault == ""
