@@ -10,15 +10,19 @@ friction, drawn with ``model_seed``. ``model=`` hands in another model (e.g. an 
 
 from __future__ import annotations
 
-import json
-from collections.abc import Sequence
 from dataclasses import asdict, dataclass
-from pathlib import Path
 
 import numpy as np
 
 from reflexarm.control import Controller
 from reflexarm.errors import ConfigError
+from reflexarm.experiments.collision_summary import (
+    PAPER,
+    compare_with_paper,
+    summarize_ee_collision,
+    summarize_link_collision,
+    write_outputs,
+)
 from reflexarm.robots import RobotModel, load_robot, perturb_model
 from reflexarm.sim import (
     PAPER_NOISE,
@@ -48,6 +52,7 @@ __all__ = [
     "run_link_collision",
     "summarize_ee_collision",
     "summarize_link_collision",
+    "write_outputs",
 ]
 
 ROBOT = "atlas_v5_left_arm"
@@ -57,21 +62,6 @@ ROBOT = "atlas_v5_left_arm"
 #: is not stated as a level; Table I's validation errors (RMS 3.6-9.9 Nm on the hydraulic joints)
 #: are of the size +-10 % gives on this arm's gravity torques (tens of Nm).
 DEFAULT_MODEL_ERROR = 0.1
-
-#: What the paper reports for the two collision experiments (Sec. III-A/B), for side-by-side tables.
-#: Coll.Det: detected at t = 1.1 s on the paper's time axis, when the peak contact force of ~69 N "is
-#: already reached"; link collision: contact at ~5.5 s, detection at ~5.6 s; Stiff tips the block.
-PAPER: dict[str, object] = {
-    "threshold_Nm": 11.0,
-    "observer_gain_per_s": 5.0,
-    "colldet_detection_s": 1.1,
-    "colldet_peak_force_N": 69.0,
-    "colldet_peak_before_detection": True,
-    "stiff_tipped": True,
-    "link_contact_s": 5.5,
-    "link_detection_s": 5.6,
-    "link_delay_s": 0.1,
-}
 
 
 def controller_model(
@@ -99,15 +89,6 @@ def controller_model(
         "level": float(model_error),
         "seed": int(model_seed),
     }
-
-
-#: Window of the moving average that defines the quasi-static contact force [s]: long against the
-#: impact transient (tens of ms), short against the seconds the arm pushes.
-QUASI_STATIC_WINDOW_S = 0.5
-
-#: Contact is counted when the environment pushes the tool with more than this [N] (above the wrist
-#: sensor's noise band of +-2.3 N, and well below the tens of newtons of a collision).
-CONTACT_FORCE_N = 5.0
 
 
 @dataclass(frozen=True)
@@ -257,84 +238,6 @@ def run_ee_collision(
     return trace
 
 
-def _first_index(mask: np.ndarray) -> int | None:
-    idx = np.flatnonzero(mask)
-    return int(idx[0]) if idx.size else None
-
-
-def summarize_ee_collision(trace: Trace) -> dict[str, object]:
-    """Peak contact force, first contact, detection time and delay, block displacement, tipped."""
-    f = np.linalg.norm(trace.f_ext_ee, axis=1)
-    w = max(1, int(round(QUASI_STATIC_WINDOW_S / float(np.median(np.diff(trace.t))))))
-    f_quasi_static = np.convolve(f, np.ones(w) / w, mode="valid")
-    i_contact = _first_index(f > CONTACT_FORCE_N)
-    i_det = _first_index(trace.collision)
-    t_contact = None if i_contact is None else float(trace.t[i_contact])
-    t_det = None if i_det is None else float(trace.t[i_det])
-    i_peak = int(np.argmax(f))
-    tail = trace.t >= trace.t[-1] - 1.0
-    disp = np.asarray(trace.meta.get("block_displacement", [np.nan, np.nan, np.nan]), dtype=float)
-    return {
-        "run": trace.meta["setting"]["name"],
-        "peak_force_N": float(f[i_peak]),
-        "peak_force_s": float(trace.t[i_peak]),
-        "force_at_detection_N": None if i_det is None else float(f[i_det]),
-        "quasi_static_force_N": float(f_quasi_static.max()),
-        "final_force_N": float(f[tail].mean()),
-        "first_contact_s": t_contact,
-        "detection_s": t_det,
-        "detection_delay_s": None if (t_det is None or t_contact is None) else t_det - t_contact,
-        "detected_joints": list(np.flatnonzero(trace.collided[i_det]).tolist()) if i_det is not None else [],
-        "block_displacement_m": float(np.linalg.norm(disp[:2])),
-        "block_tipped": bool(trace.meta.get("tipped", False)),
-        "final_q1_error_rad": float(abs(trace.q_d[-1, 0] - trace.q[-1, 0])),
-    }
-
-
-def compare_with_paper(
-    ee_rows: Sequence[dict[str, object]], link_row: dict[str, object] | None = None
-) -> list[dict[str, object]]:
-    """Rows (quantity, paper, ours) of what Sec. III-A/B reports next to the same quantity measured here.
-
-    ``ee_rows`` are :func:`summarize_ee_collision` rows of the three runs (by their ``run`` names);
-    ``link_row`` a :func:`summarize_link_collision` row.
-    """
-    by = {str(r["run"]): r for r in ee_rows}
-    out: list[dict[str, object]] = []
-
-    def add(quantity: str, paper: str, ours: str) -> None:
-        out.append({"quantity": quantity, "paper": paper, "ours": ours})
-
-    def num(v: object, fmt: str) -> str:
-        return "-" if v is None else fmt.format(v)
-
-    det = by.get("Coll.Det")
-    if det is not None:
-        add("Coll.Det peak |f| [N]", f"~{PAPER['colldet_peak_force_N']:g}", num(det["peak_force_N"], "{:.1f}"))
-        t_det, t_peak = det["detection_s"], det["peak_force_s"]
-        add(
-            "Coll.Det detected",
-            f"t = {PAPER['colldet_detection_s']:g} s",
-            "no" if t_det is None else f"t = {t_det:.3f} s, {num(det['detection_delay_s'], '{:.3f}')} s after contact",
-        )
-        before = None if t_det is None else bool(float(t_peak) <= float(t_det))  # type: ignore[arg-type]
-        add("Coll.Det peak reached before detection", "yes", "-" if before is None else ("yes" if before else "no"))
-    stiff = by.get("Stiff")
-    if stiff is not None:
-        add("Stiff tips the block", "yes", "yes" if stiff["block_tipped"] else "no")
-    comp = by.get("Compliant")
-    if comp is not None and stiff is not None:
-        lower = float(comp["quasi_static_force_N"]) < float(stiff["quasi_static_force_N"])  # type: ignore[arg-type]
-        add("Compliant: lower quasi-static force than Stiff", "yes", "yes" if lower else "no")
-    if link_row is not None:
-        add(
-            "link collision: detection delay [s]",
-            f"~{PAPER['link_delay_s']:g} ({PAPER['link_contact_s']:g} -> {PAPER['link_detection_s']:g} s)",
-            num(link_row["detection_delay_s"], "{:.3f}"),
-        )
-    return out
-
-
 def run_link_collision(
     *,
     model_error: float | None = None,
@@ -367,23 +270,6 @@ def model_torque(trace: Trace, robot: RobotModel | None = None) -> np.ndarray:
     return np.array([robot.compute_inverse_dynamics(q, dq, a) for q, dq, a in zip(trace.q, trace.dq, ddq, strict=True)])
 
 
-def summarize_link_collision(trace: Trace) -> dict[str, object]:
-    """Contact start on the elbow, detection time, delay and the joints that crossed first."""
-    tau_ext = np.abs(trace.tau_ext).max(axis=1)
-    i_contact = _first_index(tau_ext > 1.0)
-    i_det = _first_index(trace.collision)
-    t_contact = None if i_contact is None else float(trace.t[i_contact])
-    t_det = None if i_det is None else float(trace.t[i_det])
-    return {
-        "run": "link collision",
-        "contact_start_s": t_contact,
-        "detection_s": t_det,
-        "detection_delay_s": None if (t_det is None or t_contact is None) else t_det - t_contact,
-        "detected_joints": list(np.flatnonzero(trace.collided[i_det]).tolist()) if i_det is not None else [],
-        "peak_external_torque_Nm": float(tau_ext.max()),
-    }
-
-
 def free_motion_false_alarms(
     duration: float = 60.0,
     *,
@@ -414,11 +300,3 @@ def free_motion_false_alarms(
         "false_alarm_ticks": int(trace.collision.sum()),
         "max_abs_residual_Nm": np.abs(trace.residual).max(axis=0).tolist(),
     }
-
-
-def write_outputs(out: Path, name: str, traces: Sequence[Trace], rows: Sequence[dict[str, object]]) -> None:
-    """Save each trace (npz) and the summary table (JSON) into ``out``."""
-    out.mkdir(parents=True, exist_ok=True)
-    for tr in traces:
-        tr.save(out / f"{name}_{str(tr.meta['setting']['name']).replace('.', '').lower()}.npz")
-    (out / f"{name}_summary.json").write_text(json.dumps(list(rows), indent=2))
