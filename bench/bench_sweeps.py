@@ -17,14 +17,14 @@ import tempfile
 import time
 
 from reflexarm.experiments.compensation import CompensationSetup, reference_run, run_case
-from reflexarm.experiments.sweeps import (
+from reflexarm.experiments.robustness import (
     DEFAULT_LEVELS,
     PaperSweepContext,
     paper_sweep,
     paper_sweep_tasks,
     run_paper_task,
-    run_sweep,
 )
+from reflexarm.experiments.sweeps import run_sweep
 
 SIM_SECONDS = CompensationSetup().duration
 

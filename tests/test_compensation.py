@@ -11,15 +11,12 @@ import numpy as np
 import pytest
 
 from reflexarm.errors import ConfigError
-from reflexarm.experiments.compensation import (
-    CompensationSetup,
-    compliance_loss,
-    efc_step,
-    mode_table,
-    plot_compliance_loss,
-    plot_efc_step,
-)
+from reflexarm.experiments.compensation import CompensationSetup
+from reflexarm.experiments.compliance_loss import compliance_loss, real_arm_setup
+from reflexarm.experiments.efc_step import efc_step
 from reflexarm.experiments.metrics import msie, msie_per_joint, normalize_by_max, window_mean
+from reflexarm.experiments.mode_table import mode_table
+from reflexarm.experiments.plots import compliance_loss_figure, efc_step_figure
 
 pytestmark = pytest.mark.slow
 
@@ -33,12 +30,14 @@ def paper():
 
 @pytest.fixture(scope="module")
 def dry():
-    return efc_step(CompensationSetup(plant_friction="dry"), seed=0)
+    # the real arm's conditions (stiction, kappa_f = 0), on which the tests below were measured
+    return efc_step(real_arm_setup(), seed=0)
 
 
 @pytest.fixture(scope="module")
 def frictionless():
-    return efc_step(CompensationSetup(plant_friction="none"), seed=0)
+    # no plant friction, so no friction compensation either (kappa_f = 1 would add a friction the arm lacks)
+    return efc_step(CompensationSetup(plant_friction="none", kappa_f=0), seed=0)
 
 
 def rows(result):
@@ -119,9 +118,24 @@ def test_efc_step_release_returns_with_dc(dry):
     assert r["DC+EFC"]["ee_after_release_mm"] < 0.5 * r["no DC"]["ee_after_release_mm"]
 
 
-def test_efc_step_plot(dry, tmp_path):
-    p = plot_efc_step(dry, tmp_path / "fig12.png")
-    assert p.stat().st_size > 10_000
+def test_efc_step_figure_shows_the_three_runs(dry):
+    # Fig. 12's three panels (q_1, tau_ext,1, residual_1), each with one line per run, drawn from the traces
+    fig = efc_step_figure(dry)
+    assert [ax.get_ylabel() for ax in fig.axes] == [
+        "$q_1$ [rad]",
+        "$\\tau_{ext,1}$ [Nm]",
+        "$\\hat{\\tau}_{\\varepsilon,1}$ [Nm]",
+    ]
+    for ax, column in zip(fig.axes, ("q", "tau_ext", "residual"), strict=True):
+        lines = ax.get_lines()
+        assert [ln.get_label() for ln in lines] == [
+            "DC off ($\\kappa_\\varepsilon=0$)",
+            "DC, no EFC ($\\kappa_{ext}=0$)",
+            "DC + EFC ($\\kappa_{ext}=1$)",
+        ]
+        for ln, run in zip(lines, ("no DC", "DC", "DC+EFC"), strict=True):
+            np.testing.assert_array_equal(ln.get_ydata(), getattr(dry.traces[run], column)[:, 0])
+    assert fig.axes[-1].get_xlabel() == "t [s]"
 
 
 @pytest.fixture(scope="module")
@@ -144,8 +158,17 @@ def test_compliance_loss_dc_stiffens_and_the_cutoff_limits_it(push):
     assert by["DC, no cut-off"]["displacement_mm"] < 5.0
 
 
-def test_compliance_loss_plot(push, tmp_path):
-    assert plot_compliance_loss(push, tmp_path / "fig11.png").stat().st_size > 10_000
+def test_compliance_loss_figure_shows_force_and_displacement(push):
+    fig = compliance_loss_figure(push)
+    ax_x, ax_f, ax_r = fig.axes
+    assert ax_x.get_ylabel().startswith("$\\Delta x$") and ax_f.get_ylabel() == "$|f|$ [N]"
+    for ax in fig.axes:
+        assert [ln.get_label() for ln in ax.get_lines()][:3] == ["no DC", "DC", "DC, no cut-off"]
+    # the force panel is the hand's force of each run
+    for ln, run in zip(ax_f.get_lines(), ("no DC", "DC", "DC, no cut-off"), strict=True):
+        np.testing.assert_allclose(ln.get_ydata(), np.linalg.norm(push.traces[run].extras["hand_force"], axis=1))
+    # the cut-off drawn at +-30 Nm on the residual panel
+    assert sorted(ln.get_ydata()[0] for ln in ax_r.get_lines()[3:]) == [-30.0, 30.0]
 
 
 def test_mode_table_agrees_with_every_check_mark_of_fig3():

@@ -19,7 +19,7 @@ import pytest
 
 from reflexarm.cli import main as cli_main
 from reflexarm.experiments.compensation import CompensationSetup
-from reflexarm.experiments.sweeps import paper_sweep, paper_sweep_tasks
+from reflexarm.experiments.robustness import paper_sweep, paper_sweep_tasks
 
 pytestmark = pytest.mark.slow
 

@@ -4,14 +4,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
+from pathlib import Path
 from typing import Any
 
 from reflexarm._cli.common import add_common, format_table, out_dir
 
 
-def _add_setup_options(p: argparse.ArgumentParser, friction: str) -> None:
+def _add_setup_options(p: argparse.ArgumentParser, friction: str, kappa_f: int) -> None:
     p.add_argument(
         "--plant-friction",
         choices=("dry", "smooth", "none"),
@@ -20,40 +22,99 @@ def _add_setup_options(p: argparse.ArgumentParser, friction: str) -> None:
         "paper's simulation); dry = MuJoCo frictionloss with stiction (Table I, like the real arm); none "
         f"(default {friction})",
     )
-    p.add_argument("--model-error", type=float, default=10.0, help="+- model errors [%%] (default 10)")
+    p.add_argument(
+        "--kappa-f",
+        type=int,
+        choices=(0, 1),
+        default=kappa_f,
+        help="friction compensation in (2) and (6): 1 in the paper's simulation (its model errors scale the "
+        f"friction coefficients), 0 in its experiments on the real arm (default {kappa_f})",
+    )
+    p.add_argument(
+        "--model-error",
+        type=float,
+        default=None,
+        metavar="PCT",
+        help="the controller's model has uniform errors within +-PCT %% on masses, inertias, COM and friction "
+        "(Sec. III-C; default 10; 0: the plant's exact model)",
+    )
+    p.add_argument(
+        "--model-seed",
+        type=int,
+        default=None,
+        help="seed of the model-error draw (default: derived from --seed, as each trial of a sweep)",
+    )
+    p.add_argument(
+        "--model",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="use the identified model in FILE (written by 'identify dynamics') instead of a perturbed one",
+    )
     p.add_argument("--noise-scale", type=float, default=1.0, help="factor on the paper's sensor noise (default 1)")
 
 
-def _setup(args: argparse.Namespace) -> Any:
+def _setup(args: argparse.Namespace, **overrides: Any) -> Any:
     from reflexarm.errors import ConfigError
     from reflexarm.experiments.compensation import CompensationSetup
 
-    if args.model_error < 0:
-        raise ConfigError(f"--model-error must be non-negative [%]; got {args.model_error:g}")
+    pct = args.model_error
+    if args.model is not None:
+        if pct is not None and pct != 0.0:
+            raise ConfigError(
+                f"--model {args.model} is used as identified; got --model-error {pct:g} as well (drop one of them)"
+            )
+        if not Path(args.model).is_file():
+            raise ConfigError(f"--model: no such file {str(args.model)!r}")
+        pct = 0.0
+    pct = 10.0 if pct is None else pct
+    if not (math.isfinite(pct) and 0.0 <= pct < 100.0):
+        raise ConfigError(f"--model-error must be a percentage in [0, 100); got {pct:g}")
+    if args.model_seed is not None and args.model_seed < 0:
+        raise ConfigError(f"--model-seed must be a non-negative integer; got {args.model_seed}")
     if args.noise_scale < 0:
         raise ConfigError(f"--noise-scale must be non-negative; got {args.noise_scale:g}")
     return CompensationSetup(
-        model_error=args.model_error / 100.0, noise_scale=args.noise_scale, plant_friction=args.plant_friction
+        model_error=pct / 100.0,
+        noise_scale=args.noise_scale,
+        plant_friction=args.plant_friction,
+        kappa_f=args.kappa_f,
+        model_file=None if args.model is None else str(args.model),
+        **overrides,
     )
+
+
+def _model_label(setup: Any, model_seed: int | None) -> str:
+    if setup.model_file is not None:
+        return f"identified model {setup.model_file}"
+    if setup.model_error == 0.0:
+        return "the plant's exact model"
+    seed = "derived from --seed" if model_seed is None else str(model_seed)
+    return f"+-{100 * setup.model_error:g} % model errors (seed {seed})"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``efc-step``, ``compliance-loss``, ``mode-table`` and ``sweep`` to the top-level parser."""
     p = sub.add_parser("efc-step", help="50 N step on the end effector: no DC / DC / DC+EFC (Fig. 12)")
     add_common(p, default_out="results/efc-step")
-    _add_setup_options(p, "smooth")
+    _add_setup_options(p, "smooth", 1)
     p.set_defaults(func=_efc_step)
 
     p = sub.add_parser("compliance-loss", help="push the end effector and hold it, with and without DC (Fig. 11)")
     add_common(p, default_out="results/compliance-loss")
-    _add_setup_options(p, "dry")
+    _add_setup_options(p, "dry", 0)
     p.add_argument("--depth", type=float, default=0.10, help="travel of the pushing hand [m] (default 0.10)")
-    p.add_argument("--hand-stiffness", type=float, default=2000.0, help="the hand's stiffness [N/m] (default 2000)")
+    p.add_argument(
+        "--hand-stiffness",
+        default="2000",
+        help="the pushing hand's stiffness [N/m], one value or a list to sweep, e.g. 500,1000,2000,5000,10000 "
+        "(the paper gives none; default 2000)",
+    )
     p.set_defaults(func=_compliance_loss)
 
     p = sub.add_parser("mode-table", help="the table of Fig. 3, measured for each control mode")
     add_common(p, default_out="results/mode-table")
-    _add_setup_options(p, "dry")
+    _add_setup_options(p, "dry", 0)
     p.set_defaults(func=_mode_table)
 
     s = sub.add_parser("sweep", help="robustness sweeps: model errors (Fig. 13) or sensor noise (Fig. 14)")
@@ -65,7 +126,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     ):
         k = ssub.add_parser(kind, help=f"{fig}: normalised MSIE (20) over the level, DC without and with EFC")
         add_common(k, default_out=f"results/sweep-{kind}")
-        _add_setup_options(k, "smooth")
+        _add_setup_options(k, "smooth", 1)
+        k.add_argument(
+            "--noise-channels",
+            default=None,
+            help="noise only on these sensor channels (comma list of q, dq, gravity, tau_m, force, torque; default "
+            "all, as the paper): a diagnostic of which channel drives an effect",
+        )
         k.add_argument("--levels", default=None, help=f"{levels_help}; 'a:b[:step]' or 'a,b,c'")
         k.add_argument("--trials", type=int, default=10, help="random draws per level (default 10)")
         k.add_argument("--workers", type=int, default=None, help="local worker processes (default: every core)")
@@ -78,12 +145,14 @@ def _print_rows(rows: list[dict[str, Any]], columns: list[tuple[str, str, str]])
 
 
 def _efc_step(args: argparse.Namespace) -> int:
-    from reflexarm.experiments.compensation import efc_step, plot_efc_step, write_json
+    from reflexarm.experiments.compensation import write_json
+    from reflexarm.experiments.efc_step import efc_step
+    from reflexarm.experiments.plots import plot_efc_step
 
     out = out_dir(args)
     setup = _setup(args)
     t0 = time.perf_counter()
-    res = efc_step(setup, seed=args.seed, progress=not args.quiet)
+    res = efc_step(setup, seed=args.seed, model_seed=args.model_seed, progress=not args.quiet)
     for name, tr in res.traces.items():
         tr.save(out / f"efc_step_{name.replace(' ', '_').replace(',', '').replace('+', 'plus')}.npz")
     fig = plot_efc_step(res, out / "fig12_efc_step.png")
@@ -111,42 +180,66 @@ def _efc_step(args: argparse.Namespace) -> int:
         f"(all joints, norm: {s['efc_vs_dc_residual_norm']:.3f})\n"
         f"  30 Nm cut-off: peak DC residual {s['peak_dc_residual_Nm']:.1f} Nm; share of the DC displacement it "
         f"explains: {100 * s['cutoff_share_of_dc_displacement']:.1f} %\n"
-        f"plant friction: {setup.plant_friction}; wrote {out}/ ({fig.name}, efc_step.json, traces) in "
+        f"controller: {_model_label(setup, args.model_seed)}, kappa_f = {setup.kappa_f}; plant friction: "
+        f"{setup.plant_friction}; wrote {out}/ ({fig.name}, efc_step.json, traces) in "
         f"{time.perf_counter() - t0:.1f} s"
     )
     return 0
 
 
 def _compliance_loss(args: argparse.Namespace) -> int:
-    from reflexarm.experiments.compensation import compliance_loss, plot_compliance_loss, write_json
+    from reflexarm.errors import ConfigError
+    from reflexarm.experiments.compensation import write_json
+    from reflexarm.experiments.compliance_loss import PAPER_FIG11, compliance_loss_sweep
+    from reflexarm.experiments.plots import plot_compliance_loss, plot_compliance_sweep
+    from reflexarm.experiments.sweeps import parse_levels
 
     out = out_dir(args)
     setup = _setup(args)
-    res = compliance_loss(
-        setup, depth=args.depth, hand_stiffness=args.hand_stiffness, seed=args.seed, progress=not args.quiet
+    stiffness = parse_levels(args.hand_stiffness, name="--hand-stiffness")
+    if any(k <= 0 for k in stiffness):
+        raise ConfigError(f"--hand-stiffness must be positive [N/m]; got {args.hand_stiffness}")
+    sweep = compliance_loss_sweep(
+        stiffness, setup, depth=args.depth, seed=args.seed, model_seed=args.model_seed, progress=not args.quiet
     )
-    fig = plot_compliance_loss(res, out / "fig11_compliance_loss.png")
+    rows = sweep.rows()
+    for k, res in zip(stiffness, sweep.results, strict=True):
+        plot_compliance_loss(res, out / f"fig11_compliance_loss_k{k:g}.png")
+    fig = plot_compliance_sweep(sweep, out / "fig11_hand_stiffness.png")
     write_json(
         out / "compliance_loss.json",
-        {"setup": setup.as_dict(), "push": res.push, "rows": res.rows, "summary": res.summary},
+        {
+            "setup": setup.as_dict(),
+            "push": sweep.results[0].push,
+            "rows": rows,
+            "runs": {f"{k:g}": res.rows for k, res in zip(stiffness, sweep.results, strict=True)},
+            "paper": PAPER_FIG11,
+        },
     )
     _print_rows(
-        res.rows,
+        rows,
         [
-            ("run", "run", "{}"),
-            ("residual_limit_Nm", "cut-off [Nm]", "{:g}"),
-            ("force_N", "|f| [N]", "{:.1f}"),
-            ("displacement_mm", "dx along push [mm]", "{:.1f}"),
-            ("apparent_stiffness_N_per_m", "|f|/dx [N/m]", "{:.0f}"),
-            ("residual1_Nm", "res_1 [Nm]", "{:.1f}"),
+            ("hand_stiffness_N_per_m", "hand [N/m]", "{:g}"),
+            ("force_no_dc_N", "|f| no DC [N]", "{:.1f}"),
+            ("force_dc_N", "|f| DC [N]", "{:.1f}"),
+            ("displacement_no_dc_mm", "dx no DC [mm]", "{:.1f}"),
+            ("displacement_dc_mm", "dx DC [mm]", "{:.1f}"),
+            ("force_ratio", "force DC/noDC", "{:.2f}"),
+            ("paper_force_ratio", "paper", "{:.2f}"),
+            ("displacement_ratio", "displ. DC/noDC", "{:.2f}"),
+            ("paper_displacement_ratio", "paper", "{:.2f}"),
+            ("stiffness_ratio", "stiffn. DC/noDC", "{:.2f}"),
+            ("paper_stiffness_ratio", "paper", "{:.2f}"),
+            ("stiffness_ratio_no_cutoff", "no cut-off", "{:.0f}"),
+            ("peak_dc_residual_Nm", "peak |res| DC [Nm]", "{:.1f}"),
         ],
     )
-    s = res.summary
     print(
-        f"\nwith DC / without: force x{s['force_ratio']:.2f} (paper 1.93), displacement x"
-        f"{s['displacement_ratio']:.2f} (paper 0.67), apparent stiffness x{s['stiffness_ratio']:.2f} "
-        f"(paper 2.87)\nwithout the 30 Nm cut-off the stiffness would rise x{s['stiffness_ratio_no_cutoff']:.0f}\n"
-        f"wrote {out}/ ({fig.name}, compliance_loss.json)"
+        f"\nratios with DC / without DC under the hold (paper: force +93 % = x1.93, displacement 67 % = x0.67, "
+        f"stiffness +187 % = x{PAPER_FIG11['stiffness_ratio']:.2f}); 'no cut-off': the stiffness ratio without "
+        f"the 30 Nm cut-off.\ncontroller: {_model_label(setup, args.model_seed)}, kappa_f = {setup.kappa_f}; "
+        f"plant friction: {setup.plant_friction}\nwrote {out}/ ({fig.name}, fig11_compliance_loss_k*.png, "
+        "compliance_loss.json)"
     )
     return 0
 
@@ -156,11 +249,12 @@ def _mark(v: bool) -> str:
 
 
 def _mode_table(args: argparse.Namespace) -> int:
-    from reflexarm.experiments.compensation import CHECK_RATIO, mode_table, write_json
+    from reflexarm.experiments.compensation import write_json
+    from reflexarm.experiments.mode_table import CHECK_RATIO, mode_table
 
     out = out_dir(args)
     setup = _setup(args)
-    rows, _ = mode_table(setup, seed=args.seed, progress=not args.quiet)
+    rows, _ = mode_table(setup, seed=args.seed, model_seed=args.model_seed, progress=not args.quiet)
     write_json(out / "mode_table.json", {"setup": setup.as_dict(), "check_ratio": CHECK_RATIO, "rows": rows})
     table = []
     for r in rows:
@@ -201,10 +295,24 @@ def _mode_table(args: argparse.Namespace) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    from reflexarm.experiments.sweeps import DEFAULT_LEVELS, paper_sweep
+    from reflexarm.errors import ConfigError
+    from reflexarm.experiments.plots import crossover_levels
+    from reflexarm.experiments.robustness import DEFAULT_LEVELS, paper_sweep
 
     out = out_dir(args)
-    setup = _setup(args)
+    channels = None
+    if args.noise_channels is not None:
+        channels = tuple(c.strip() for c in args.noise_channels.split(",") if c.strip())
+    if args.kind == "model-error" and args.model is not None:
+        raise ConfigError(
+            f"--model {args.model}: a model-error sweep perturbs the true model at each level; use --model with "
+            "'sweep noise'"
+        )
+    if args.model_seed is not None:
+        raise ConfigError(
+            f"--model-seed {args.model_seed}: a sweep draws one model per trial from --seed; drop --model-seed"
+        )
+    setup = _setup(args, noise_channels=channels)
     levels = DEFAULT_LEVELS[args.kind] if args.levels is None else args.levels
     t0 = time.perf_counter()
     res = paper_sweep(
@@ -220,29 +328,64 @@ def _sweep(args: argparse.Namespace) -> int:
     )
     wall = time.perf_counter() - t0
     s = res.summary
-    wide = s.pivot(index="level", columns="condition", values="norm_mean")
-    rows = [
-        {
+    by = {c: s[s["condition"] == c].set_index("level") for c in ("DC", "DC+EFC")}
+    dc, efc = by["DC"], by["DC+EFC"]
+    rows = []
+    for lv in dc.index:
+        row: dict[str, Any] = {
             "level": lv,
-            "dc": wide.loc[lv, "DC"],
-            "efc": wide.loc[lv, "DC+EFC"],
-            "ratio": wide.loc[lv, "DC"] / wide.loc[lv, "DC+EFC"],
+            "dc": dc.loc[lv, "norm_mean"],
+            "efc": efc.loc[lv, "norm_mean"],
+            "ratio": dc.loc[lv, "msie_mean"] / efc.loc[lv, "msie_mean"],
+            "dc_abs": dc.loc[lv, "msie_mean"],
+            "efc_abs": efc.loc[lv, "msie_mean"],
         }
-        for lv in wide.index
-    ]
+        for key in s.columns:
+            if key in dc.columns and key not in ("n", "condition") and not key.startswith(("norm_", "msie_")):
+                row[f"dc_{key}"] = dc.loc[lv, key]
+        rows.append(row)
     unit = "%" if args.kind == "model-error" else "x"
-    _print_rows(
-        rows,
-        [
-            ("level", f"level [{unit}]", "{:g}"),
-            ("dc", "||MSIE|| DC", "{:.4f}"),
-            ("efc", "||MSIE|| DC+EFC", "{:.4f}"),
-            ("ratio", "DC / DC+EFC", "{:.1f}"),
-        ],
-    )
+    columns = [
+        ("level", f"level [{unit}]", "{:g}"),
+        ("dc", "||MSIE|| DC", "{:.4f}"),
+        ("efc", "||MSIE|| DC+EFC", "{:.5f}"),
+        ("ratio", "DC/DC+EFC", "{:.1f}"),
+        ("dc_abs", "MSIE DC [rad^2]", "{:.4e}"),
+        ("efc_abs", "MSIE DC+EFC [rad^2]", "{:.4e}"),
+    ]
+    if args.kind == "model-error" or setup.model_error > 0:
+        columns += [
+            ("dc_g_error_median", "g err med", "{:.2%}"),
+            ("dc_g_error_max", "g err max", "{:.1%}"),
+            ("dc_M_error_median", "M err med", "{:.2%}"),
+            ("dc_M_error_max", "M err max", "{:.1%}"),
+        ]
+    if args.kind == "noise":
+        columns += [
+            ("dc_residual1_load_std_Nm", "std res1 [Nm]", "{:.2f}"),
+            ("dc_residual1_noise_pred_Nm", "pred. std", "{:.2f}"),
+            ("dc_residual1_clip_fraction", "|res1|>cut", "{:.3f}"),
+            ("dc_compensated1_load_Nm", "mean cut res1", "{:.2f}"),
+            ("dc_tau_ext1_load_Nm", "tau_ext1 [Nm]", "{:.2f}"),
+        ]
+    _print_rows(rows, columns)
+    if args.kind == "model-error":
+        print(
+            "\ng/M err: achieved relative error of the controller's g(q) and M(q) (median and max over 100 random "
+            "states, mean over the trials)"
+        )
+    else:
+        cross = crossover_levels(s)
+        print(
+            "\njoint 1 under the load, DC run: std of the residual (measured; predicted from the velocity noise, "
+            "k_o |M_1,:| a_dq s / sqrt(3)), share of ticks beyond the cut-off, mean of the cut-off residual, "
+            f"tau_ext,1\ncrossover (DC below DC+EFC): {'at ' + ', '.join(f'{c:g}' for c in cross) if cross else 'none'}"
+        )
     n_div = int(s["diverged"].sum())
     print(
-        f"\n{len(res.sweep.table)} runs ({len(res.sweep.ran)} run now, {len(res.sweep.skipped)} found in {out}), "
+        f"controller: {_model_label(setup, None)} per trial, kappa_f = {setup.kappa_f}; plant friction: "
+        f"{setup.plant_friction}; noise channels: {'all' if channels is None else ', '.join(channels)}\n"
+        f"{len(res.sweep.table)} runs ({len(res.sweep.ran)} run now, {len(res.sweep.skipped)} found in {out}), "
         f"{n_div} diverged; wall {wall:.1f} s"
     )
     if res.sweep.run_wall_s:

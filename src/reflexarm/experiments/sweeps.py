@@ -1,4 +1,4 @@
-"""Sweeps at scale: many independent closed-loop runs, in parallel, resumable; Figs. 13 and 14.
+"""Sweeps at scale: many independent closed-loop runs, in parallel, resumable.
 
 The machinery (:func:`run_sweep`) is generic: a list of :class:`SweepTask`, a picklable run function
 ``run_fn(task, context) -> dict`` and an output folder. Runs execute
@@ -13,10 +13,8 @@ tasks' order, so an interrupted-and-resumed sweep ends with the same table as an
 folder's ``sweep.json`` manifest records the settings the stored results depend on; restarting with
 different settings into the same folder is refused rather than mixing results.
 
-The paper's sweeps (:func:`model_error_sweep`, Fig. 13; :func:`noise_sweep`, Fig. 14) repeat the Fig. 12
-experiment (see :mod:`reflexarm.experiments.compensation`) with disturbance compensation, without and
-with EFC, and score each run by the MSIE (20) against the compliant controller without compensation,
-model errors or noise.
+The paper's sweeps (Figs. 13 and 14) are built on this machinery in :mod:`reflexarm.experiments.robustness`.
+This module imports nothing of the experiments (they import it).
 """
 
 from __future__ import annotations
@@ -36,22 +34,14 @@ import pandas as pd
 from reflexarm.errors import ConfigError, DataError
 
 __all__ = [
-    "CONDITIONS",
-    "DEFAULT_LEVELS",
-    "SWEEP_KINDS",
-    "PaperSweepContext",
-    "PaperSweepResult",
     "SweepResult",
     "SweepTask",
+    "check_workers",
+    "connect_scheduler",
     "load_runs",
-    "paper_sweep",
-    "paper_sweep_tasks",
     "parse_levels",
-    "plot_sweep",
-    "reference_trajectory",
-    "run_paper_task",
+    "prepare_folder",
     "run_sweep",
-    "summarize_sweep",
     "trial_seeds",
 ]
 
@@ -163,7 +153,12 @@ class SweepResult:
     run_wall_s: dict[str, float] = field(default_factory=dict)
 
 
-def _check_workers(workers: object) -> int:
+def check_workers(workers: object) -> int:
+    """The number of local worker processes: ``workers``, or every core for None.
+
+    Raises:
+        ConfigError: not a positive integer (naming the value).
+    """
     if workers is None:
         return os.cpu_count() or 1
     if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or int(workers) < 1:
@@ -171,7 +166,12 @@ def _check_workers(workers: object) -> int:
     return int(workers)
 
 
-def _prepare_folder(out: Path, manifest: dict[str, Any] | None) -> Path:
+def prepare_folder(out: Path, manifest: dict[str, Any] | None) -> Path:
+    """Create ``out/runs``; store ``manifest`` on the first call, refuse a folder holding other settings.
+
+    Raises:
+        DataError: an unreadable manifest. ConfigError: a manifest with other settings.
+    """
     out = Path(out)
     runs = out / RUNS_DIR
     runs.mkdir(parents=True, exist_ok=True)
@@ -243,7 +243,8 @@ def _call(run_fn: RunFunction, task: SweepTask, context: Any) -> tuple[SweepTask
     return task, result, time.perf_counter() - t0
 
 
-def _connect(scheduler: str, timeout: float) -> Any:
+def connect_scheduler(scheduler: str, timeout: float) -> Any:
+    """A Dask client of ``scheduler``; ConfigError naming the address if it cannot be reached."""
     from distributed import Client
 
     if not isinstance(scheduler, str) or not scheduler.strip():
@@ -272,7 +273,7 @@ def _iter_joblib(run_fn: RunFunction, todo: list[SweepTask], context: Any, worke
 def _iter_dask(run_fn: RunFunction, todo: list[SweepTask], context: Any, scheduler: str, timeout: float) -> Iterable:
     from distributed import as_completed
 
-    client = _connect(scheduler, timeout)
+    client = connect_scheduler(scheduler, timeout)
     futures = []
     try:
         ctx = client.scatter(context, broadcast=True) if context is not None else None
@@ -325,12 +326,12 @@ def run_sweep(
     if len(set(keys)) != len(keys):
         dup = sorted({k for k in keys if keys.count(k) > 1})
         raise ConfigError(f"duplicate sweep tasks: {', '.join(dup[:5])}")
-    n_workers = _check_workers(workers)
+    n_workers = check_workers(workers)
     if scheduler is not None and (not isinstance(scheduler, str) or not scheduler.strip()):
         raise ConfigError(f"scheduler must be an address such as 'tcp://host:8786'; got {scheduler!r}")
     t_start = time.perf_counter()
     out = Path(out)
-    runs = _prepare_folder(out, manifest)
+    runs = prepare_folder(out, manifest)
     done = {p.stem for p in runs.glob("*.json")}
     todo = [t for t in tasks if t.key not in done]
     skipped = [t.key for t in tasks if t.key in done]
@@ -367,214 +368,3 @@ def run_sweep(
     table.to_csv(out / "results.csv", index=False)
     table.to_parquet(out / "results.parquet", index=False)
     return SweepResult(table, ran, skipped, time.perf_counter() - t_start, run_wall)
-
-
-# ------------------------------------------------------------------------------------------------------
-# The paper's sweeps: Fig. 13 (model errors) and Fig. 14 (sensor noise)
-# ------------------------------------------------------------------------------------------------------
-
-#: The two controller settings compared in Figs. 13-14: disturbance compensation without / with EFC.
-CONDITIONS: dict[str, int] = {"DC": 0, "DC+EFC": 1}
-SWEEP_KINDS = ("model-error", "noise")
-#: Default level grids: 1 % to 30 % model errors (Fig. 13), noise scale 1 to 30 (Fig. 14).
-DEFAULT_LEVELS = {"model-error": [float(v) for v in range(1, 31)], "noise": [float(v) for v in range(1, 31)]}
-LEVEL_UNITS = {"model-error": "max. model error [%]", "noise": "noise scale factor [-]"}
-
-
-@dataclass(frozen=True)
-class PaperSweepContext:
-    """What every run of a paper sweep shares: the setup and the reference trajectory q_ref of (20)."""
-
-    setup: Any  # CompensationSetup (typed loosely to keep this module importable without the sim)
-    t_ref: np.ndarray
-    q_ref: np.ndarray
-
-
-def paper_sweep_tasks(kind: str, levels: Sequence[float] | str, trials: int, seed: int = 0) -> list[SweepTask]:
-    """The runs of a Fig. 13 / Fig. 14 sweep: every level x condition x trial.
-
-    Raises:
-        ConfigError: unknown kind, bad level (negative; >= 100 % model error), trials < 1.
-    """
-    if kind not in SWEEP_KINDS:
-        raise ConfigError(f"unknown sweep {kind!r}; choose one of: {', '.join(SWEEP_KINDS)}")
-    lv = parse_levels(levels)
-    if kind == "model-error":
-        bad = [v for v in lv if v >= 100.0]
-        if bad:
-            raise ConfigError(f"model-error levels are percentages below 100; got {bad[0]:g}")
-    if isinstance(trials, bool) or not isinstance(trials, (int, np.integer)) or trials < 1:
-        raise ConfigError(f"trials must be a positive integer; got {trials!r}")
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ConfigError(f"seed must be a non-negative integer; got {seed!r}")
-    return [SweepTask(kind, v, c, k, int(seed)) for v in lv for c in CONDITIONS for k in range(int(trials))]
-
-
-def run_paper_task(task: SweepTask, context: PaperSweepContext) -> dict[str, Any]:
-    """One run of Fig. 13/14: the Fig. 12 experiment with DC, kappa_ext by condition, scored by MSIE (20).
-
-    The model-error draw and the noise sequence come from :func:`trial_seeds` (the same for every level
-    and both conditions). A diverged simulation is a result (``status = "diverged"``, MSIE NaN).
-    """
-    from reflexarm.errors import SimulationError
-    from reflexarm.experiments import compensation as comp
-    from reflexarm.experiments.metrics import msie_per_joint, window_mean
-
-    setup = context.setup
-    model_seed, noise_seed = trial_seeds(task.seed, task.trial)
-    if task.kind == "model-error":
-        model_error, noise_scale = task.level / 100.0, setup.noise_scale
-    elif task.kind == "noise":
-        model_error, noise_scale = setup.model_error, task.level
-    else:
-        raise ConfigError(f"unknown sweep {task.kind!r}; choose one of: {', '.join(SWEEP_KINDS)}")
-    try:
-        trace = comp.run_case(
-            setup,
-            1,
-            CONDITIONS[task.condition],
-            model_error=model_error,
-            noise_scale=noise_scale,
-            model_seed=model_seed,
-            noise_seed=noise_seed,
-        )
-    except SimulationError as e:
-        return {"msie": float("nan"), "status": "diverged", "error": str(e)}
-    if trace.q.shape != context.q_ref.shape:
-        raise DataError(f"run {task.key} has {trace.q.shape} samples, the reference {context.q_ref.shape}")
-    load = setup.load_window
-    per_joint = msie_per_joint(trace.t, trace.q, context.q_ref)
-    return {
-        "msie": float(per_joint.mean()),
-        "status": "ok",
-        **{f"msie_j{i + 1}": float(v) for i, v in enumerate(per_joint)},
-        "residual1_load_Nm": float(window_mean(trace.t, trace.residual[:, 0], *load)),
-        "q1_load_rad": float(window_mean(trace.t, trace.q[:, 0], *load)),
-        "max_abs_residual_Nm": float(np.abs(trace.residual).max()),
-    }
-
-
-def summarize_sweep(table: pd.DataFrame) -> pd.DataFrame:
-    """Per level and condition: MSIE mean/min/max over the trials, normalised by the figure's maximum.
-
-    ``||MSIE|| = MSIE / max(MSIE)`` with the maximum over every run of the figure (both conditions, all
-    levels), as the paper normalises Figs. 13 and 14 separately. ``ratio_dc_to_efc`` is the mean MSIE
-    without EFC over the mean with EFC at the same level.
-    """
-    if table.empty:
-        raise DataError("no runs to summarise")
-    ok = table[table["status"] == "ok"]
-    peak = float(ok["msie"].max())
-    g = ok.groupby(["level", "condition"])["msie"]
-    out = g.agg(n="count", msie_mean="mean", msie_min="min", msie_max="max").reset_index()
-    for c in ("mean", "min", "max"):
-        out[f"norm_{c}"] = out[f"msie_{c}"] / peak
-    diverged = table[table["status"] != "ok"].groupby(["level", "condition"]).size()
-    out["diverged"] = [int(diverged.get((lv, c), 0)) for lv, c in zip(out["level"], out["condition"], strict=True)]
-    means = out.pivot(index="level", columns="condition", values="msie_mean")
-    if set(CONDITIONS) <= set(means.columns):
-        ratio = means["DC"] / means["DC+EFC"]
-        out["ratio_dc_to_efc"] = out["level"].map(ratio)
-    return out.sort_values(["condition", "level"]).reset_index(drop=True)
-
-
-def plot_sweep(summary: pd.DataFrame, kind: str, path: str | os.PathLike[str]) -> Path:
-    """Figs. 13/14: normalised MSIE over the level, top without EFC (kappa_ext = 0), bottom with EFC."""
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(6.5, 5.5), layout="constrained")
-    axes = fig.subplots(2, 1, sharex=True, sharey=True)
-    for ax, (cond, kext) in zip(axes, CONDITIONS.items(), strict=True):
-        s = summary[summary["condition"] == cond].sort_values("level")
-        ax.fill_between(s["level"], s["norm_min"], s["norm_max"], color="C0", alpha=0.25, lw=0, label="min-max")
-        ax.plot(s["level"], s["norm_mean"], "o-", color="C0", ms=3, label="mean")
-        ax.set_yscale("log")
-        ax.set_ylabel("||MSIE|| [-]")
-        ax.set_title(f"DC, $\\kappa_{{ext}} = {kext}$" + (" (EFC)" if kext else " (no EFC)"), fontsize=10)
-        ax.grid(alpha=0.3, which="both")
-    axes[0].legend(fontsize=8)
-    axes[1].set_xlabel(LEVEL_UNITS.get(kind, "level"))
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(p, dpi=120)
-    return p
-
-
-@dataclass
-class PaperSweepResult:
-    """What :func:`paper_sweep` returns: the run table, the per-level summary and the output files."""
-
-    sweep: SweepResult
-    summary: pd.DataFrame
-    figure: Path
-    files: dict[str, Path]
-
-
-def reference_trajectory(setup: Any, out: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
-    """q_ref of (20) for ``setup``, cached in ``<out>/reference.npz`` (computed once per sweep folder)."""
-    from reflexarm.experiments import compensation as comp
-
-    path = Path(out) / "reference.npz"
-    if path.exists():
-        with np.load(path) as z:
-            return z["t"].copy(), z["q"].copy()
-    tr = comp.reference_run(setup)
-    Path(out).mkdir(parents=True, exist_ok=True)
-    tmp = Path(out) / ".reference.tmp.npz"
-    np.savez(tmp, t=tr.t, q=tr.q)
-    os.replace(tmp, path)
-    return tr.t, tr.q
-
-
-def paper_sweep(
-    kind: str,
-    out: str | os.PathLike[str],
-    *,
-    levels: Sequence[float] | str | None = None,
-    trials: int = 10,
-    seed: int = 0,
-    setup: Any = None,
-    workers: int | None = None,
-    scheduler: str | None = None,
-    scheduler_timeout: float = 10.0,
-    progress: bool = True,
-) -> PaperSweepResult:
-    """Fig. 13 (``kind="model-error"``, levels in percent) or Fig. 14 (``kind="noise"``, scale factors).
-
-    Writes into ``out``: ``runs/*.json`` (one per run, as they finish), ``reference.npz``,
-    ``results.csv``/``results.parquet`` (one row per run), ``summary.csv`` (per level and condition)
-    and ``fig13_model_error.png`` / ``fig14_noise.png``. Resumes an interrupted sweep in the same folder.
-    """
-    from reflexarm.experiments.compensation import CompensationSetup
-
-    setup = setup or CompensationSetup()
-    tasks = paper_sweep_tasks(kind, DEFAULT_LEVELS[kind] if levels is None else levels, trials, seed)
-    n_workers = _check_workers(workers)
-    out = Path(out)
-    manifest = {"experiment": f"paper-sweep/{kind}", "format": 1, "seed": int(seed), "setup": setup.as_dict()}
-    _prepare_folder(out, manifest)  # refuse a folder with other settings before the reference run
-    if scheduler is not None:  # and an unreachable scheduler
-        _connect(scheduler, scheduler_timeout).close()
-    t_ref, q_ref = reference_trajectory(setup, out)
-    context = PaperSweepContext(setup, t_ref, q_ref)
-    res = run_sweep(
-        tasks,
-        run_paper_task,
-        out,
-        context=context,
-        manifest=manifest,
-        workers=n_workers,
-        scheduler=scheduler,
-        scheduler_timeout=scheduler_timeout,
-        progress=progress,
-    )
-    summary = summarize_sweep(res.table)
-    summary.to_csv(out / "summary.csv", index=False)
-    fig = plot_sweep(summary, kind, out / ("fig13_model_error.png" if kind == "model-error" else "fig14_noise.png"))
-    files = {
-        "results_csv": out / "results.csv",
-        "results_parquet": out / "results.parquet",
-        "summary_csv": out / "summary.csv",
-        "figure": fig,
-    }
-    return PaperSweepResult(res, summary, fig, files)

@@ -4,6 +4,8 @@ push, end-effector force step), noisy sensors, a closed-loop runner and the reco
 from reflexarm.sim.cinderblock import Cinderblock
 from reflexarm.sim.elbow_stick import ElbowStick
 from reflexarm.sim.end_effector_force import EndEffectorForce
+from reflexarm.sim.hand_push import HandPush
+from reflexarm.sim.link_force import LinkForce
 from reflexarm.sim.noise import PAPER_NOISE, SensorNoise
 from reflexarm.sim.plant import Plant
 from reflexarm.sim.runner import run_closed_loop
@@ -16,7 +18,9 @@ __all__ = [
     "Cinderblock",
     "ElbowStick",
     "EndEffectorForce",
+    "HandPush",
     "JointTrajectory",
+    "LinkForce",
     "Plant",
     "Scene",
     "SensorNoise",
