@@ -17,7 +17,7 @@ PUSH_JOINT = 1
 
 def copy_plant(plant: RigidBodyPlant, tau_ext: Callable[[float], np.ndarray] | None = None) -> RigidBodyPlant:
     """A plant in the same state (time, q, dq, last torque) with its own external torque."""
-    other = RigidBodyPlant.__new__(RigidBodyPlant)
+    other = type(plant).__new__(type(plant))
     other.__dict__.update(plant.__dict__)
     other.data = plant.model.createData()
     other.q, other.dq, other.last_tau = plant.q.copy(), plant.dq.copy(), plant.last_tau.copy()
