@@ -138,6 +138,31 @@ def test_cinderblock_arguments():
         Cinderblock(position=(0, 0), size=(0.39, -0.19, 0.19))
     with pytest.raises(ConfigError, match=r"mass must be a positive number; got 0"):
         Cinderblock(position=(0, 0), mass=0)
+    with pytest.raises(ConfigError, match=r"friction must be a positive coefficient \[-\]; got -0.5"):
+        Cinderblock(position=(0, 0), friction=-0.5)
+    assert Cinderblock(position=(0, 0), friction=0.9).describe()["friction"] == 0.9
+
+
+@pytest.mark.parametrize(("friction", "slides"), [(0.6, True), (0.9, False)])
+def test_cinderblock_friction_decides_slide_or_hold(robot, friction, slides):
+    """110 N pushing the 15 kg block along its long axis at the height of its centre: Coulomb's law with
+    mu m g = 88 N (mu = 0.6) < 110 N < 132 N (mu = 0.9) says it slides on the first table and holds on the
+    second; it cannot tip (110 N * 0.095 m = 10 Nm < m g * 0.195 m = 29 Nm about the bottom edge)."""
+    block = Cinderblock(position=(0.6, -0.5), table_height=0.6, friction=friction)
+    plant = Plant(robot, scene=block, noise=SensorNoise.none())
+    pos0, _ = block.pose(plant)
+    handle = plant.apply_external_force([110.0, 0.0, 0.0], point_world=pos0, body="cinderblock")
+    for _ in range(300):
+        plant.step(robot.compute_gravity(plant.q))
+    plant.clear_external_force(handle)
+    moved = float(block.displacement(plant)[0])
+    # sliding for 0.3 s under a net (110 - 88) N on 15 kg travels ~0.5 * 1.5 m/s^2 * 0.09 s^2 = 7 cm;
+    # holding leaves only the contact's elastic creep (micrometres, see test_cinderblock_rests_and_tips)
+    if slides:
+        assert moved > 0.02
+    else:
+        assert abs(moved) < 1e-3
+    assert not block.tipped(plant)
 
 
 def test_end_effector_force_step(robot):
