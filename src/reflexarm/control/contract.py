@@ -219,3 +219,21 @@ def shape_error(work: np.ndarray) -> SignalError:
     """The SignalError for a BAD_SHAPE code of the tick."""
     name, _ = _SIGNALS[int(work[_k.F_SIGNAL])]
     return SignalError(name, f"shape ({int(work[_k.F_VALUE])},)", f"a real vector of shape ({int(work[_k.F_HI])},)")
+
+
+def signal_bounds(work: np.ndarray, rows: np.ndarray) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """The plausibility bounds per signal as (low, high) arrays, read from the tick's ``work`` array."""
+    dq, ddq, tau_m = rows[_k.DQ_MAX_ROW].copy(), rows[_k.DDQ_MAX_ROW].copy(), rows[_k.TAU_M_MAX_ROW].copy()
+    wrench = np.array([work[_k.FORCE_MAX]] * 3 + [work[_k.MOMENT_MAX]] * 3)
+    g_lo, g_hi = max(work[_k.G_NORM] - work[_k.G_TOL], 0.0), work[_k.G_NORM] + work[_k.G_TOL]
+    q = rows[_k.Q_LO_ROW].copy(), rows[_k.Q_HI_ROW].copy()
+    return {
+        "q": q,
+        "q_d": q,
+        "dq": (-dq, dq),
+        "dq_d": (-dq, dq),
+        "ddq_d": (-ddq, ddq),
+        "tau_m": (-tau_m, tau_m),
+        "wrench": (-wrench, wrench),
+        "|gravity|": (np.array([g_lo]), np.array([g_hi])),
+    }

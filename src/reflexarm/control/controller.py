@@ -23,6 +23,7 @@ from reflexarm.control.contract import (
     convert_inputs,
     describe_fault,
     shape_error,
+    signal_bounds,
     timing_stats,
 )
 from reflexarm.control.impedance import JointImpedanceController
@@ -261,15 +262,7 @@ class Controller:
     @property
     def signal_bounds(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """The plausibility bounds per signal as (low, high) arrays (copies)."""
-        r, w = self._rows, self._work
-        dq = r[_k.DQ_MAX_ROW].copy()
-        ddq = r[_k.DDQ_MAX_ROW].copy()
-        tau_m = r[_k.TAU_M_MAX_ROW].copy()
-        wrench = np.array([w[_k.FORCE_MAX]] * 3 + [w[_k.MOMENT_MAX]] * 3)
-        g = np.array([max(w[_k.G_NORM] - w[_k.G_TOL], 0.0)]), np.array([w[_k.G_NORM] + w[_k.G_TOL]])
-        q = r[_k.Q_LO_ROW].copy(), r[_k.Q_HI_ROW].copy()
-        return {"q": q, "q_d": q, "dq": (-dq, dq), "dq_d": (-dq, dq), "ddq_d": (-ddq, ddq),
-                "tau_m": (-tau_m, tau_m), "wrench": (-wrench, wrench), "|gravity|": g}  # fmt: skip
+        return signal_bounds(self._work, self._rows)
 
     @property
     def observer_state(self) -> np.ndarray:

@@ -9,7 +9,7 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from reflexarm._validation import as_switch, as_vector
-from reflexarm.control import _kernels
+from reflexarm.control._damping import modal_damping_into
 from reflexarm.errors import ConfigError
 from reflexarm.robots.robot_model import RobotModel
 from reflexarm.signals import Reference
@@ -49,9 +49,7 @@ def modal_damping(mass_matrix: np.ndarray, stiffness: np.ndarray, damping_ratio:
     if not np.all(np.isfinite(M)) or np.any(np.linalg.eigvalsh(M) <= 0.0):
         raise ConfigError("mass matrix is not symmetric positive definite")
     out = np.empty_like(M)
-    if not _kernels.modal_damping_into(
-        M, np.asarray(stiffness, dtype=float), np.asarray(damping_ratio, dtype=float), out
-    ):
+    if not modal_damping_into(M, np.asarray(stiffness, dtype=float), np.asarray(damping_ratio, dtype=float), out):
         raise ConfigError("mass matrix is not symmetric positive definite")
     return out
 
@@ -121,7 +119,7 @@ class JointImpedanceController:
         M = pin.crba(self._model, self._data, q)  # upper triangle filled; the kernel reads only that
         self._M[:] = M
         self.damping_ok = bool(
-            _kernels.modal_damping_into(self._M, self.gains.stiffness, self.gains.damping_ratio, self.damping)
+            modal_damping_into(self._M, self.gains.stiffness, self.gains.damping_ratio, self.damping)
         )
         return self.damping
 
