@@ -268,3 +268,69 @@ def test_trial_seeds_are_independent_of_level_and_stable():
     a, b = trial_seeds(1, 0)
     assert a != b
     assert json.dumps(trial_seeds(0, 0))  # plain ints
+
+
+# ------------------------------------------------------------------------- the figure of Figs. 13 and 14
+def synthetic_summary(dc, efc, kind_columns=True):
+    """A summary as robustness.summarize_sweep returns it, for levels 1, 10, 30."""
+    from reflexarm.experiments.robustness import summarize_sweep
+
+    rows = []
+    for cond, values in (("DC", dc), ("DC+EFC", efc)):
+        for level, v in zip((1.0, 10.0, 30.0), values, strict=True):
+            for trial, f in enumerate((0.9, 1.1)):
+                rows.append(
+                    {
+                        "kind": "noise",
+                        "level": level,
+                        "condition": cond,
+                        "trial": trial,
+                        "msie": v * f,
+                        "status": "ok",
+                        "g_error_median": 0.001 * level,
+                        "M_error_median": 0.0012 * level,
+                        "residual1_load_std_Nm": 0.35 * level,
+                        "residual1_noise_pred_Nm": 0.34 * level,
+                        "compensated1_load_Nm": 13.0 - 0.1 * level,
+                        "tau_ext1_load_Nm": 13.0,
+                    }
+                )
+    return summarize_sweep(pd.DataFrame(rows))
+
+
+def test_sweep_figure_draws_both_controllers_in_one_log_panel_and_marks_a_crossover():
+    from reflexarm.experiments.plots import crossover_levels, sweep_figure
+
+    summary = synthetic_summary(dc=[1e-3, 1e-3, 5e-4], efc=[1e-5, 1e-4, 8e-4])  # DC below EFC at 30
+    assert crossover_levels(summary) == [30.0]
+    fig = sweep_figure(summary, "noise", residual_limit=30.0)
+    top = fig.axes[0]
+    assert top.get_yscale() == "log"
+    labels = [ln.get_label() for ln in top.get_lines()]
+    assert labels[:2] == ["DC ($\\kappa_{ext}=0$)", "DC+EFC ($\\kappa_{ext}=1$)"]
+    assert labels[2] == "crossover at 30"
+    # the mean over the trials, normalised by the largest run of the figure (0.9 and 1.1 x the value)
+    peak = 1.1e-3
+    np.testing.assert_allclose(top.get_lines()[0].get_ydata(), np.array([1e-3, 1e-3, 5e-4]) / peak)
+    np.testing.assert_allclose(top.get_lines()[1].get_ydata(), np.array([1e-5, 1e-4, 8e-4]) / peak)
+    assert "DC below DC+EFC from 30" in top.get_title()
+    # the mechanism panel: residual noise (measured, predicted), DC's compensated mean and the cut-off line
+    low = [ln.get_label() for ln in fig.axes[1].get_lines()]
+    assert "predicted std (dq noise)" in low and "mean cut-off res$_1$, DC" in low and "cut-off 30 Nm" in low
+    assert fig.axes[-1].get_xlabel() == "noise scale factor [-]"
+
+
+def test_sweep_figure_of_model_errors_shows_increase_and_achieved_error_without_crossover():
+    from reflexarm.experiments.plots import sweep_figure
+
+    summary = synthetic_summary(dc=[1e-3, 1.01e-3, 1.03e-3], efc=[1e-5, 2e-5, 4e-5])
+    fig = sweep_figure(summary, "model-error")
+    assert len(fig.axes) == 3
+    assert "no crossover" in fig.axes[0].get_title()
+    assert [ln.get_label() for ln in fig.axes[0].get_lines()][2:] == []  # no crossover line
+    inc = {ln.get_label(): ln.get_ydata() for ln in fig.axes[1].get_lines()}
+    np.testing.assert_allclose(inc["DC"], [0.0, 1e-5, 3e-5], atol=1e-12)
+    np.testing.assert_allclose(inc["DC+EFC"], [0.0, 1e-5, 3e-5], atol=1e-12)
+    err = {ln.get_label(): ln.get_ydata() for ln in fig.axes[2].get_lines()}
+    np.testing.assert_allclose(err["g(q), median"], [0.1, 1.0, 3.0])  # in percent
+    assert fig.axes[2].get_ylabel() == "achieved model error [%]"

@@ -382,8 +382,13 @@ def _sweep(args: argparse.Namespace) -> int:
             f"tau_ext,1\ncrossover (DC below DC+EFC): {'at ' + ', '.join(f'{c:g}' for c in cross) if cross else 'none'}"
         )
     n_div = int(s["diverged"].sum())
+    model = (
+        "model errors of each level, one draw per trial (from --seed)"
+        if args.kind == "model-error"
+        else f"{_model_label(setup, None)}, one draw per trial"
+    )
     print(
-        f"controller: {_model_label(setup, None)} per trial, kappa_f = {setup.kappa_f}; plant friction: "
+        f"controller: {model}, kappa_f = {setup.kappa_f}; plant friction: "
         f"{setup.plant_friction}; noise channels: {'all' if channels is None else ', '.join(channels)}\n"
         f"{len(res.sweep.table)} runs ({len(res.sweep.ran)} run now, {len(res.sweep.skipped)} found in {out}), "
         f"{n_div} diverged; wall {wall:.1f} s"
