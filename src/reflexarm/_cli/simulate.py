@@ -56,6 +56,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     fm.add_argument("--duration", type=float, default=60.0, help="simulated time [s] (default 60)")
     fm.add_argument("--threshold", type=float, default=11.0, help="zeta [Nm] (default 11)")
     fm.add_argument(
+        "--trace",
+        default=None,
+        metavar="FILE.parquet",
+        help="also stream the whole trace to this Parquet file, block by block (default: statistics only; "
+        "memory does not grow with --duration either way)",
+    )
+    fm.add_argument(
         "--motion",
         choices=("demo", "hydraulic"),
         default="demo",
@@ -203,6 +210,7 @@ def _free(args: argparse.Namespace) -> int:
         model_seed=choice.seed,
         model=None if choice.file is None else choice.build(_robot()),
         motion=args.motion,
+        trace_path=args.trace,
     )
     res["controller_model"] = choice.describe()  # type: ignore[assignment]
     # the smallest zeta without a false alarm over this run is the largest |residual| of any joint

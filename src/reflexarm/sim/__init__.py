@@ -8,9 +8,10 @@ from reflexarm.sim.hand_push import HandPush
 from reflexarm.sim.link_force import LinkForce
 from reflexarm.sim.noise import PAPER_NOISE, SensorNoise
 from reflexarm.sim.plant import Plant
-from reflexarm.sim.runner import run_closed_loop
+from reflexarm.sim.recording import RunStatistics
+from reflexarm.sim.runner import run_closed_loop, stream_closed_loop
 from reflexarm.sim.scene import Scene
-from reflexarm.sim.trace import Trace
+from reflexarm.sim.trace import Trace, TraceWriter
 from reflexarm.sim.trajectory import JointTrajectory
 
 __all__ = [
@@ -22,8 +23,11 @@ __all__ = [
     "JointTrajectory",
     "LinkForce",
     "Plant",
+    "RunStatistics",
     "Scene",
     "SensorNoise",
     "Trace",
+    "TraceWriter",
     "run_closed_loop",
+    "stream_closed_loop",
 ]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Iterator
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
@@ -13,7 +14,7 @@ import numpy.typing as npt
 
 from reflexarm.errors import DataError
 
-__all__ = ["Trace"]
+__all__ = ["Trace", "TraceWriter"]
 
 #: Per-joint (N, n) float fields, per-sample (N, k) fields with fixed k, and their column stems.
 _JOINT_FIELDS = ("q", "dq", "q_meas", "q_d", "dq_d", "tau", "tau_m", "residual", "tau_ext")
@@ -160,37 +161,41 @@ class Trace:
                 np.savez_compressed(fh, **arrays)  # type: ignore[arg-type]
             return p
         if suffix == ".parquet":
-            import pyarrow as pa
             import pyarrow.parquet as pq
 
-            columns: dict[str, Any] = {"t": self.t}
-            layout: dict[str, list[int]] = {}
-
-            def put(name: str, arr: np.ndarray) -> None:
-                layout[name] = list(arr.shape[1:])
-                flat = arr.reshape(arr.shape[0], int(np.prod(arr.shape[1:])))
-                if arr.ndim == 1:
-                    columns[name] = arr
-                else:
-                    for j in range(flat.shape[1]):
-                        columns[f"{name}_{j}"] = flat[:, j]
-
-            for f in fields(self):
-                if f.name not in ("t", "extras", "meta"):
-                    put(f.name, getattr(self, f.name))
-            for key, value in self.extras.items():
-                put(f"extras/{key}", value)
-            table = pa.table(columns)
-            table = table.replace_schema_metadata(
-                {
-                    "reflexarm.format": _FORMAT,
-                    "reflexarm.meta": json.dumps(self.meta),
-                    "reflexarm.layout": json.dumps(layout),
-                }
-            )
-            pq.write_table(table, p)
+            pq.write_table(self._arrow_table(), p)
             return p
         raise DataError(f"unknown trace file type {suffix!r} for {str(p)!r}; use .npz or .parquet")
+
+    def _arrow_table(self) -> Any:
+        """The trace as a pyarrow table: one column per component, meta and layout in the schema metadata."""
+        import pyarrow as pa
+
+        columns: dict[str, Any] = {"t": self.t}
+        layout: dict[str, list[int]] = {}
+
+        def put(name: str, arr: np.ndarray) -> None:
+            layout[name] = list(arr.shape[1:])
+            flat = arr.reshape(arr.shape[0], int(np.prod(arr.shape[1:])))
+            if arr.ndim == 1:
+                columns[name] = arr
+            else:
+                for j in range(flat.shape[1]):
+                    columns[f"{name}_{j}"] = flat[:, j]
+
+        for f in fields(self):
+            if f.name not in ("t", "extras", "meta"):
+                put(f.name, getattr(self, f.name))
+        for key, value in self.extras.items():
+            put(f"extras/{key}", value)
+        table = pa.table(columns)
+        return table.replace_schema_metadata(
+            {
+                "reflexarm.format": _FORMAT,
+                "reflexarm.meta": json.dumps(self.meta),
+                "reflexarm.layout": json.dumps(layout),
+            }
+        )
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> Trace:
@@ -211,33 +216,103 @@ class Trace:
                 import pyarrow.parquet as pq
 
                 table = pq.read_table(p)
-                md = {k.decode(): v.decode() for k, v in (table.schema.metadata or {}).items()}
-                if "reflexarm.layout" not in md:
-                    raise DataError(f"{str(p)!r} is not a reflexarm trace (no layout metadata)")
-                layout = json.loads(md["reflexarm.layout"])
-                cols = {name: table.column(name).to_numpy() for name in table.column_names}
-                out: dict[str, Any] = {"t": cols["t"]}
-                extras = {}
-                for name, tail in layout.items():
-                    if not tail:
-                        arr = cols[name]
-                    else:
-                        width = int(np.prod(tail))
-                        arr = np.column_stack([cols[f"{name}_{j}"] for j in range(width)]).reshape(-1, *tail)
-                    if name.startswith("extras/"):
-                        extras[name[len("extras/") :]] = arr
-                    else:
-                        out[name] = arr
-                return cls(**out, extras=extras, meta=json.loads(md.get("reflexarm.meta", "{}")))
+                return cls._from_arrow(table, _trace_metadata(table.schema, p))
         except DataError:
             raise
         except Exception as e:
             raise DataError(f"cannot read trace file {str(p)!r}: {e}") from e
         raise DataError(f"unknown trace file type {suffix!r} for {str(p)!r}; use .npz or .parquet")
 
+    @classmethod
+    def _from_arrow(cls, table: Any, md: dict[str, str]) -> Trace:
+        layout = json.loads(md["reflexarm.layout"])
+        cols = {name: table.column(name).to_numpy() for name in table.column_names}
+        out: dict[str, Any] = {"t": cols["t"]}
+        extras = {}
+        for name, tail in layout.items():
+            if not tail:
+                arr = cols[name]
+            else:
+                width = int(np.prod(tail))
+                arr = np.column_stack([cols[f"{name}_{j}"] for j in range(width)]).reshape(-1, *tail)
+            if name.startswith("extras/"):
+                extras[name[len("extras/") :]] = arr
+            else:
+                out[name] = arr
+        return cls(**out, extras=extras, meta=json.loads(md.get("reflexarm.meta", "{}")))
+
+    @classmethod
+    def iter_blocks(cls, path: str | os.PathLike[str]) -> Iterator[Trace]:
+        """Read a ``.parquet`` trace one row group at a time (a long run streamed by :class:`TraceWriter`
+        is read in the memory of one block)."""
+        import pyarrow.parquet as pq
+
+        p = Path(path)
+        if not p.is_file():
+            raise DataError(f"trace file {str(p)!r} does not exist")
+        if p.suffix.lower() != ".parquet":
+            raise DataError(f"only .parquet traces can be read in blocks; got {p.suffix!r} for {str(p)!r}")
+        try:
+            f = pq.ParquetFile(p)
+            md = _trace_metadata(f.schema_arrow, p)
+        except DataError:
+            raise
+        except Exception as e:
+            raise DataError(f"cannot read trace file {str(p)!r}: {e}") from e
+        for i in range(f.num_row_groups):
+            yield cls._from_arrow(f.read_row_group(i), md)
+
     def __repr__(self) -> str:
         span = f"{self.t[0]:g}..{self.t[-1]:g} s" if len(self) else "empty"
         return f"Trace(N={len(self)}, n={self.n}, {span}, extras={sorted(self.extras)})"
+
+
+def _trace_metadata(schema: Any, p: Path) -> dict[str, str]:
+    md = {k.decode(): v.decode() for k, v in (schema.metadata or {}).items()}
+    if "reflexarm.layout" not in md:
+        raise DataError(f"{str(p)!r} is not a reflexarm trace (no layout metadata)")
+    return md
+
+
+class TraceWriter:
+    """Write a trace to ``.parquet`` block by block (one row group per block), in bounded memory.
+
+    The file is an ordinary trace file: :meth:`Trace.load` reads it whole, :meth:`Trace.iter_blocks`
+    one block at a time. The schema (columns, ``meta``) is fixed by the first block; later blocks must
+    have the same fields. Use as a context manager, or call :meth:`close`.
+    """
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        self.path = Path(path)
+        if self.path.suffix.lower() != ".parquet":
+            raise DataError(f"a streamed trace is written as .parquet; got {self.path.suffix!r} for {str(self.path)!r}")
+        self.rows = 0
+        self._writer: Any = None
+
+    def write(self, block: Trace) -> None:
+        """Append ``block``'s rows."""
+        import pyarrow.parquet as pq
+
+        table = block._arrow_table()
+        if self._writer is None:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._writer = pq.ParquetWriter(self.path, table.schema)
+        elif not table.schema.equals(self._writer.schema, check_metadata=False):
+            raise DataError(f"trace block for {str(self.path)!r} has other columns than the first block")
+        self._writer.write_table(table.replace_schema_metadata(self._writer.schema.metadata))
+        self.rows += len(block)
+
+    def close(self) -> None:
+        """Finish the file (safe to call twice)."""
+        if self._writer is not None:
+            self._writer.close()
+            self._writer = None
+
+    def __enter__(self) -> TraceWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 def _as_shape(value: npt.ArrayLike, shape: tuple[int, ...], name: str, dtype: type) -> np.ndarray:
