@@ -11,13 +11,14 @@ writing any state; only an accepted tick updates the observers, the damping matr
 All parameters and state live in one flat float64 ``work`` array (a header of scalars, then ``N_ROWS``
 rows of n values, then three n x n matrices) so that the call unboxes as few arguments as possible. The
 kernels are compiled for float64 arrays only (explicit signatures): an argument of another dtype raises
-``TypeError`` at the call instead of compiling a new specialization inside the control loop.
+``TypeError`` at the call instead of compiling a new specialization inside the control loop (the
+controller converts such inputs before the call, see ``Controller.step``).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, types
 
 from reflexarm.control._damping import modal_damping_into
 
@@ -107,10 +108,12 @@ OUTPUT_NON_FINITE = -8  # the control law gave NaN/inf (never expected with acce
 
 SAT_SHIFT = 8  # accepted return value: n_over + (n_saturated << SAT_SHIFT)
 
-_V = "float64[:]"
-TICK_SIGNATURE = (
-    f"int64(float64, {_V}, {_V}, {_V}, {_V}, {_V}, {_V}, {_V}, {_V}, {_V}, float64[:, :], {_V}, {_V}, "
-    "float64[:, :], float64[::1])"
+# inputs are read-only views of any layout (read-only and strided float64 arrays need no copy); ``work`` is
+# the one array written
+_IN1 = types.Array(types.float64, 1, "A", readonly=True)
+_IN2 = types.Array(types.float64, 2, "A", readonly=True)
+TICK_SIGNATURE = types.int64(
+    types.float64, *[_IN1] * 8, _IN1, _IN2, _IN1, _IN1, _IN2, types.Array(types.float64, 1, "C")
 )
 
 
@@ -372,3 +375,22 @@ def controller_tick(t, q, dq, tau_m, wrench, gravity, q_d, dq_d, ddq_d, g, C, p,
     work[HAS_PREV_TAU] = 1.0
     work[N_SAT] = n_sat
     return n_over + (n_sat << SAT_SHIFT)
+
+
+_warm = False
+
+
+def warm_up() -> None:
+    """Resolve the tick's dispatch for writable and for read-only float64 inputs once per process (the first
+    call with a new kind of array otherwise costs a few hundred microseconds, no compilation)."""
+    global _warm
+    if _warm:
+        return
+    work = np.zeros(layout_size(0))  # n = 0: every array is the wrong length, the call returns at once
+    for readonly in (False, True):
+        vecs = [np.zeros(1) for _ in range(11)]
+        mats = [np.zeros((1, 1)) for _ in range(2)]
+        for a in vecs + mats:
+            a.flags.writeable = not readonly
+        controller_tick(0.0, *vecs[:8], vecs[8], mats[0], vecs[9], vecs[10], mats[1], work)  # type: ignore[call-arg]
+    _warm = True

@@ -187,11 +187,17 @@ def as_signal(value: object, length: int, name: str) -> np.ndarray:
         raise SignalError(name, f"dtype {arr.dtype}", expected, "complex, bool, str and object values are refused")
     if arr.shape != (length,):
         raise SignalError(name, f"shape {arr.shape}", expected)
+    if arr.dtype == np.float64:
+        return arr  # any layout, read-only or not: the tick takes it as it is
     return np.ascontiguousarray(arr, dtype=np.float64)
 
 
-def convert_inputs(measurement: Any, reference: Any, n: int) -> tuple[Any, ...]:
-    """Unpack and convert a measurement and a reference to the tick's types, or raise SignalError."""
+def convert_inputs(measurement: Any, reference: Any, n: int) -> tuple[tuple[Any, ...], bool]:
+    """Unpack and convert a measurement and a reference to the tick's types, or raise SignalError.
+
+    Returns the nine values (t, q, dq, tau_m, wrench, gravity, q_d, dq_d, ddq_d) and whether any array had
+    to be converted (False: every one was a float64 array already and is returned as is).
+    """
     try:
         t, q, dq, tau_m, wrench, gravity = measurement
     except (TypeError, ValueError) as e:
@@ -202,17 +208,15 @@ def convert_inputs(measurement: Any, reference: Any, n: int) -> tuple[Any, ...]:
         q_d, dq_d, ddq_d = reference
     except (TypeError, ValueError) as e:
         raise SignalError("reference", type(reference).__name__, "a Reference(q_d, dq_d, ddq_d)") from e
-    return (
-        _as_time(t),
-        as_signal(q, n, "measurement q"),
-        as_signal(dq, n, "measurement dq"),
-        as_signal(tau_m, n, "measurement tau_m"),
-        as_signal(wrench, 6, "measurement wrench"),
-        as_signal(gravity, 3, "measurement gravity"),
-        as_signal(q_d, n, "reference q_d"),
-        as_signal(dq_d, n, "reference dq_d"),
-        as_signal(ddq_d, n, "reference ddq_d"),
+    raw = (q, dq, tau_m, wrench, gravity, q_d, dq_d, ddq_d)
+    names = ("q", "dq", "tau_m", "wrench", "gravity", "q_d", "dq_d", "ddq_d")
+    lengths = (n, n, n, 6, 3, n, n, n)
+    arrays = tuple(
+        as_signal(v, length, f"{'reference' if i > 4 else 'measurement'} {name}")
+        for i, (v, length, name) in enumerate(zip(raw, lengths, names, strict=True))
     )
+    converted = any(a is not v for a, v in zip(arrays, raw, strict=True))
+    return (_as_time(t), *arrays), converted
 
 
 def shape_error(work: np.ndarray) -> SignalError:
