@@ -283,3 +283,28 @@ def test_plausibility_bounds_are_named_settable_and_let_sensor_noise_through(atl
             gravity=np.array([0.0, 0.0, -9.81]) + u(3, 2e-4),
         )
         assert ctrl.step(m, ref).fault == ""
+
+
+def test_read_only_and_strided_float64_inputs_are_taken_as_they_are(atlas):
+    a, b = Controller(atlas), Controller(atlas)
+    ref = Reference.hold(atlas.home)
+    for k in range(3):
+        m = good(atlas, k)
+        wide = np.zeros((atlas.n, 2))
+        wide[:, 0] = m.q
+        odd = m._replace(q=wide[:, 0], dq=m.dq.copy(), tau_m=m.tau_m.copy())  # a strided view
+        odd.dq.flags.writeable = False
+        odd.tau_m.flags.writeable = False
+        np.testing.assert_array_equal(a.step(odd, ref).tau, b.step(m, ref).tau)
+    assert len(_k.controller_tick.signatures) == 1
+
+
+def test_the_supervisor_logs_an_invalid_observer_as_a_fault_not_a_collision(atlas):
+    from reflexarm.control import ModeSupervisor
+
+    sup = ModeSupervisor(Controller(atlas, threshold=11.0), mode="precise_stiff")
+    ref = Reference.hold(atlas.home)
+    sup.step(good(atlas, 0), ref)
+    sup.controller.observer.residual[0] = np.inf
+    assert sup.step(good(atlas, 1), ref).collision
+    assert [(x.to_mode, x.cause) for x in sup.transitions] == [("precise_stiff", "task"), ("fault", "fault")]
