@@ -94,10 +94,37 @@ def project_physically_consistent(
         the increase of the weighted residual sum of squares.
 
     Raises:
-        IdentificationError: the result has no information matrix (e.g. read from an old file).
+        IdentificationError: the result has no information matrix (e.g. read from an old file), has
+            NaN/inf parameters or information, or the projection fails numerically (the solver's error is
+            chained); never a raw numpy/scipy error.
     """
     if result.information is None:
         raise IdentificationError("the identification has no information matrix; re-run identify_dynamics")
+    checked = {
+        "beta_b": result.beta_b,
+        "information matrix": result.information,
+        "friction": result.friction.parameters(),
+        "nominal inertial parameters": robot.inertial_parameters(),
+    }
+    for name, value in checked.items():
+        v = np.asarray(value, dtype=float)
+        if not np.all(np.isfinite(v)):
+            raise IdentificationError(
+                f"cannot project a {result.method} identification with non-finite {name} "
+                f"({int(np.sum(~np.isfinite(v)))} of {v.size} entries NaN/inf) onto consistent parameters; "
+                "re-identify on a clean log (identify_dynamics names the likely bad rows)"
+            )
+    try:
+        return _project(result, robot, max_nfev)
+    except (ValueError, np.linalg.LinAlgError, FloatingPointError) as e:
+        raise IdentificationError(
+            f"projecting the {result.method} identification onto physically consistent parameters failed: "
+            f"{type(e).__name__}: {e}"
+        ) from e
+
+
+def _project(result: DynamicsIdentification, robot: RobotModel, max_nfev: int) -> DynamicsIdentification:
+    assert result.information is not None  # checked by the caller
     base = result.base
     nb, n = base.n_base, base.n_joints
     H = np.asarray(result.information, dtype=float)

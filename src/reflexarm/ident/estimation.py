@@ -38,13 +38,14 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 
-from reflexarm.errors import IdentificationError
+from reflexarm.errors import IdentificationError, NonFiniteEstimateError
 from reflexarm.ident.base_parameters import (
     BaseParameters,
     compute_base_parameters,
     warn_if_ill_conditioned,
 )
 from reflexarm.ident.logs import RobotLog
+from reflexarm.ident.plausibility import check_log_against_robot, likely_bad_rows
 from reflexarm.ident.regressor import BatchRegressor
 from reflexarm.robots.friction import DEFAULT_VELOCITY_BAND, CoulombViscousFriction
 from reflexarm.robots.robot_model import RobotModel
@@ -391,6 +392,7 @@ def identify_dynamics(
     condition_limit: float = DEFAULT_CONDITION_LIMIT,
     min_speed: float = 0.0,
     progress: bool = False,
+    check_limits: bool = True,
 ) -> DynamicsIdentification:
     """Identify beta_b (and friction) from a log by weighted least squares, eq. (18).
 
@@ -409,6 +411,9 @@ def identify_dynamics(
             the velocity noise). Each joint's rows are separate equations of (19), so this drops no
             other joint's information. Default 0: every row is used.
         progress: show a progress bar over the regressor chunks.
+        check_limits: refuse logs that leave the robot's limits by far
+            (:func:`~reflexarm.ident.plausibility.check_log_against_robot`: torque beyond 10 x the effort
+            limit, velocity beyond 10 x the velocity limit, position a quarter turn outside the range).
 
     Warns:
         IllConditionedWarning: the regressor is rank deficient or its condition number (column-
@@ -417,6 +422,10 @@ def identify_dynamics(
     Raises:
         IdentificationError: unknown method, missing friction for ``sequential``, log without ddq,
             joint count mismatch.
+        NonFiniteEstimateError: (an IdentificationError) the solution is NaN/inf; the message and its
+            ``samples`` name the rows that stand out most from their columns (the likely bad rows).
+        ImplausibleDataError: (a DataError) ``check_limits`` and a log far outside the robot's limits;
+            the message names the rows, columns, values and bounds.
     """
     if method not in METHODS:
         raise IdentificationError(f"unknown identification method {method!r}; choose one of: {', '.join(METHODS)}")
@@ -431,6 +440,8 @@ def identify_dynamics(
             raise IdentificationError(
                 f"{lg.source}: log has no ddq; run reflexarm.ident.preprocess_log first (filtering and differentiation)"
             )
+        if check_limits:
+            check_log_against_robot(lg, robot)
     fixed: FrictionParameters | None = None
     if method == "sequential":
         if friction is None:
@@ -499,6 +510,7 @@ def identify_dynamics(
             clock = time.perf_counter()
             acc.add(M, keep)
             t_solve += time.perf_counter() - clock
+    _refuse_non_finite({"entries of the information matrix": acc.G}, logs)
     clock = time.perf_counter()
     notes: list[str] = []
     if given is not None:
@@ -513,6 +525,7 @@ def identify_dynamics(
         # per-joint residual variance of an unweighted fit -> Sigma of (18)
         x0 = acc.solve(np.ones(n)).x
         sigma2 = np.maximum(acc.residual_ss(x0) / np.maximum(acc.rows - p / n, 1.0), 1e-12)
+        _refuse_non_finite({"unweighted parameters": x0, "noise variances": sigma2}, logs)
         notes.append(
             "Sigma from the per-joint residual variances of an unweighted pass: "
             + ", ".join(f"{s:.3g}" for s in sigma2)
@@ -533,6 +546,7 @@ def identify_dynamics(
     s2 = sol.residual_norm**2 / dof
     std = np.sqrt(np.maximum(s2 * np.diag(sol.covariance), 0.0))
     residual_rms = np.sqrt(acc.residual_ss(x) / np.maximum(acc.rows, 1))
+    _refuse_non_finite({"parameters": x, "standard deviations": std, "residual RMS": residual_rms}, logs)
     if min_speed > 0:
         notes.append(
             f"rows with |dq_j| < {min_speed:g} rad/s left out: "
@@ -564,6 +578,24 @@ def identify_dynamics(
         notes=tuple(notes),
         timings={"regressor_s": t_reg, "solve_s": t_solve},
         information=sol.information,
+    )
+
+
+def _refuse_non_finite(values: dict[str, np.ndarray], logs: Sequence[RobotLog]) -> None:
+    """Raise :class:`NonFiniteEstimateError` naming the likely bad rows if any of ``values`` is NaN/inf."""
+    bad = {name: int(np.sum(~np.isfinite(v))) for name, v in values.items() if not np.all(np.isfinite(v))}
+    if not bad:
+        return
+    suspects = likely_bad_rows(logs)
+    what = ", ".join(f"{k} of {values[name].size} {name}" for name, k in bad.items())
+    if suspects:
+        listed = "; ".join(f"{s.source} {s} (its column's 99th percentile {s.reference:.3g})" for s in suspects)
+        cause = f"the rows that stand out most from their columns (likely bad rows): {listed}. Remove or repair them"
+    else:
+        cause = "no row stands out from its column; check the given noise variances (tiny ones overflow the weights)"
+    raise NonFiniteEstimateError(
+        f"identification gave non-finite results ({what}): the weighted least-squares problem overflowed; {cause}",
+        tuple(suspects),
     )
 
 
@@ -671,6 +703,7 @@ def validate_model(
                 f"{log.source}: validation times {log.t[0]:.4g}..{log.t[-1]:.4g} s are outside the states' "
                 f"{states.t[0]:.4g}..{states.t[-1]:.4g} s"
             )
+        _refuse_times_in_gaps(log, states)
         q = _interp_cols(states.t, states.q, log.t)
         dq = _interp_cols(states.t, states.dq, log.t)
         ddq = _interp_cols(states.t, states.ddq, log.t)
@@ -679,6 +712,25 @@ def validate_model(
     if log.wrench is not None:
         meas = _rhs(robot, replace(log, tau=meas, tau_raw=None))
     return TorqueValidation(log.t.copy(), meas.copy(), pred, label if label is not None else result.method, dq.copy())
+
+
+def _refuse_times_in_gaps(log: RobotLog, states: RobotLog) -> None:
+    """States split at long gaps (:func:`~reflexarm.ident.preprocess_log`) have no values inside a gap;
+    interpolating there would invent q, dq, ddq, so validation times inside one are refused."""
+    steps = np.diff(states.t)
+    gaps = np.flatnonzero(steps > 1.5 * np.median(steps))
+    if not gaps.size:
+        return
+    idx = np.searchsorted(states.t, log.t, side="right") - 1
+    idx = np.clip(idx, 0, steps.size - 1)
+    inside = np.isin(idx, gaps) & (log.t > states.t[idx] + 1e-9) & (log.t < states.t[idx + 1] - 1e-9)
+    if inside.any():
+        k = int(np.argmax(inside))
+        raise IdentificationError(
+            f"{log.source}: {int(inside.sum()):,} validation sample(s) fall in a gap of the states {states.source!r} "
+            f"(first at t = {log.t[k]:.6g} s, between {states.t[idx[k]]:.6g} and {states.t[idx[k] + 1]:.6g} s); "
+            "interpolating across it would invent q, dq, ddq: validate on the segments only (RobotLog.select)"
+        )
 
 
 def _interp_cols(t: np.ndarray, y: np.ndarray, tn: np.ndarray) -> np.ndarray:

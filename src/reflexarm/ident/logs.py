@@ -19,8 +19,12 @@ An ``.npz`` file holds arrays instead of columns: ``t`` (N,), ``q``, ``dq``, ``t
 
 Validation is strict and every error names the file, the column or row and the problem
 (:class:`~reflexarm.errors.DataError`): missing or unknown columns, joint columns that are not 1..n,
-a joint count that does not match the robot, NaN/inf, time going backwards. Rows are reported 0-based
-among the data rows (for a CSV file, row r is on line r + 2).
+a joint count that does not match the robot, NaN/inf, time going backwards, a column or array whose
+dtype is not a number (booleans, text, objects, complex, dates: a boolean column is not taken as 0/1),
+values beyond the absolute plausibility bounds of :mod:`reflexarm.ident.plausibility` (e.g. |tau| >
+1e6 Nm; :class:`~reflexarm.errors.ImplausibleDataError` lists the rows, columns and values). Rows are
+reported 0-based among the data rows (for a CSV file, row r is on line r + 2). The bounds relative to a
+robot's limits are applied by :func:`~reflexarm.ident.identify_dynamics`, which knows the robot.
 
 Real logs are messy, so two defects are repaired (with a :class:`LogRepairWarning` saying what was done)
 instead of rejected, unless ``repair=False``:
@@ -39,8 +43,12 @@ instead of rejected, unless ``repair=False``:
 
 :func:`preprocess_log` then resamples to a uniform grid (positions by cubic Hermite interpolation with
 the measured velocities as slopes, velocities by a cubic spline, the other signals linearly; only gaps
-are actually filled when the log is already on the grid) and filters with a zero-phase Butterworth low-
-pass (``scipy.signal.filtfilt``, order 4, default cutoff :data:`DEFAULT_CUTOFF_HZ` for q, dq and ddq),
+are actually filled when the log is already on the grid). Gaps longer than ``max_gap`` (default
+:data:`~reflexarm.ident.preprocessing.DEFAULT_MAX_GAP_PERIODS` periods) are not filled: they split the
+log into segments, each resampled, filtered and differentiated on its own, and the grid's size is
+checked against :data:`~reflexarm.ident.preprocessing.MAX_GRID_FACTOR` before anything is allocated.
+It then filters with a zero-phase Butterworth low-pass (``scipy.signal.filtfilt``, order 4, default
+cutoff :data:`DEFAULT_CUTOFF_HZ` for q, dq and ddq),
 and derives ddq as the central difference of the filtered dq. The torques are filtered with the same
 filter for identification (the regressor and the torque then see the same filter, Gautier's parallel
 filtering); the raw torques stay available for validation.
@@ -58,6 +66,8 @@ import numpy as np
 import numpy.typing as npt
 
 from reflexarm.errors import DataError
+from reflexarm.ident._retime import _TICK_TOLERANCE, _estimate_period, _retime
+from reflexarm.ident.plausibility import check_absolute_bounds
 
 __all__ = [
     "DEFAULT_CUTOFF_HZ",
@@ -74,10 +84,6 @@ __all__ = [
 DEFAULT_CUTOFF_HZ = 10.0
 #: Butterworth order of the zero-phase filter (applied forwards and backwards: effective order 8).
 DEFAULT_FILTER_ORDER = 4
-#: Re-timing is refused if it would move a sample by more than this many nominal periods.
-MAX_RETIME_SHIFT = 6.0
-#: A step counts as regular if it is within this fraction of a period of a whole number of periods.
-_TICK_TOLERANCE = 0.2
 
 WRENCH_COLUMNS = ("fx", "fy", "fz", "mx", "my", "mz")
 _JOINT_GROUPS = ("q", "dq", "tau", "ddq")
@@ -116,7 +122,7 @@ class RobotLog:
 
     def __post_init__(self) -> None:
         where = self.source
-        t = np.asarray(self.t, dtype=float).reshape(-1)
+        t = _numeric(self.t, where, "t").reshape(-1)
         N = t.size
         if N < 2:
             raise DataError(f"{where}: a log needs at least 2 samples; got {N}")
@@ -127,7 +133,7 @@ class RobotLog:
             if value is None:
                 arrays[name] = None
                 continue
-            arr = np.asarray(value, dtype=float)
+            arr = _numeric(value, where, name)
             if arr.ndim == 1:
                 arr = arr[:, None]
             if arr.ndim != 2 or arr.shape[0] != N:
@@ -138,7 +144,7 @@ class RobotLog:
                 raise DataError(f"{where}: {name} has {arr.shape[1]} joints; q has {n}")
             arrays[name] = arr
         if self.wrench is not None:
-            w = np.asarray(self.wrench, dtype=float)
+            w = _numeric(self.wrench, where, "wrench")
             if w.shape != (N, 6):
                 raise DataError(f"{where}: wrench must have shape ({N}, 6); got {w.shape}")
             arrays["wrench"] = w
@@ -152,6 +158,7 @@ class RobotLog:
                 row = int(np.argwhere(bad)[0][0])
                 col = "" if checked.ndim == 1 else f"[:, {int(np.argwhere(bad)[0][1])}]"
                 raise DataError(f"{where}: {name}{col} is {_describe(checked[bad][0])} at row {row}")
+        check_absolute_bounds(where, t, arrays)
         steps = np.diff(t)
         if np.any(steps <= 0):
             row = int(np.argmax(steps <= 0)) + 1
@@ -237,15 +244,15 @@ class RobotLog:
     ) -> RobotLog:
         """Build a log from arrays with the same checks and repairs as :func:`load_log`."""
         data = {
-            "t": np.asarray(t, dtype=float).reshape(-1),
-            "q": _as2d(q),
-            "dq": _as2d(dq),
-            "tau": _as2d(tau),
+            "t": _numeric(t, source, "t").reshape(-1),
+            "q": _as2d(_numeric(q, source, "q")),
+            "dq": _as2d(_numeric(dq, source, "dq")),
+            "tau": _as2d(_numeric(tau, source, "tau")),
         }
         if ddq is not None:
-            data["ddq"] = _as2d(ddq)
+            data["ddq"] = _as2d(_numeric(ddq, source, "ddq"))
         if wrench is not None:
-            data["wrench"] = _as2d(wrench)
+            data["wrench"] = _as2d(_numeric(wrench, source, "wrench"))
         return _finish(data, source, n_joints, repair, period)
 
     def to_columns(self) -> dict[str, np.ndarray]:
@@ -270,6 +277,29 @@ def _describe(x: float) -> str:
 def _as2d(x: npt.ArrayLike) -> np.ndarray:
     arr = np.asarray(x, dtype=float)
     return arr[:, None] if arr.ndim == 1 else arr
+
+
+#: dtype kinds a log column may have: signed/unsigned integers and floats. Booleans, text, objects,
+#: complex numbers, dates and durations are refused: a boolean column taken as 0/1 joint values, or
+#: text parsed leniently, is a silent wrong number.
+_NUMERIC_KINDS = "iuf"
+_KIND_NAMES = {"b": "boolean", "O": "text or Python objects", "U": "text", "S": "bytes", "c": "complex",
+               "M": "date-time", "m": "time delta", "V": "raw bytes"}  # fmt: skip
+
+
+def _refuse_dtype(where: str, what: str, dtype: object, kind: str) -> DataError:
+    return DataError(
+        f"{where}: {what} has dtype {dtype} ({_KIND_NAMES.get(kind, 'not a number')}); log values must be "
+        "integers or floats (SI units): convert the column, e.g. a boolean flag is not a joint value"
+    )
+
+
+def _numeric(x: npt.ArrayLike, where: str, name: str) -> np.ndarray:
+    """``x`` as float64, refusing non-numeric dtypes (bool, text, objects, complex) by name."""
+    arr = np.asarray(x)
+    if arr.dtype.kind not in _NUMERIC_KINDS:
+        raise _refuse_dtype(where, f"array {name!r}", arr.dtype, arr.dtype.kind)
+    return np.asarray(arr, dtype=float)
 
 
 # ---------------------------------------------------------------------------------------------- loading
@@ -359,11 +389,16 @@ def _read_table(p: Path, suffix: str) -> dict[str, np.ndarray]:
     out: dict[str, np.ndarray] = {}
     for c in columns:
         col = df[c]
+        kind = str(getattr(col.dtype, "kind", "O"))
+        if kind not in _NUMERIC_KINDS:
+            bad = next((i for i, v in enumerate(col.tolist()) if not _is_number(v)), None)
+            if kind in "OUS" and bad is not None:
+                raise DataError(f"{where}: column {c!r} row {bad}: {col.iloc[bad]!r} is not a number")
+            raise _refuse_dtype(where, f"column {c!r}", col.dtype, kind)
         try:
             values = np.asarray(col.to_numpy(dtype=float, na_value=np.nan), dtype=float)
-        except (TypeError, ValueError) as e:
-            bad = next((i for i, v in enumerate(col.tolist()) if not _is_number(v)), None)
-            raise DataError(f"{where}: column {c!r} row {bad}: {col.iloc[bad]!r} is not a number") from e
+        except (TypeError, ValueError) as e:  # pragma: no cover - numeric kinds convert
+            raise _refuse_dtype(where, f"column {c!r}", col.dtype, kind) from e
         bad = ~np.isfinite(values)
         if bad.any():
             r = int(np.argmax(bad))
@@ -403,14 +438,7 @@ def _read_npz(p: Path) -> dict[str, np.ndarray]:
     for k in ("t", "q", "dq", "tau"):
         if k not in arrays:
             raise DataError(f"{where}: array {k!r} missing; found: {', '.join(arrays) or 'nothing'}")
-    out = {}
-    for k, a in arrays.items():
-        try:
-            arr = np.asarray(a, dtype=float)
-        except (TypeError, ValueError) as e:
-            raise DataError(f"{where}: array {k!r} is not numeric ({a.dtype})") from e
-        out[k] = arr
-    return out
+    return {k: _numeric(a, where, k) for k, a in arrays.items()}
 
 
 def _finish(
@@ -437,6 +465,7 @@ def _finish(
             pos = np.argwhere(bad)[0]
             col = k if a.ndim == 1 else (WRENCH_COLUMNS[pos[1]] if k == "wrench" else f"{k}_{pos[1] + 1}")
             raise DataError(f"{where}: column {col!r} row {pos[0]} is {_describe(a[tuple(pos)])}")
+    check_absolute_bounds(where, t, {k: v for k, v in data.items() if k != "t"})
     if N < 2:
         raise DataError(f"{where}: a log needs at least 2 samples; got {N}")
     steps = np.diff(t)
@@ -504,106 +533,6 @@ def _finish(
     return log
 
 
-def _step_durations(q: np.ndarray, dq: np.ndarray) -> np.ndarray:
-    """Duration of each step implied by the measured displacement and mean velocity [s] (NaN if at rest)."""
-    v = 0.5 * (dq[1:] + dq[:-1])
-    vv = np.sum(v * v, axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(vv > 0, np.sum(v * (q[1:] - q[:-1]), axis=1) / vv, np.nan)
-
-
-def _estimate_period(t: np.ndarray, q: np.ndarray, dq: np.ndarray) -> float:
-    """The sample period: the median host step, or, when the host steps are irregular, the typical step
-    duration implied by q and dq (the robot's own clock), adjusted so that a whole number of periods
-    spans the log by the host clock (which is right on average)."""
-    steps = np.diff(t)
-    T = float(np.median(steps[steps > 0]))
-    ticks = steps / T
-    if not np.any(np.abs(ticks - np.maximum(np.round(ticks), 1.0)) > _TICK_TOLERANCE):
-        return T
-    d = _step_durations(q, dq)
-    d = d[np.isfinite(d) & (d > 0)]
-    if d.size < 10:
-        return T
-    T_q = float(np.median(d))
-    one = d[(d > 0.5 * T_q) & (d < 1.5 * T_q)]  # the single-tick cluster
-    if one.size >= 10:
-        T_q = float(np.median(one))
-    total = (t[-1] - t[0]) / T_q
-    return float((t[-1] - t[0]) / max(round(total), 1)) if total > 0 else T
-
-
-def _retime(t: np.ndarray, q: np.ndarray, dq: np.ndarray, T: float, where: str) -> tuple[np.ndarray, str]:
-    """Re-time samples on a grid of period T; see the module docstring."""
-    steps = np.diff(t)
-    v = 0.5 * (dq[1:] + dq[:-1])
-    disp = q[1:] - q[:-1]
-    est = _step_durations(q, dq) / T
-    ok = np.isfinite(est) & (np.round(est) >= 1) & (np.abs(est - np.round(est)) < _TICK_TOLERANCE)
-    new_t = _align_ticks(t, np.nan_to_num(est), ok, T)
-    lo, hi = steps.min() * 1e3, steps.max() * 1e3
-
-    def inconsistency(tt: np.ndarray) -> float:
-        r = disp - v * np.diff(tt)[:, None]
-        return float(np.sqrt(np.mean(r**2)) / max(np.sqrt(np.mean((v * T) ** 2)), 1e-300))
-
-    if new_t is None:
-        fixed = t.copy()
-        for i in range(1, fixed.size):
-            if fixed[i] <= fixed[i - 1]:
-                fixed[i] = fixed[i - 1] + 1e-3 * T
-        msg = (
-            f"{where}: time steps are irregular ({lo:.3g} to {hi:.3g} ms around a {T * 1e3:.4g} ms period) and no "
-            f"re-timing on the period grid stays within {MAX_RETIME_SHIFT:g} periods of the host clock; kept the host "
-            "time stamps (made strictly increasing)"
-        )
-        return fixed, msg
-    ticks = np.round(np.diff(new_t) / T).astype(np.int64)
-    shift = np.abs(new_t - t)
-    gaps = int(np.sum(ticks > 1))
-    msg = (
-        f"{where}: time stamps jitter ({lo:.3g} to {hi:.3g} ms steps around a {T * 1e3:.4g} ms period); re-timed "
-        f"{t.size:,} samples on the {T * 1e3:.4g} ms grid, aligning the step counts implied by q and dq "
-        f"({int(ok.sum()):,} of {steps.size:,} steps unambiguous) with the host clock; largest shift "
-        f"{shift.max() * 1e3:.3g} ms; mismatch |delta q - dq dt| / |dq T| {inconsistency(t):.3f} -> "
-        f"{inconsistency(new_t):.3f}; {gaps:,} gaps of 2 to {int(ticks.max())} periods remain (resample to fill them)"
-    )
-    return new_t, msg
-
-
-def _align_ticks(t: np.ndarray, est: np.ndarray, ok: np.ndarray, T: float) -> np.ndarray | None:
-    """Most likely tick index of each sample (Viterbi over offsets from the host-rounded index).
-
-    Sample i sits on tick n_i = h_i + d_i, h_i = round((t_i - t_0) / T), |d_i| <= W. The cost of a path
-    is sum_i ((T n_i - (t_i - t_0)) / T)^2 (host clock, jitter of about one period) plus, on steps where
-    q/dq give an unambiguous duration ``est`` [periods], ((est - (n_i - n_{i-1})) / 0.1)^2; every step
-    must advance by at least one tick. Returns None if no path exists within the window.
-    """
-    W = int(MAX_RETIME_SHIFT)
-    d = np.arange(-W, W + 1)
-    h = np.round((t - t[0]) / T).astype(np.int64)
-    rel = (t - t[0]) / T
-    cost = (h[0] + d - rel[0]) ** 2
-    cost[d != 0] = np.inf  # the first sample defines the grid
-    back = np.empty((t.size, d.size), dtype=np.int64)
-    cols = np.arange(d.size)
-    for i in range(1, t.size):
-        k = (h[i] + d)[None, :] - (h[i - 1] + d)[:, None]
-        edge = np.where(k < 1, np.inf, 0.0)
-        if ok[i - 1]:
-            edge = edge + ((est[i - 1] - k) / 0.1) ** 2
-        total = cost[:, None] + edge
-        back[i] = np.argmin(total, axis=0)
-        cost = total[back[i], cols] + (h[i] + d - rel[i]) ** 2
-    if not np.isfinite(cost.min()):
-        return None
-    path = np.empty(t.size, dtype=np.int64)
-    path[-1] = int(np.argmin(cost))
-    for i in range(t.size - 1, 0, -1):
-        path[i - 1] = back[i][path[i]]
-    return t[0] + T * (h + d[path]).astype(float)
-
-
 # ---------------------------------------------------------------------------------------------- saving
 def save_log(log: RobotLog, path: str | os.PathLike[str]) -> Path:
     """Write ``log`` as ``.csv``, ``.parquet`` or ``.npz`` (by suffix) in the documented schema."""
@@ -631,95 +560,5 @@ def save_log(log: RobotLog, path: str | os.PathLike[str]) -> Path:
     return p
 
 
-# ---------------------------------------------------------------------------------------------- preprocessing
-def preprocess_log(
-    log: RobotLog,
-    *,
-    cutoff_hz: float | None = DEFAULT_CUTOFF_HZ,
-    order: int = DEFAULT_FILTER_ORDER,
-    period: float | None = None,
-    filter_torque: bool = True,
-) -> RobotLog:
-    """Uniform grid, zero-phase low-pass filter, ddq by differentiation.
-
-    Args:
-        log: a validated log (possibly with gaps).
-        cutoff_hz: Butterworth cutoff for q, dq (and ddq, derived from the filtered dq) [Hz]; None: no
-            filtering (ddq is then the central difference of the raw dq).
-        order: Butterworth order (applied forwards and backwards by ``filtfilt``: zero phase).
-        period: grid period [s] (default: the log's median step).
-        filter_torque: filter the torques with the same filter (kept raw in ``tau_raw``).
-
-    Returns:
-        A new log on the uniform grid with ``ddq`` filled (a ddq given in the log is kept, resampled).
-    """
-    from scipy.interpolate import CubicHermiteSpline, CubicSpline
-    from scipy.signal import butter, filtfilt
-
-    T = log.period if period is None else float(period)
-    if not T > 0:
-        raise DataError(f"{log.source}: resampling period must be positive; got {period!r}")
-    notes = []
-    if log.is_uniform and period is None:
-        t = log.t
-        q, dq, tau = log.q, log.dq, log.tau
-        ddq, wrench = log.ddq, log.wrench
-    else:
-        k = int(np.floor((log.t[-1] - log.t[0]) / T + 1e-9)) + 1
-        t = log.t[0] + T * np.arange(k)
-        q = CubicHermiteSpline(log.t, log.q, log.dq, axis=0)(t)
-        dq = CubicSpline(log.t, log.dq, axis=0)(t)
-        tau = _interp(log.t, log.tau, t)
-        ddq = None if log.ddq is None else _interp(log.t, log.ddq, t)
-        wrench = None if log.wrench is None else _interp(log.t, log.wrench, t)
-        on_grid = np.isin(np.round((log.t - log.t[0]) / T).astype(np.int64), np.arange(k)).sum()
-        notes.append(
-            f"resampled {len(log):,} samples to a uniform {T * 1e3:.4g} ms grid of {k:,} samples "
-            f"(q cubic Hermite with dq as slopes, dq cubic spline, other signals linear; "
-            f"{k - min(on_grid, k):,} grid points filled)"
-        )
-    fs = 1.0 / T
-    tau_raw = log.measured_torque if (log.is_uniform and period is None) else _interp(log.t, log.measured_torque, t)
-    if cutoff_hz is not None:
-        if not 0 < cutoff_hz < 0.5 * fs:
-            raise DataError(
-                f"{log.source}: filter cutoff {cutoff_hz!r} Hz must be between 0 and the Nyquist frequency "
-                f"{0.5 * fs:.4g} Hz"
-            )
-        b, a = butter(order, cutoff_hz / (0.5 * fs))
-        # odd extension over two periods of the cutoff, so the edge transient of the filter dies out
-        padlen = min(max(3 * max(len(a), len(b)), int(round(2 * fs / cutoff_hz))), t.size - 1)
-        q = filtfilt(b, a, q, axis=0, padlen=padlen)
-        dq = filtfilt(b, a, dq, axis=0, padlen=padlen)
-        if filter_torque:
-            tau = filtfilt(b, a, tau, axis=0, padlen=padlen)
-        if wrench is not None:
-            wrench = filtfilt(b, a, wrench, axis=0, padlen=padlen)
-        notes.append(
-            f"zero-phase Butterworth low-pass (order {order}, forwards and backwards) at {cutoff_hz:g} Hz on q, dq"
-            + (", tau" if filter_torque else "")
-            + (", wrench" if wrench is not None else "")
-        )
-    if ddq is None:
-        ddq = np.gradient(dq, T, axis=0)
-        notes.append("ddq = central difference of the " + ("filtered " if cutoff_hz is not None else "") + "dq")
-    elif cutoff_hz is not None:
-        ddq = filtfilt(b, a, ddq, axis=0, padlen=padlen)
-    return RobotLog(
-        t=t,
-        q=q,
-        dq=dq,
-        tau=tau,
-        ddq=ddq,
-        wrench=wrench,
-        tau_raw=tau_raw if (filter_torque and cutoff_hz is not None) else None,
-        source=log.source,
-        notes=log.notes + tuple(notes),
-    )
-
-
-def _interp(t: np.ndarray, y: np.ndarray, tn: np.ndarray) -> np.ndarray:
-    out = np.empty((tn.size, y.shape[1]))
-    for j in range(y.shape[1]):
-        out[:, j] = np.interp(tn, t, y[:, j])
-    return out
+# preprocessing lives in its own module; re-exported here, where it has always been imported from
+from reflexarm.ident.preprocessing import preprocess_log  # noqa: E402
