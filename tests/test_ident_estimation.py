@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import json
 import warnings
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from excitation_data import fixed_excitation
 
 from reflexarm.errors import IdentificationError, ModelError
 from reflexarm.ident import (
@@ -34,11 +36,12 @@ TORQUE_NOISE_RMS = PAPER_NOISE.tau_m / np.sqrt(3)
 @pytest.fixture(scope="module")
 def setup(atlas):
     base = compute_base_parameters(atlas)
-    # a short optimization (the optimizer itself is tested in test_ident_excitation.py): enough to bring
-    # the condition number from ~1e3 to ~1e2
-    design = optimize_excitation(atlas, base=base, n_harmonics=4, n_grid=100, n_samples=60, maxiter=12, seed=0)
-    validation = optimize_excitation(atlas, base=base, maxiter=0, seed=1).initial  # a different trajectory
-    assert design.condition_optimized < 0.2 * design.condition_initial
+    # a fixed, optimized excitation (data: an optimizer run differs between machines, see
+    # excitation_data.py; the optimizer itself is tested in test_ident_excitation.py)
+    trajectory, _ = fixed_excitation()
+    design = SimpleNamespace(trajectory=trajectory)
+    # a different trajectory: seeded random coefficients scaled into the limits, no optimizer (maxiter=0)
+    validation = optimize_excitation(atlas, base=base, maxiter=0, seed=1).initial
     return atlas, base, design, validation
 
 
@@ -73,26 +76,113 @@ def test_noise_free_recovery_of_the_true_base_parameters(setup, method):
     assert res.condition_number < 100
 
 
+#: Every k-th sample enters the bias formula (the states are smooth at 1 kHz; both sums scale alike).
+_BIAS_STRIDE = 10
+#: Off each end of a filtered noise record: the filter's edge transient [samples].
+_EDGE = 2000
+
+
+def _acceleration_noise_rms(t: np.ndarray, n: int) -> np.ndarray:
+    """RMS of the ddq error preprocess_log makes from the paper's velocity noise alone, per joint [rad/s^2]:
+    the noise run through the same filter and differentiation (~0.145 rad/s^2 at 10 Hz)."""
+    rng = np.random.default_rng(5)
+    zero = np.zeros((t.size, n))
+    dq = rng.uniform(-PAPER_NOISE.dq, PAPER_NOISE.dq, zero.shape)
+    ddq = preprocess_log(RobotLog.from_arrays(t, zero, dq, zero, source="noise")).ddq
+    return ddq[_EDGE:-_EDGE].std(axis=0)
+
+
+def _errors_in_variables_error(robot, base, states, res, truth, accel_rms, q, dq, ddq):
+    """Predicted model error per joint along (q, dq, ddq) from the first-order errors-in-variables bias.
+
+    With F the rows the fit used, W = Sigma^-1 its weights and dF the regressor error of a ddq error e
+    (independent per joint, RMS s_i): E[F_m^T W F_m] = F^T W F + E[dF^T W dF], so the weighted least
+    squares estimate is biased by ``d_beta = -(F^T W F)^-1 E[dF^T W dF] beta`` with
+    ``E[dF^T W dF] = sum_k sum_j w_j sum_i s_i^2 D_kji^T D_kji``, D_kji = dY_j/dddq_i at sample k (Y is
+    affine in ddq: D = Y(q, 0, e_i) - Y(q, 0, 0)). Returns RMS over the samples of Y(q, dq, ddq) d_beta.
+    """
+    n = robot.n
+    reg = BatchRegressor(robot)
+    k = slice(None, None, _BIAS_STRIDE)
+    qs, dqs, ddqs = states.q[k], states.dq[k], states.ddq[k]
+    zero = np.zeros_like(qs)
+    combined = res.method == "combined"
+
+    def columns(Y: np.ndarray, v: np.ndarray, friction: bool) -> np.ndarray:
+        if not combined:
+            return Y
+        Ff = np.zeros((v.shape[0], n, 2 * n))
+        j = np.arange(n)
+        Ff[:, j, j], Ff[:, j, n + j] = (v, np.sign(v)) if friction else (0.0, 0.0)
+        return np.concatenate([Y, Ff], axis=2)
+
+    F = columns(base.select(reg.compute_regressor(qs, dqs, ddqs)), dqs, True)
+    Y0 = base.select(reg.compute_regressor(qs, zero, zero))
+    D = [columns(base.select(reg.compute_regressor(qs, zero, np.eye(n)[i] + zero)) - Y0, dqs, False) for i in range(n)]
+    keep = np.abs(dqs) >= PAPER_NOISE.dq  # the rows the fit kept (min_speed)
+    w = 1.0 / res.noise_variance
+    A = sum(w[j] * F[keep[:, j], j].T @ F[keep[:, j], j] for j in range(n))
+    B = sum(w[j] * accel_rms[i] ** 2 * D[i][keep[:, j], j].T @ D[i][keep[:, j], j] for j in range(n) for i in range(n))
+    beta = base.base_from_standard(robot.inertial_parameters())
+    if combined:
+        beta = np.r_[beta, truth.viscous, truth.coulomb]
+    d_beta = -np.linalg.solve(A, B @ beta)
+    err = columns(base.select(reg.compute_regressor(q, dq, ddq)), dq, True) @ d_beta
+    return np.sqrt(np.mean(err**2, axis=0))
+
+
 @pytest.mark.parametrize("method", ["sequential", "combined"])
 def test_paper_noise_predicts_validation_torques_within_twice_the_noise(setup, method):
-    """Paper noise on q, dq and tau; ddq from the filtered dq. The identified model, evaluated along the
-    validation motion (a different trajectory), predicts the measured validation torques within 2x the
-    torque noise RMS on every joint, i.e. its own error is below ~1.7x the noise.
+    """What is checked: paper noise on q, dq and tau of the identification log (fixed excitation, two
+    periods); ddq from the filtered dq. The identified model is evaluated at the TRUE states of a
+    different validation motion and compared with the measured (noisy) validation torques. Then
+    ``RMSE_j^2 = sigma^2 + e_j^2`` (the validation noise is independent of the model), e_j the model's
+    own error, and the test derives e_j instead of assuming it:
 
-    Rows with |dq_j| below the velocity noise level (5.5e-2 rad/s) are left out of the fit
-    (``min_speed``): there the measured velocity's sign, hence the Coulomb torque of up to 10 Nm, is a
-    coin flip, and those rows alone would bias the estimate by several times the noise.
+    * the torque noise alone gives a model error of sigma * sqrt(p / N) ~ 0.02 sigma (p <= 57
+      parameters, N = 40,000 rows per joint; filtering keeps the noise's low-frequency content, so it
+      does not change this);
+    * the dominant term is errors-in-variables: differentiating the filtered velocity noise gives a ddq
+      error of s ~ 0.145 rad/s^2 per joint (measured by preprocessing the noise alone), i.e. a regressor
+      error of M(q) s ~ 4 sigma. Its random part is concentrated at 5-10 Hz, where the regressor has
+      no energy, but its square biases the estimate; :func:`_errors_in_variables_error` gives that
+      bias's model error e_bias_j from the first-order formula.
+
+    Asserted: e_j <= 1.3 e_bias_j + 0.15 sigma per joint. The factor 1.3 covers the formula's neglected
+    higher orders and the realised (not expected) noise Gram; the 0.15 sigma the torque-noise term
+    (0.02 sigma) and the random part of the errors-in-variables term (its regressor-band content,
+    <= 0.1 sigma). Over three excitations (condition 40-153) and both methods the measured e_j / e_bias_j
+    were 0.7-1.3 where e_bias > 0.1 sigma. Hence RMSE_j <= sqrt(sigma^2 + bound_j^2), which for this
+    trajectory is below 2 sigma (checked): the test's name is a consequence of the derived bound.
+
+    The torques are identified unfiltered (``filter_torque=False``): the low-pass filter smooths the
+    Coulomb steps at velocity reversals while sign(dq) stays sharp, an error the formula does not hold
+    (with filtered torques the combined method's e_j on joint 4 is 1.2 sigma against e_bias 0.23 sigma).
+    Rows with |dq_j| below the velocity noise level (5.5e-2 rad/s) are left out (``min_speed``): there
+    the sign of the measured velocity, hence the Coulomb torque of up to 10 Nm, is a coin flip.
     """
     robot, base, design, validation = setup
     truth = FrictionParameters.from_model(robot.friction)
     log, _ = _simulate(robot, design.trajectory.with_periods(2), noise=PAPER_NOISE, seed=1)
-    res = identify_dynamics(
-        robot, preprocess_log(log), method=method, friction=truth, base=base, min_speed=PAPER_NOISE.dq
-    )
-    vlog, (q, dq, ddq, _) = _simulate(robot, validation, noise=PAPER_NOISE, seed=2)
+    states = preprocess_log(log, filter_torque=False)
+    res = identify_dynamics(robot, states, method=method, friction=truth, base=base, min_speed=PAPER_NOISE.dq)
+    vlog, (q, dq, ddq, tau) = _simulate(robot, validation, noise=PAPER_NOISE, seed=2)
     pred = res.compute_torque(robot, q, dq, ddq)
+    model_error = np.sqrt(np.mean((pred - tau) ** 2, axis=0))
+    accel_rms = _acceleration_noise_rms(log.t, robot.n)
+    e_bias = _errors_in_variables_error(robot, base, states, res, truth, accel_rms, q, dq, ddq)
+    bound = 1.3 * e_bias + 0.15 * TORQUE_NOISE_RMS
+    assert np.all(model_error <= bound), (
+        f"model error / sigma {model_error / TORQUE_NOISE_RMS} above the errors-in-variables bound "
+        f"{bound / TORQUE_NOISE_RMS}"
+    )
+    # the measured validation torques: sigma^2 + e^2, up to the sampling error of an MSE over 10,000
+    # samples of uniform noise (relative std sqrt(0.8 / 10,000) = 0.9 %, so 3 std of the MSE bound
+    # the RMSE within 1.35 %; 2.7 % is used)
     rmse = np.sqrt(np.mean((pred - vlog.tau) ** 2, axis=0))
-    assert np.all(rmse <= 2 * TORQUE_NOISE_RMS), f"validation RMSE / noise RMS: {rmse / TORQUE_NOISE_RMS}"
+    expected = np.sqrt(TORQUE_NOISE_RMS**2 + bound**2)
+    assert np.all(rmse <= expected * (1 + 3 * 0.009)), f"validation RMSE / noise RMS: {rmse / TORQUE_NOISE_RMS}"
+    assert np.all(expected <= 2 * TORQUE_NOISE_RMS), f"derived bound / noise: {expected / TORQUE_NOISE_RMS}"
 
 
 def test_noise_variances_are_estimated_per_joint_and_weight_the_fit(setup):
@@ -175,9 +265,11 @@ def test_inconsistent_estimate_is_refused_then_projected(setup, tmp_path):
     # the exact estimate is already consistent: the projection must leave it (almost) where it is
     kept = project_physically_consistent(exact, robot)
     np.testing.assert_allclose(kept.beta_b, exact.beta_b, atol=1e-6 * np.linalg.norm(exact.beta_b))
-    i = base.independent.tolist().index(robot.inertial_parameter_names().index("Iyy_l_arm_wry2"))
-    beta = exact.beta_b.copy()
-    beta[i] -= 0.05  # far below zero: the last link's inertia about its own axis becomes negative
+    # the last link's inertia about its own axis far below zero, mapped to base parameters (which pivot
+    # column carries it is the QR's choice, so the change is made on the standard parameters)
+    pi = robot.inertial_parameters()
+    pi[robot.inertial_parameter_names().index("Iyy_l_arm_wry2")] -= 0.05
+    beta = exact.beta_b + base.base_from_standard(pi) - base.base_from_standard(robot.inertial_parameters())
     from dataclasses import replace
 
     bad = replace(exact, beta_b=beta, friction=truth)
