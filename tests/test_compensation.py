@@ -238,3 +238,42 @@ def test_msie_matches_its_definition():
     np.testing.assert_allclose(msie_per_joint(t, q, np.zeros_like(q)), [a**2 / 2, 0.0], atol=1e-9)
     np.testing.assert_allclose(normalize_by_max([1.0, 4.0, 2.0]), [0.25, 1.0, 0.5])
     assert window_mean(t, q[:, 1], 0.0, 1.0) == 0.0
+
+
+def test_an_identified_model_file_is_the_controllers_model(atlas, tmp_path):
+    # --model FILE: the file's parameters (here those of a perturbed model written as an identification
+    # result) become the controller's model, exactly; a level on top of it is refused
+    from reflexarm.experiments.compensation import controller_model
+    from reflexarm.ident import compute_base_parameters, save_identified_model
+    from reflexarm.ident.estimation import DynamicsIdentification, FrictionParameters
+    from reflexarm.robots import perturb_model
+
+    pert = perturb_model(atlas, 0.2, seed=5)
+    base = compute_base_parameters(atlas)
+    pi = pert.inertial_parameters()
+    n = atlas.n
+    res = DynamicsIdentification(
+        method="sequential",
+        robot_name=atlas.name,
+        joint_names=tuple(atlas.joint_names),
+        base=base,
+        beta_b=base.base_from_standard(pi),
+        friction=FrictionParameters.from_model(pert.friction),
+        beta_std=np.zeros(base.n_base),
+        noise_variance=np.ones(n),
+        condition_number=1.0,
+        n_samples=1,
+        residual_rms=np.zeros(n),
+        physical_parameters=pi,
+    )
+    path = save_identified_model(res, atlas, tmp_path / "model.json")
+    setup = CompensationSetup(model_file=str(path))
+    model = controller_model(setup)
+    q = np.random.default_rng(0).uniform(atlas.lower_limit, atlas.upper_limit)
+    # tolerance: the file stores the parameters as JSON decimal text (17 significant digits round-trip)
+    np.testing.assert_allclose(model.compute_gravity(q), pert.compute_gravity(q), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(model.compute_mass_matrix(q), pert.compute_mass_matrix(q), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(model.friction.coulomb, pert.friction.coulomb, rtol=1e-12)
+    assert np.abs(model.compute_gravity(q) - atlas.compute_gravity(q)).max() > 0.1  # not the true model
+    with pytest.raises(ConfigError, match="the setup uses the identified model .* got model_error 0.1 as well"):
+        controller_model(setup, 0.1)
