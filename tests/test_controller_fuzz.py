@@ -142,6 +142,7 @@ def test_no_input_disables_or_misleads_the_controller(arm, config):
         counts[expect] += 1
         tau = cmd.tau
         plant.step(tau)
+    print(f"{arm} / {config}: {counts}")  # shown with pytest -s
     assert min(counts.values()) > 0.02 * TICKS, counts  # every kind of tick occurred
     # detection intact: recovery after faults is automatic (no latch happened: nothing to reset)
     assert not ctrl.observer_invalid and not ctrl.reacted

@@ -104,7 +104,7 @@ TIME_NOT_INCREASING = -4  # t = F_VALUE <= last accepted t = F_LO
 MODEL_NON_FINITE = -5  # a Pinocchio term is NaN/inf
 MASS_NOT_POSITIVE_DEFINITE = -6  # the damping update's Cholesky factorization failed
 OBSERVER_INVALID = -7  # latched until reset
-OUTPUT_NON_FINITE = -8  # the control law gave NaN/inf (never expected with accepted inputs)
+OUTPUT_NON_FINITE = -8  # the control law gave NaN/inf (never expected with accepted inputs); latches as -7
 
 SAT_SHIFT = 8  # accepted return value: n_over + (n_saturated << SAT_SHIFT)
 
@@ -340,9 +340,9 @@ def controller_tick(t, q, dq, tau_m, wrench, gravity, q_d, dq_d, ddq_d, g, C, p,
                 elif r < -limit:
                     r = -limit
                 tau -= eps_w * r
-        if not np.isfinite(tau):
+        if not np.isfinite(tau):  # the observers are part-way updated: they latch as invalid either way
+            work[OBS_INVALID] = 1.0
             if not np.isfinite(obs_acc):
-                work[OBS_INVALID] = 1.0
                 return OBSERVER_INVALID
             return _fault(work, OUTPUT_NON_FINITE, SIG_MODEL, i, tau, 0.0, 0.0)
         # bounded torque: per-tick rate limit, then saturation

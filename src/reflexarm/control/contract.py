@@ -29,7 +29,7 @@ FAULT_CODES: dict[int, str] = {
     _k.MODEL_NON_FINITE: "non-finite dynamics terms of the model",
     _k.MASS_NOT_POSITIVE_DEFINITE: "mass matrix not positive definite",
     _k.OBSERVER_INVALID: "observer state invalid (latched until reset)",
-    _k.OUTPUT_NON_FINITE: "non-finite control law",
+    _k.OUTPUT_NON_FINITE: "non-finite control law (latched until reset, as an invalid observer)",
 }
 
 _SIGNALS = {
@@ -66,7 +66,9 @@ class InputBounds:
     Attributes:
         position_margin: q and q_d may exceed the model's joint limits by this much [rad] (joints without
             finite limits are only checked for finiteness).
-        velocity_factor: |dq| and |dq_d| up to this multiple of the model's velocity limit [-].
+        velocity_factor: |dq| and |dq_d| up to this multiple of the model's velocity limit [-]. Wide
+            because a plant without actuator dynamics (an ideal simulation) spins a light wrist to ~4x its
+            velocity limit within one tick of a 30 Nm step.
         torque_factor: |tau_m| up to this multiple of the controller's torque limit (the saturation, or
             the model's effort limit when saturation is off) [-].
         max_force: |wrist force component| bound [N].
@@ -159,7 +161,7 @@ def describe_fault(code: int, work: np.ndarray) -> str:
     if code == _k.OBSERVER_INVALID:
         return "observer state invalid (non-finite): collision detection is off until reset()"
     if code == _k.OUTPUT_NON_FINITE:
-        return f"non-finite control law on joint {index}"
+        return f"non-finite control law on joint {index}: collision detection is off until reset()"
     return f"fault {code}"
 
 

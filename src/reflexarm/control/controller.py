@@ -433,7 +433,7 @@ class Controller:
         rows[_k.TAU_ROW] = bounded
         w[_k.HAS_PREV_TAU] = 1.0
         self.last_fault = fault
-        if code == _k.OBSERVER_INVALID:
+        if code in (_k.OBSERVER_INVALID, _k.OUTPUT_NON_FINITE):
             collision = True  # detection is off: never report "no collision"
         else:
             collision = self.detector.detected if self.detector is not None else False
