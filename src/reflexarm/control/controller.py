@@ -322,7 +322,7 @@ class Controller:
                 q.dtype is F and dq.dtype is F and tau_m.dtype is F and wrench.dtype is F and gravity.dtype is F
                 and q_d.dtype is F and dq_d.dtype is F and ddq_d.dtype is F
             ):  # fmt: skip
-                return self._step_converted(measurement, reference)
+                raise TypeError("not float64")  # handled below, outside this try
             gm = self._gravity_in_model
             if gravity[0] != gm[0] or gravity[1] != gm[1] or gravity[2] != gm[2]:
                 gm[:] = gravity  # a candidate: restored by _reject if the tick is not accepted
