@@ -73,9 +73,10 @@ def compliance_loss(
 
     DC here is kappa_eps = 1, kappa_ext = 0 (the wrist sensor of the paper's real arm was not operational,
     so the observer sees the push). The push (:class:`HandPush`): the hand's rest point travels ``depth``
-    in 1 s from t = 0.5 s and is held until 4.0 s; the hand's stiffness of 2000 N/m is an assumption (a
-    firm human grip; a rigid hand would show the stiffening only as force, a very soft one only as
-    position). Under the hold (mean over 3.5-4.0 s), the displacement is measured along the push (as f_x
+    in 1 s from t = 0.5 s and is held until 4.0 s; the hand's stiffness is an assumption (the paper gives
+    none; :func:`compliance_loss_sweep` runs several: with 10 cm of travel, hands of 3000-4000 N/m give
+    ratios near the paper's, softer ones stay below the cut-off and DC holds the arm).
+    Under the hold (mean over 3.5-4.0 s), the displacement is measured along the push (as f_x
     and Delta x of Fig. 11) and the apparent stiffness is ``|f| / dx`` (:func:`apparent_stiffness`).
 
     Summary: force ratio DC / no DC (paper: 1.93), displacement ratio (paper: 0.67), apparent stiffness
