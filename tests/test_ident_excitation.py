@@ -19,11 +19,30 @@ def design(atlas):
     )
 
 
+#: The optimizer must lower the condition number at least this much in 15 iterations. Its path is
+#: machine-specific (SLSQP over a BLAS-evaluated cost): the ratio came out 0.125-0.165 under
+#: OPENBLAS_CORETYPE=Haswell, Zen, SkylakeX, Sandybridge, Nehalem, Prescott and with 1 or 2 threads,
+#: so 0.2 would sit within 20 % of a measured value; 0.4 still asks for a 2.5x reduction.
+CONDITION_RATIO = 0.4
+
+
 def test_optimization_lowers_the_condition_number(design, atlas):
-    assert design.condition_optimized < 0.2 * design.condition_initial
+    assert design.condition_optimized < CONDITION_RATIO * design.condition_initial
     # the reported numbers are what an independent evaluation of the same regressor gives
     assert regressor_condition(atlas, design.trajectory, n_samples=60) == pytest.approx(design.condition_optimized)
     assert regressor_condition(atlas, design.initial, n_samples=60) == pytest.approx(design.condition_initial)
+
+
+def test_seeded_optimization_is_repeatable_on_one_machine(atlas):
+    """The same call gives the same trajectory bit for bit (same process, BLAS threads and CPU; across
+    CPUs or thread counts the path differs, which is why the identification tests use fixed data)."""
+    base = compute_base_parameters(atlas)
+    kw = dict(base=base, n_harmonics=3, n_grid=60, n_samples=40, maxiter=5, seed=11)
+    first, second = optimize_excitation(atlas, **kw), optimize_excitation(atlas, **kw)
+    np.testing.assert_array_equal(first.trajectory.a, second.trajectory.a)
+    np.testing.assert_array_equal(first.trajectory.b, second.trajectory.b)
+    np.testing.assert_array_equal(first.trajectory.offset, second.trajectory.offset)
+    assert first.condition_optimized == second.condition_optimized
 
 
 def test_optimized_trajectory_respects_the_limits_when_sampled_at_1khz(design, atlas):
