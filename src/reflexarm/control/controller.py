@@ -60,7 +60,7 @@ class Controller:
        ``(q_d, dq_d, ddq_d)``; t is a real number; q, dq, tau_m, q_d, dq_d, ddq_d have shape (n,), wrench
        (6,), gravity (3,); values are real (integer or floating dtypes, lists of numbers). Complex, bool,
        str and object values raise. Float64 arrays go straight into the compiled tick; anything else is
-       converted once to contiguous float64 first (a few microseconds more, never a recompilation).
+       converted once to contiguous float64 first (some 10-20 us more, never a recompilation).
     2. *Values* (run-time faults: the tick returns the **safe command**, ``Command.mode == "fault"``,
        ``Command.fault`` naming the signal, the component, the value and the bound, ``fault_code`` one of
        :data:`~reflexarm.control.contract.FAULT_CODES`): t finite and strictly later than the last accepted
@@ -76,7 +76,7 @@ class Controller:
 
     **Recovery.** A measurement or reference fault lasts one tick: the next valid tick is controlled
     normally (the observer then integrates the period since the last accepted stamp, clipped to the band).
-    An *invalid observer* (a non-finite state, which the bounds above are meant to make impossible) latches:
+    An *invalid observer* (a non-finite state or control law, which the bounds above make unreachable) latches:
     every command is then the safe command with ``fault`` saying detection is off and ``collision=True``
     (an invalid residual never reports "no collision") until :meth:`reset`, as a robot needs an explicit
     error recovery after a reflex.
@@ -88,6 +88,9 @@ class Controller:
 
     **Time.** The observer integrates the measured period ``t - t_last_accepted`` clipped to
     ``[period_band[0] * dt, period_band[1] * dt]``; :attr:`timing` reports the periods seen.
+
+    The bounds, the state and the fault codes are plain data (one float64 array and integer codes, see
+    :mod:`reflexarm.control._kernels`), so the same contract carries over to a compiled C++ tick.
 
     Args:
         robot: the controller's model (M_hat, C_hat, g_hat, tau_f_hat, Jacobian of the wrist sensor
