@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import tracemalloc
 from dataclasses import replace
 
@@ -39,7 +40,7 @@ def _exact_log(robot, duration=2.0, seed=0):
 
 
 # ------------------------------------------------------------------ finding 12: absurd values
-def test_absurd_torque_cell_is_refused_with_its_row_instead_of_nan_parameters(atlas, tmp_path):
+def test_absurd_torque_cell_is_refused_with_its_row_instead_of_nan_parameters(atlas, tmp_path, capsys):
     """One tau = 1e300 cell gave 43/43 NaN base parameters silently; now loading names the row."""
     t, q, dq, _, tau = _exact_log(atlas)
     tau[BAD_ROW, BAD_JOINT] = 1e300
@@ -52,8 +53,9 @@ def test_absurd_torque_cell_is_refused_with_its_row_instead_of_nan_parameters(at
         load_log(p, n_joints=7)
     (sample,) = info.value.samples
     assert (sample.row, sample.column, sample.value) == (BAD_ROW, "tau_3", 1e300)
-    # the CLI ends with that message, not with a scipy error
+    # the CLI ends with that message, not with a scipy error ("coulomb must be finite")
     assert main(["identify", "dynamics", "--log", str(p), "--out", str(tmp_path / "o"), "--quiet"]) == 2
+    assert re.search("reflexarm identify: error: " + expected, capsys.readouterr().err)
 
 
 def test_torque_far_beyond_the_robots_limits_is_refused_by_identification(atlas):
