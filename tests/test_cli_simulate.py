@@ -4,11 +4,15 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from reflexarm._cli.common import DEFAULT_MODEL_ERROR_PERCENT, ModelChoice, model_choice
 from reflexarm.cli import build_parser, main
 from reflexarm.errors import ConfigError
+from reflexarm.ident import BatchRegressor, FrictionParameters, RobotLog, identify_dynamics, save_identified_model
+from reflexarm.ident.excitation import FourierTrajectory
+from reflexarm.sim import Trace
 
 COMMANDS = (
     ["demo"],
@@ -90,3 +94,28 @@ def test_velocity_tracking_command_prints_both_controllers(tmp_path, capsys):
 def test_velocity_tracking_rejects_a_joint_out_of_range(tmp_path, capsys):
     assert main(["simulate", "velocity-tracking", "--joint", "9", "--out", str(tmp_path), "--quiet"]) == 2
     assert "--joint must be in 1..7; got 9" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_an_identified_model_file_drives_the_link_collision(tmp_path, capsys, atlas):
+    """``--model FILE``: the model identified from an exact log (so: close to the plant's) is the one the
+    controller runs on, and the push is detected with it."""
+    rng = np.random.default_rng(0)
+    coef = 0.15 * rng.normal(size=(2, 7, 5))
+    traj = FourierTrajectory(2 * np.pi * 0.1, coef[0], coef[1], atlas.home)
+    t = np.arange(0.0, 10.0, 1e-3)  # one period of the 0.1 Hz excitation
+    q, dq, ddq = traj.evaluate(t)
+    fr = FrictionParameters.from_model(atlas.friction)
+    tau = BatchRegressor(atlas).compute_regressor(q, dq, ddq) @ atlas.inertial_parameters() + fr.compute_torque(dq)
+    result = identify_dynamics(atlas, RobotLog(t, q, dq, tau, ddq=ddq, source="exact"), friction=fr)
+    model_file = tmp_path / "model.json"
+    save_identified_model(result, atlas, model_file)
+    capsys.readouterr()
+    out = tmp_path / "link"
+    assert main(["simulate", "link-collision", "--model", str(model_file), "--out", str(out), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert f"controller model: identified model {model_file}" in err
+    row = json.loads((out / "link_collision_summary.json").read_text())[0]
+    assert row["detection_s"] is not None and row["detected_joints"] == [0]
+    tr = Trace.load(next(out.glob("*.npz")))
+    assert tr.meta["controller_model"] == {"source": "identified", "file": str(model_file)}
