@@ -24,15 +24,14 @@ import numpy as np
 
 from reflexarm.experiments.identification import (
     HYDRAULIC_JOINTS,
-    MOVING_SPEED,
-    NOMINAL_ERROR_LEVEL,
+    compare_methods,
     compare_tracking,
     run_identification_study,
 )
-from reflexarm.ident import load_identified_model, optimize_excitation, project_physically_consistent
+from reflexarm.ident import load_identified_model, optimize_excitation
 from reflexarm.ident.model_file import save_identified_model
 from reflexarm.ident.plots import plot_friction, plot_torque_validation
-from reflexarm.robots import load_robot, perturb_model
+from reflexarm.robots import load_robot
 
 
 def main(argv: list[str] | None = None) -> dict[str, object]:
@@ -53,16 +52,18 @@ def main(argv: list[str] | None = None) -> dict[str, object]:
             f"  {row['joint']:>16}: mu_C {row['mu_C']:6.3f} Nm (true {row['mu_C_true']:5.2f}), "
             f"d_v {row['d_v']:6.3f} Nms/rad (true {row['d_v_true']:4.2f})"
         )
-    for moving in (False, True):
-        how = f"rows with |dq_j| < {MOVING_SPEED:g} rad/s left out" if moving else "every sample"
-        print(f"\nvalidation MSE [Nm^2], identified from {how} (all samples | moving samples):")
-        for r in st.table(moving=moving):
-            print(
-                f"  {r['joint']:>16}: combined {r['mse_combined']:8.3f} | {r['mse_moving_combined']:7.3f}   "
-                f"sequential {r['mse_sequential']:8.3f} | {r['mse_moving_sequential']:7.3f}"
-            )
-        h = st.hydraulic_mse(moving=moving)
-        print("  hydraulic joints, mean: " + ", ".join(f"{k} {v:.3f}" for k, v in h.items()))
+    print(
+        f"\nvalidation MSE [Nm^2] of the saved models, both identified from the same rows (|dq_j| >= "
+        f"{st.min_speed:g} rad/s), over all validation samples | the moving ones:"
+    )
+    for r in st.table():
+        print(
+            f"  {r['joint']:>16}: combined {r['mse_combined']:8.3f} | {r['mse_moving_combined']:7.3f}   "
+            f"sequential {r['mse_sequential']:8.3f} | {r['mse_moving_sequential']:7.3f}"
+        )
+    h = st.hydraulic_mse()
+    print("  hydraulic joints, mean: " + ", ".join(f"{k} {v:.3f}" for k, v in h.items()))
+    print("  sequential against combined: " + compare_methods(h["combined"], h["sequential"]))
     args.out.mkdir(parents=True, exist_ok=True)
     plot_friction(
         list(st.friction.fits),
@@ -79,9 +80,9 @@ def main(argv: list[str] | None = None) -> dict[str, object]:
         window=(t0, t0 + st.validation_trajectory.period),
     )
 
-    # closing the loop: the sequential model (moving rows), made physically consistent, in the controller
-    nominal = perturb_model(robot, NOMINAL_ERROR_LEVEL, seed=0)
-    seq = project_physically_consistent(st.results_moving["sequential"], nominal)
+    # closing the loop: the sequential model as the study hands it out (physically consistent), in the controller
+    nominal = st.nominal
+    seq = st.results["sequential"]
     identified = load_identified_model(save_identified_model(seq, robot, args.out / "model_sequential.json"), robot)
     other = optimize_excitation(robot, maxiter=0, seed=7).initial
     tracking = {}

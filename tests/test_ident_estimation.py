@@ -8,8 +8,8 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from excitation_data import fixed_excitation
 
+from excitation_data import fixed_excitation
 from reflexarm.errors import IdentificationError, ModelError
 from reflexarm.ident import (
     BatchRegressor,

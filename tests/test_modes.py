@@ -237,15 +237,52 @@ def test_fault_and_recovery_are_logged(atlas):
     assert sup.transitions == [] and sup.mode == "precise_stiff"
 
 
-def test_modes_table_matches_fig3():
-    m = CONTROL_MODES
-    assert (m["compliant"].kappa_eps, m["precise_stiff"].kappa_eps, m["precise_ee_compliant"].kappa_eps) == (0, 1, 1)
-    assert (m["precise_stiff"].kappa_ext, m["precise_ee_compliant"].kappa_ext) == (0, 1)
-    assert [(x.accurate, x.ee_compliant, x.link_compliant) for x in m.values()] == [
-        (False, True, True),
-        (True, False, False),
-        (True, True, False),
-    ]
+#: What each scene puts on the arm: a model error delta (15 % heavier arm), an end-effector force measured
+#: by the wrist sensor, or a link torque nobody measures. Each mode's entry in CONTROL_MODES says which
+#: of them the arm yields to (Fig. 3); the test runs the scenes and reads the answer off the arm.
+SCENES = ("model_error", "ee_force", "link_torque")
+LINK_PUSH = np.array([0.0, 8.0, 0.0, 0.0, 0.0, 0.0, 0.0])  # [Nm] on joint 2
+
+
+def _static_deflection(atlas, mode, scene):
+    """K (q - q_d) at rest [Nm], and the torque the scene applies (what K (q - q_d) equals if the arm yields)."""
+    model = frictionless(atlas)
+    true = heavier(atlas) if scene == "model_error" else model
+    plant = WrenchPlant(
+        true,
+        ee_force=(lambda t: F_EE) if scene == "ee_force" else None,
+        link_torque=(lambda t: LINK_PUSH) if scene == "link_torque" else None,
+    )
+    plant.reset(atlas.home)
+    ctrl = Controller(model, stiffness=K, damping_ratio=0.7, observer_gain=10, threshold=None, switch_time=0.0)
+    qs, _ = run(plant, ModeSupervisor(ctrl, mode=mode), atlas.home, 3000)
+    q = qs[-1]
+    if scene == "model_error":
+        applied = model.compute_gravity(q) - true.compute_gravity(q)  # delta of (3)
+    elif scene == "ee_force":
+        applied = true.compute_frame_jacobian(q)[:3].T @ F_EE
+    else:
+        applied = LINK_PUSH
+    return K * (q - atlas.home), applied
+
+
+@pytest.mark.parametrize("mode", list(CONTROL_MODES))
+def test_each_mode_yields_to_exactly_what_fig3_says(atlas, mode):
+    """Per mode and scene, the arm at rest either yields (K (q - q_d) = the applied torque, eq. (3)) or
+    holds (K (q - q_d) = 0, the residual compensates it): accurate = holds against the model error,
+    ee_compliant = yields to the wrist-measured force, link_compliant = yields to the link torque."""
+    flags = CONTROL_MODES[mode]
+    expected = {"model_error": not flags.accurate, "ee_force": flags.ee_compliant, "link_torque": flags.link_compliant}
+    # tolerance 0.3 Nm: 1 % of the largest load torque, as in the closed-loop test above (3 s = 30
+    # observer time constants; the residual's discretisation bias at rest is far below it)
+    atol = 0.3
+    for scene in SCENES:
+        deflection, applied = _static_deflection(atlas, mode, scene)
+        # each scene applies well over the tolerance somewhere (the smallest, delta, ~1.8 Nm at home), so
+        # "yields" and "holds" cannot both pass
+        assert np.abs(applied).max() > 3 * atol, scene
+        target = applied if expected[scene] else np.zeros_like(applied)
+        np.testing.assert_allclose(deflection, target, atol=atol, err_msg=f"{mode}, {scene}")
 
 
 @pytest.mark.parametrize(

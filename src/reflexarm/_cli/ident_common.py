@@ -1,0 +1,109 @@
+"""Helpers shared by the identification commands (``excite``, ``identify``, ``validate``)."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from reflexarm.errors import ConfigError
+
+DEFAULT_ROBOT = "atlas_v5_left_arm"
+
+
+def robot_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--robot", default=DEFAULT_ROBOT, help=f"built-in name or .urdf/.xml file (default {DEFAULT_ROBOT})")
+    p.add_argument("--ee-frame", default=None, help="end-effector frame (user robot files)")
+
+
+def load_robot_arg(args: argparse.Namespace) -> Any:
+    from reflexarm.robots import load_robot
+
+    return load_robot(args.robot, ee_frame=args.ee_frame)
+
+
+def write_csv(path: Path, rows: list[dict[str, object]]) -> Path:
+    if not rows:
+        return path
+    with path.open("w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: ("" if v is None else v) for k, v in r.items()})
+    return path
+
+
+def to_json(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): to_json(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [to_json(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, (np.floating, np.integer)):
+        return obj.item()
+    return obj
+
+
+def write_json(path: Path, obj: Any) -> Path:
+    path.write_text(json.dumps(to_json(obj), indent=1))
+    return path
+
+
+def parse_floats(text: str | None, what: str) -> list[float] | None:
+    if text is None:
+        return None
+    try:
+        return [float(x) for x in text.split(",") if x.strip()]
+    except ValueError as e:
+        raise ConfigError(f"{what} must be comma-separated numbers; got {text!r}") from e
+
+
+def parse_joints(text: str, n: int) -> list[int]:
+    try:
+        js = [int(x) - 1 for x in text.split(",") if x.strip()]
+    except ValueError as e:
+        raise ConfigError(f"--joints must be comma-separated 1-based joint numbers; got {text!r}") from e
+    bad = [j + 1 for j in js if not 0 <= j < n]
+    if bad:
+        raise ConfigError(f"joint(s) {bad} out of range; the robot has joints 1..{n}")
+    return js
+
+
+def say(args: argparse.Namespace, msg: str) -> None:
+    if not args.quiet:
+        print(msg, file=sys.stderr)
+
+
+def load_friction(path: str | None) -> Any:
+    """Friction parameters from a friction.json of 'identify friction' (without the pose-specific offsets)."""
+    if path is None:
+        return None
+    from reflexarm.ident import FrictionParameters
+
+    try:
+        d = json.loads(Path(path).read_text())
+    except (OSError, json.JSONDecodeError) as e:
+        raise ConfigError(f"cannot read friction file {path!r}: {e}") from e
+    fr = FrictionParameters.from_dict(d)
+    return FrictionParameters(fr.viscous, fr.coulomb, None)  # offsets of single-joint runs are pose-specific
+
+
+def for_controller(result: Any, robot: Any, nominal: Any, args: argparse.Namespace) -> Any:
+    """The result to write for the controller: projected onto consistent parameters if M(q) is indefinite."""
+    from reflexarm.ident import project_physically_consistent
+    from reflexarm.ident.consistency import is_physically_consistent
+
+    if getattr(args, "no_projection", False) or is_physically_consistent(result, robot):
+        return result
+    projected = project_physically_consistent(result, nominal)
+    print(
+        f"{result.method}: M(q) of the least-squares estimate is not positive definite everywhere; "
+        f"the model file holds the nearest consistent one ({projected.notes[-1]})"
+    )
+    return projected

@@ -1,0 +1,343 @@
+"""``reflexarm identify dynamics`` and ``reflexarm validate`` (Sec. II-D 1 and 3, Table I, Fig. 6).
+
+``identify dynamics`` identifies the base parameters from a user's logs, or (no ``--log``) runs the
+simulated study on the built-in arm (:func:`reflexarm.experiments.identification.run_identification_study`):
+the printed Table I, ``fig6_torques.png`` and the saved ``model_<method>.json`` are the same models.
+``validate`` scores a saved model on a log, or tracks a trajectory with it on the plant.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from reflexarm._cli.common import format_table, out_dir
+from reflexarm._cli.ident_common import (
+    for_controller,
+    load_friction,
+    load_robot_arg,
+    parse_floats,
+    say,
+    write_csv,
+    write_json,
+)
+from reflexarm.errors import ConfigError
+
+#: Columns of the printed Table I analogue.
+TABLE_COLUMNS = [
+    ("joint", "joint", "{}"),
+    ("mse_combined", "MSE comb", "{:.3f}"),
+    ("mse_sequential", "MSE seq", "{:.3f}"),
+    ("mse_moving_combined", "MSE comb moving", "{:.3f}"),
+    ("mse_moving_sequential", "MSE seq moving", "{:.3f}"),
+    ("paper_mse_combined", "paper comb", "{:.2f}"),
+    ("paper_mse_sequential", "paper seq", "{:.2f}"),
+    ("mu_C_single_joint", "mu_C,p", "{:.2f}"),
+    ("d_v_single_joint", "d_v,p", "{:.2f}"),
+    ("mu_C_combined", "mu_C comb", "{:.2f}"),
+    ("d_v_combined", "d_v comb", "{:.2f}"),
+    ("mu_C_true", "mu_C true", "{:.2f}"),
+    ("d_v_true", "d_v true", "{:.2f}"),
+]
+
+
+def _noise_variance(text: str) -> Any:
+    if text == "estimate":
+        return "estimate"
+    if text == "none":
+        return None
+    return np.asarray(parse_floats(text, "--noise-variance"))
+
+
+def identify_dynamics_command(args: argparse.Namespace) -> int:
+    """From ``--log`` files; without them, the simulated study (:func:`dynamics_study_command`)."""
+    if not args.log:
+        return dynamics_study_command(args)
+    from reflexarm.ident import (
+        compute_base_parameters,
+        identify_dynamics,
+        load_log,
+        preprocess_log,
+        validate_model,
+    )
+    from reflexarm.ident.model_file import save_identified_model
+    from reflexarm.ident.plots import plot_torque_validation
+
+    out = out_dir(args)
+    robot = load_robot_arg(args)
+    base = compute_base_parameters(robot)
+    print(f"{robot.name}: {base.n_base} base parameters of {base.n_standard}")
+    logs = [load_log(p, n_joints=robot.n) for p in args.log]
+    val_raw = None
+    if args.split is not None:
+        if len(logs) != 1:
+            raise ConfigError("--split needs exactly one --log")
+        full = preprocess_log(logs[0], cutoff_hz=args.cutoff)
+        raw_ident, val_raw = logs[0].split(args.split)
+        t_split = val_raw.t[0]
+        ident = [full.select(full.t < t_split)]
+        states = full
+    else:
+        ident = [preprocess_log(lg, cutoff_hz=args.cutoff) for lg in logs]
+        states = None
+    if args.validation_log is not None:
+        val_raw = load_log(args.validation_log, n_joints=robot.n)
+        states = preprocess_log(val_raw, cutoff_hz=args.cutoff)
+    friction = load_friction(args.friction)
+    methods = ["combined", "sequential"] if args.method == "both" else [args.method]
+    if "sequential" in methods and friction is None:
+        if args.method == "sequential":
+            raise ConfigError("--method sequential needs --friction friction.json (from 'reflexarm identify friction')")
+        methods = ["combined"]
+        say(args, "no --friction given: only the combined method is run")
+    results = {}  # the models as saved: what the validation below scores
+    for m in methods:
+        estimate = identify_dynamics(
+            robot,
+            ident,
+            method=m,  # type: ignore[arg-type]
+            friction=friction,
+            offset=args.offset,
+            base=base,
+            noise_variance=_noise_variance(args.noise_variance),
+            min_speed=0.0 if args.min_speed is None else args.min_speed,
+            progress=not args.quiet,
+        )
+        results[m] = for_controller(estimate, robot, robot, args)
+        save_identified_model(results[m], robot, out / f"model_{m}.json")
+    summary: dict[str, Any] = {"robot": robot.name, "n_base": base.n_base, "methods": {}}
+    for m, r in results.items():
+        summary["methods"][m] = {
+            "condition_number": r.condition_number,
+            "residual_rms": r.residual_rms,
+            "friction": r.friction.to_dict(),
+            "notes": r.notes,
+            "timings": r.timings,
+        }
+    if val_raw is not None:
+        vals = {m: validate_model(r, robot, val_raw, states=states) for m, r in results.items()}
+        rows = []
+        for j in range(robot.n):
+            row: dict[str, object] = {"joint": f"{j + 1} ({robot.joint_names[j]})"}
+            for m, v in vals.items():
+                row[f"rmse_{m}"] = float(v.rmse[j])
+                row[f"nrmse_{m}"] = float(v.nrmse[j])
+                row[f"mse_{m}"] = float(v.mse[j])
+            rows.append(row)
+        write_csv(out / "validation.csv", rows)
+        for m, v in vals.items():
+            summary["methods"][m]["validation"] = {
+                "rmse": v.rmse,
+                "nrmse": v.nrmse,
+                "pooled_rmse": v.pooled_rmse,
+                "samples": int(v.t.size),
+            }
+        cols = [("joint", "joint", "{}")]
+        for m in vals:
+            cols += [(f"rmse_{m}", f"RMSE {m} [Nm]", "{:.3f}"), (f"nrmse_{m}", f"RMSE/std {m}", "{:.3f}")]
+        print(format_table(rows, cols))
+        for m, v in vals.items():
+            print(f"pooled validation RMSE ({m}): {v.pooled_rmse:.4f} Nm over {v.t.size:,} samples")
+        plot_torque_validation(vals, out / "fig6_torques.png", joint_names=robot.joint_names)
+    write_json(out / "identification.json", summary)
+    print(
+        f"\nwrote {out}/ ({', '.join(f'model_{m}.json' for m in results)}, identification.json"
+        + (", validation.csv, fig6_torques.png)" if val_raw is not None else ")")
+    )
+    return 0
+
+
+def _load_excitation(robot: Any, path: str) -> Any:
+    """An ExcitationDesign from an excitation.json of 'reflexarm excite' (no optimization)."""
+    from reflexarm.ident.excitation import ExcitationDesign, FourierTrajectory, regressor_condition
+
+    try:
+        d = json.loads(Path(path).read_text())
+        tr = FourierTrajectory.from_dict(d["trajectory"])
+    except (OSError, json.JSONDecodeError, KeyError) as e:
+        raise ConfigError(f"cannot read excitation file {path!r} (from 'reflexarm excite'): {e}") from e
+    cond = regressor_condition(robot, tr)
+    limits = d.get("limits_optimized", {})
+    return ExcitationDesign(tr, tr, cond, cond, limits, limits, 0, f"read from {path}", d.get("bounds", {}))
+
+
+def dynamics_study_command(args: argparse.Namespace) -> int:
+    """The simulated Table I study; prints, plots and saves the same (possibly projected) models."""
+    from reflexarm.experiments.identification import (
+        HYDRAULIC_JOINTS,
+        MOVING_SPEED,
+        PAPER_TABLE1_MSE,
+        compare_methods,
+        run_identification_study,
+    )
+    from reflexarm.ident import save_log
+    from reflexarm.ident.model_file import save_identified_model
+    from reflexarm.ident.plots import plot_excitation, plot_friction, plot_torque_validation
+
+    out = out_dir(args)
+    robot = load_robot_arg(args)
+    excitation = None if args.excitation is None else _load_excitation(robot, args.excitation)
+    min_speed = MOVING_SPEED if args.min_speed is None else args.min_speed
+    say(
+        args,
+        f"simulated study on the {args.scenario} plant: single-joint friction runs, excitation run, "
+        "validation run (a few minutes) ...",
+    )
+    st = run_identification_study(
+        robot,
+        scenario=args.scenario,
+        excitation=excitation,
+        min_speed=min_speed,
+        project=not args.no_projection,
+        seed=args.seed,
+        maxiter=args.maxiter,
+        n_jobs=args.jobs,
+        progress=not args.quiet,
+    )
+    base = st.results["sequential"].base
+    print(f"{robot.name}: {base.n_base} base parameters of {base.n_standard}")
+    print(
+        f"excitation: condition number {st.excitation.condition_initial:.4g} -> {st.excitation.condition_optimized:.4g}"
+    )
+    rows = st.table()
+    write_csv(out / "table1_mse.csv", rows)
+    print(
+        f"\nTable I analogue (scenario {args.scenario}). Both methods identified from the same rows: every "
+        f"excitation sample except, per joint, those with |dq_j| < {min_speed:g} rad/s. Validation on a "
+        f"different trajectory with its own noise seed; MSE [Nm^2] of the saved model files over all samples "
+        f"and over the samples with |dq_j| >= {MOVING_SPEED:g} rad/s:"
+    )
+    print(format_table(rows, TABLE_COLUMNS))
+    for what, joints in (("hydraulic joints 1-4", HYDRAULIC_JOINTS), ("all joints", None)):
+        mean = st.mean_mse(joints)
+        print(f"mean MSE, {what}: " + ", ".join(f"{k} {v:.3f}" for k, v in mean.items()))
+    h = st.hydraulic_mse()
+    paper = {m: float(np.mean(np.asarray(PAPER_TABLE1_MSE[m])[list(HYDRAULIC_JOINTS)])) for m in PAPER_TABLE1_MSE}
+    print(
+        f"hydraulic joints, sequential against combined: {compare_methods(h['combined'], h['sequential'])} "
+        f"(moving samples: {compare_methods(h['combined_moving_samples'], h['sequential_moving_samples'])}); "
+        f"paper: {compare_methods(paper['combined'], paper['sequential'])}"
+    )
+    for m in st.notes["projected"]:  # type: ignore[attr-defined]
+        print(f"{m}: M(q) of the least-squares estimate is not positive definite everywhere; the saved and "
+              f"validated model is the nearest consistent one ({st.results[m].notes[-1]})")  # fmt: skip
+    rel = {
+        m: float(np.linalg.norm(r.beta_b - st.true_base) / np.linalg.norm(st.true_base)) for m, r in st.results.items()
+    }
+    for m, r in st.results.items():
+        save_identified_model(
+            r, robot, out / f"model_{m}.json", extra={"scenario": args.scenario, "min_speed": st.min_speed}
+        )
+    save_log(st.validation_raw, out / "validation_log.npz")
+    write_json(out / "excitation.json", {"robot": robot.name, **st.excitation.to_dict()})
+    write_json(
+        out / "study.json",
+        {
+            "robot": robot.name,
+            "scenario": args.scenario,
+            "notes": st.notes,
+            "n_base": base.n_base,
+            "min_speed": st.min_speed,
+            "condition_initial": st.excitation.condition_initial,
+            "condition_optimized": st.excitation.condition_optimized,
+            "hydraulic_mse": st.hydraulic_mse(),
+            "mean_mse": st.mean_mse(),
+            "base_relative_error": rel,
+            "friction_fits": st.friction.table(robot.joint_names),
+            "table": rows,
+        },
+    )
+    plot_friction(
+        list(st.friction.fits),
+        out / "fig4_friction.png",
+        joint_names=robot.joint_names,
+        truth=(st.friction.truth.coulomb, st.friction.truth.viscous),
+    )
+    t0 = st.validation_log.t[0]
+    plot_torque_validation(
+        st.validations,
+        out / "fig6_torques.png",
+        joint_names=robot.joint_names,
+        window=(t0, t0 + st.validation_trajectory.period),
+    )
+    plot_excitation(st.excitation, out / "excitation.png", joint_names=robot.joint_names)
+    print("\nrelative error of the base parameters: " + ", ".join(f"{m} {v:.3f}" for m, v in rel.items()))
+    print(
+        f"\nwrote {out}/ (model_combined.json, model_sequential.json: the models above; validation_log.npz: "
+        "'reflexarm validate --model model_<method>.json --log validation_log.npz' reproduces their columns; "
+        "excitation.json, study.json, table1_mse.csv, fig4_friction.png, fig6_torques.png, excitation.png)"
+    )
+    return 0
+
+
+def validate_command(args: argparse.Namespace) -> int:
+    """Score a saved model on ``--log``; ``--closed-loop``: tracking on the plant against the nominal model."""
+    from reflexarm.ident import load_log, preprocess_log, validate_model
+    from reflexarm.ident.model_file import load_identified_model, read_identified_model
+    from reflexarm.ident.plots import plot_torque_validation
+
+    out = out_dir(args)
+    robot = load_robot_arg(args)
+    result, _ = read_identified_model(args.model)
+    identified = load_identified_model(args.model, robot)
+    if args.log is None and not args.closed_loop:
+        raise ConfigError("give --log FILE to validate on, or --closed-loop to compare tracking in simulation")
+    summary: dict[str, Any] = {"model": str(args.model), "robot": robot.name}
+    if args.log is not None:
+        raw = load_log(args.log, n_joints=robot.n)
+        states = preprocess_log(raw, cutoff_hz=args.cutoff)
+        v = validate_model(result, robot, raw, states=states, label=result.method)
+        rows = v.table(robot.joint_names)
+        write_csv(out / "validation.csv", rows)
+        print(
+            format_table(
+                rows,
+                [
+                    ("joint", "joint", "{}"),
+                    ("rmse", "RMSE [Nm]", "{:.4f}"),
+                    ("nrmse", "RMSE/std", "{:.3f}"),
+                    ("mse", "MSE [Nm^2]", "{:.4f}"),
+                    ("torque_std", "std(tau) [Nm]", "{:.3f}"),
+                ],
+            )
+        )
+        print(f"pooled RMSE: {v.pooled_rmse:.4f} Nm over {v.t.size:,} samples; mean MSE over the joints: "
+              f"{float(np.mean(v.mse)):.4f} Nm^2")  # fmt: skip
+        summary["validation"] = {"rows": rows, "pooled_rmse": v.pooled_rmse, "mean_mse": float(np.mean(v.mse))}
+        plot_torque_validation({result.method: v}, out / "fig6_torques.png", joint_names=robot.joint_names)
+    if args.closed_loop:
+        from reflexarm.experiments.identification import NOMINAL_ERROR_LEVEL, compare_tracking
+        from reflexarm.ident.excitation import optimize_excitation
+        from reflexarm.robots import perturb_model
+
+        nominal = perturb_model(robot, NOMINAL_ERROR_LEVEL, seed=args.seed)
+        traj = optimize_excitation(robot, maxiter=0, seed=args.seed + 7).initial
+        say(args, f"tracking a {args.duration:g} s trajectory with the perturbed nominal and the identified model ...")
+        cmp = compare_tracking(
+            robot,
+            {"perturbed nominal": nominal, "identified": identified},
+            traj,
+            args.duration,
+            kappa_f=args.kappa_f,
+            seed=args.seed,
+            progress=not args.quiet,
+        )
+        rows = cmp.table(robot.joint_names)
+        write_csv(out / "tracking.csv", rows)
+        cols = [("model", "controller model", "{}")] + [
+            (f"rms_{j + 1}", f"q{j + 1} [mrad]", "{:.2f}") for j in range(robot.n)
+        ]
+        print(
+            format_table(
+                [{k: (float(v) * 1e3 if k.startswith("rms") else v) for k, v in r.items()} for r in rows],  # type: ignore[arg-type]
+                cols + [("rms_all", "all [mrad]", "{:.2f}")],
+            )
+        )
+        summary["tracking_rms_rad"] = rows
+    write_json(out / "validate.json", summary)
+    print(f"\nwrote {out}/")
+    return 0
