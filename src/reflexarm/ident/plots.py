@@ -1,5 +1,6 @@
 """Figures of the identification: friction characteristics (Fig. 4), measured vs model torques (Fig. 6),
-the excitation trajectory, written as PNG."""
+the excitation trajectory. ``<name>_figure`` builds the matplotlib figure (for inspection or further
+drawing), ``plot_<name>`` writes it as PNG and closes it."""
 
 from __future__ import annotations
 
@@ -17,7 +18,14 @@ from reflexarm.ident.estimation import TorqueValidation  # noqa: E402
 from reflexarm.ident.excitation import ExcitationDesign  # noqa: E402
 from reflexarm.ident.joint_friction import FrictionFit  # noqa: E402
 
-__all__ = ["plot_excitation", "plot_friction", "plot_torque_validation"]
+__all__ = [
+    "excitation_figure",
+    "friction_figure",
+    "plot_excitation",
+    "plot_friction",
+    "plot_torque_validation",
+    "torque_validation_figure",
+]
 
 
 def _save(fig: plt.Figure, path: str | os.PathLike[str]) -> Path:
@@ -36,6 +44,16 @@ def plot_friction(
     joint_names: Sequence[str] | None = None,
     truth: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Path:
+    """Write :func:`friction_figure` to ``path`` (PNG)."""
+    return _save(friction_figure(fits, joint_names=joint_names, truth=truth), path)
+
+
+def friction_figure(
+    fits: Sequence[FrictionFit],
+    *,
+    joint_names: Sequence[str] | None = None,
+    truth: tuple[np.ndarray, np.ndarray] | None = None,
+) -> plt.Figure:
     """Friction torque against velocity, one panel per joint (cf. Fig. 4).
 
     Markers: the mean of one constant-velocity interval; line: the fitted Coulomb + viscous law;
@@ -73,7 +91,7 @@ def plot_friction(
     for ax in list(axes.flat)[k:]:
         ax.set_visible(False)
     fig.suptitle("Single-joint friction identification (cf. Fig. 4)")
-    return _save(fig, path)
+    return fig
 
 
 def plot_torque_validation(
@@ -84,7 +102,19 @@ def plot_torque_validation(
     joints: Sequence[int] | None = None,
     window: tuple[float, float] | None = None,
 ) -> Path:
-    """Measured and model torques per joint on a validation trajectory (cf. Fig. 6)."""
+    """Write :func:`torque_validation_figure` to ``path`` (PNG)."""
+    return _save(torque_validation_figure(validations, joint_names=joint_names, joints=joints, window=window), path)
+
+
+def torque_validation_figure(
+    validations: Mapping[str, TorqueValidation],
+    *,
+    joint_names: Sequence[str] | None = None,
+    joints: Sequence[int] | None = None,
+    window: tuple[float, float] | None = None,
+) -> plt.Figure:
+    """Measured and model torques per joint on a validation trajectory (cf. Fig. 6), one panel per joint;
+    each model's legend entry carries its validation MSE on that joint."""
     first = next(iter(validations.values()))
     n = first.measured.shape[1]
     idx = list(range(n)) if joints is None else list(joints)
@@ -103,13 +133,19 @@ def plot_torque_validation(
         ax.legend(fontsize=7, loc="upper right", ncol=len(validations) + 1)
     axes[-1, 0].set_xlabel("t [s]")
     fig.suptitle("Measured and model torques on the validation trajectory (cf. Fig. 6)")
-    return _save(fig, path)
+    return fig
 
 
 def plot_excitation(
     design: ExcitationDesign, path: str | os.PathLike[str], *, joint_names: Sequence[str] | None = None
 ) -> Path:
-    """q, dq, ddq of the initial and the optimized excitation over one period, with the bounds."""
+    """Write :func:`excitation_figure` to ``path`` (PNG)."""
+    return _save(excitation_figure(design, joint_names=joint_names), path)
+
+
+def excitation_figure(design: ExcitationDesign, *, joint_names: Sequence[str] | None = None) -> plt.Figure:
+    """q, dq, ddq of the initial (dotted) and the optimized (solid) excitation over one period, with the
+    velocity and acceleration bounds (dashed)."""
     tr, tr0 = design.trajectory, design.initial
     t = np.linspace(0.0, tr.period, 1000)
     sig = tr.evaluate(t)
@@ -133,4 +169,4 @@ def plot_excitation(
         f"Fourier excitation: condition number {design.condition_initial:.3g} (dotted, start) -> "
         f"{design.condition_optimized:.3g} (solid, optimized)"
     )
-    return _save(fig, path)
+    return fig
