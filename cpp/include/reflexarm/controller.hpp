@@ -1,0 +1,156 @@
+// reflexarm::Controller: joint impedance control (2) with modal damping, momentum observer (4)-(6),
+// disturbance compensation (9)-(11) with an output cut-off, collision detection (12) and reaction (13).
+//
+// Shaped like a ros2_control controller: configure() allocates everything (on_configure), reset()
+// restarts the observers (on_activate), update() runs one tick (update) without heap allocation and
+// without exceptions. The math and the input contract are those of reflexarm.control.Controller.step.
+#pragma once
+
+#include <cstdint>
+
+#include <Eigen/Core>
+
+#include "pinocchio/multibody.hpp"
+
+#include "reflexarm/fault.hpp"
+#include "reflexarm/modal_damping.hpp"
+#include "reflexarm/params.hpp"
+#include "reflexarm/signals.hpp"
+
+namespace reflexarm
+{
+
+  /// Statistics of the measured control periods since the last reset (accepted ticks only).
+  struct TimingStats
+  {
+    long n_periods = 0;
+    double sum_period = 0.0; ///< [s]
+    double min_period = 0.0; ///< [s] (meaningful when n_periods > 0)
+    double max_period = 0.0; ///< [s]
+    long clipped = 0;        ///< periods integrated at the band's edge instead
+    double band_low = 0.0;   ///< [s]
+    double band_high = 0.0;  ///< [s]
+  };
+
+  /// State of one momentum observer (4): integral, p(0), residual tau_eps_hat.
+  struct ObserverState
+  {
+    Eigen::VectorXd integral, p0, residual;
+    void resize(Eigen::Index n)
+    {
+      integral.setZero(n);
+      p0.setZero(n);
+      residual.setZero(n);
+    }
+  };
+
+  class Controller
+  {
+  public:
+    using Model = pinocchio::Model;
+    using Data = pinocchio::Data;
+
+    /// Copies the model, checks the parameters and sizes every buffer. Throws ConfigError.
+    void configure(const Model & model, const ControllerParams & params);
+    bool isConfigured() const noexcept { return configured_; }
+
+    /// Clears the observers, the latched collision, reaction and observer fault, the clock and its
+    /// statistics; the next update() re-initialises. After a "compliant" reaction the kappa_eps active
+    /// before it is restored. Keeps the last command (the rate limit goes on) and the damping matrix.
+    void reset() noexcept;
+
+    /// One control tick. `time` is the measurement's time stamp [s]: the observer integrates the time
+    /// since the last accepted stamp clipped to the period band (a rejected tick does not advance the
+    /// clock, so the integrated period cannot come from `period`); `period` (ros2_control's measured
+    /// period) is not used by the math. Writes `command` (sized by initCommand) and returns its fault
+    /// code (None for an accepted tick). Never allocates, never throws.
+    FaultCode update(
+      double time, double period, const State & state, const Reference & reference, Command & command) noexcept;
+
+    /// Sizes a Command for this controller (call once, outside the loop).
+    void initCommand(Command & command) const;
+
+    /// Flips kappa_f / kappa_eps / kappa_ext (-1: unchanged); kappa_eps is ramped over switch_time.
+    void setSwitches(int kappa_f = -1, int kappa_eps = -1, int kappa_ext = -1) noexcept;
+
+    // ---------------------------------------------------------------- facts
+    int nv() const noexcept { return n_; }
+    const ControllerParams & params() const noexcept { return params_; }
+    const Model & model() const noexcept { return model_; }
+    Mode mode() const noexcept { return mode_; }
+    int kappaF() const noexcept { return kappa_f_; }
+    int kappaEps() const noexcept { return kappa_eps_; }
+    int kappaExt() const noexcept { return kappa_ext_; }
+    double epsWeight() const noexcept { return eps_weight_; } ///< ramped kappa_eps applied now
+    bool reacted() const noexcept { return reacted_; }
+    bool detected() const noexcept { return detected_; }
+    bool hasDetector() const noexcept { return has_detector_; }
+    double firstDetectionTime() const noexcept { return first_time_; } ///< NaN before a detection
+    const Eigen::Matrix<std::uint8_t, Eigen::Dynamic, 1> & firstDetectionJoints() const noexcept
+    {
+      return first_joints_;
+    }
+    bool observerInvalid() const noexcept { return obs_invalid_; }
+    const TimingStats & timing() const noexcept { return timing_; }
+    const Eigen::MatrixXd & damping() const noexcept { return D_; }
+    /// The residual the detector looks at (the detection observer's if there is one).
+    const Eigen::VectorXd & detectionResidual() const noexcept
+    {
+      return use_det_ ? obs_det_.residual : obs_.residual;
+    }
+    const ObserverState & observer() const noexcept { return obs_; }
+    const ObserverState & detectionObserver() const noexcept { return obs_det_; }
+    /// Mutable observer states, for diagnostics and tests (e.g. to exercise the invalid-observer latch).
+    ObserverState & observerState() noexcept { return obs_; }
+    const Eigen::VectorXd & lastCommand() const noexcept { return tau_prev_; }
+    const Eigen::Vector3d & gravity() const noexcept { return gravity_; } ///< last accepted
+    // plausibility bounds per joint
+    const Eigen::VectorXd & positionLow() const noexcept { return q_lo_; }
+    const Eigen::VectorXd & positionHigh() const noexcept { return q_hi_; }
+    const Eigen::VectorXd & velocityMax() const noexcept { return dq_max_; }
+    const Eigen::VectorXd & accelerationMax() const noexcept { return ddq_max_; }
+    const Eigen::VectorXd & motorTorqueMax() const noexcept { return tau_m_max_; }
+    const Eigen::VectorXd & torqueMax() const noexcept { return tau_max_; }
+    const Eigen::VectorXd & torqueStep() const noexcept { return tau_step_; }
+
+  private:
+    FaultCode fault(FaultCode code, Signal s, int index, double value, double lo, double hi) noexcept;
+    FaultCode checkInputs(double t, const State & s, const Reference & r) noexcept;
+    FaultCode reject(FaultCode code, Command & cmd) noexcept;
+    void updateMode() noexcept;
+    void restoreGravity() noexcept;
+
+    bool configured_ = false;
+    int n_ = 0;
+    ControllerParams params_;
+    Model model_, model0_; // model0_: zero gravity, for M(q) x as RNEA(q, 0, x)
+    Data data_g_, data_c_, data_j_, data_m_, data_p_, data_ff_;
+    // parameters per joint
+    Eigen::VectorXd K_, xi_, ko_, ko_det_, threshold_, coulomb_, viscous_;
+    Eigen::VectorXd q_lo_, q_hi_, dq_max_, ddq_max_, tau_m_max_, tau_max_, tau_step_;
+    double inv_band_ = 0.0, limit_ = 0.0, period_lo_ = 0.0, period_hi_ = 0.0;
+    double g_norm_ = 0.0, g_tol_ = 0.0, force_max_ = 0.0, moment_max_ = 0.0;
+    bool use_det_ = false, has_detector_ = false;
+    // buffers
+    Eigen::VectorXd zeros_, g_, p_, ff_, tau_new_, last_q_, tau_prev_, tau_safe_;
+    Eigen::Matrix<double, 6, Eigen::Dynamic> J_;
+    Eigen::MatrixXd C_, M_, D_, D_new_;
+    ModalDampingWorkspace modal_;
+    Eigen::Matrix<std::uint8_t, Eigen::Dynamic, 1> over_, sat_, first_joints_;
+    // state
+    ObserverState obs_, obs_det_;
+    Eigen::Vector3d gravity_ = Eigen::Vector3d::Zero(); // last accepted
+    bool gravity_staged_ = false;
+    bool started_ = false, has_t_ = false, has_last_q_ = false, obs_invalid_ = false, has_prev_tau_ = false;
+    double last_t_ = 0.0;
+    TimingStats timing_;
+    int kappa_f_ = 0, kappa_eps_ = 0, kappa_ext_ = 0, kappa_eps_before_reaction_ = 0;
+    double eps_weight_ = 0.0;
+    bool reacted_ = false, gravity_mode_ = false, detected_ = false;
+    double first_time_ = 0.0;
+    int damping_countdown_ = 0;
+    Mode mode_ = Mode::Compliant;
+    FaultInfo fault_;
+  };
+
+} // namespace reflexarm

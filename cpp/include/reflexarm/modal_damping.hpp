@@ -1,0 +1,36 @@
+// reflexarm: modal damping of eq. (2) by double diagonalization, allocation-free.
+#pragma once
+
+#include <Eigen/Core>
+
+namespace reflexarm
+{
+
+  /// Buffers of computeModalDamping, sized once for n joints.
+  struct ModalDampingWorkspace
+  {
+    explicit ModalDampingWorkspace(Eigen::Index n = 0) { resize(n); }
+    void resize(Eigen::Index n);
+
+    Eigen::MatrixXd L, B, A, LU, U;
+    Eigen::VectorXd lambda;
+  };
+
+  /// Eigen-decomposition of a symmetric matrix W = V diag(values) V^T by cyclic Jacobi rotations
+  /// (values ascending). W is overwritten; no allocation. False if it did not converge.
+  bool symmetricEigen(
+    Eigen::Ref<Eigen::MatrixXd> W, Eigen::Ref<Eigen::VectorXd> values, Eigen::Ref<Eigen::MatrixXd> V) noexcept;
+
+  /// D = L U diag(2 xi_i sqrt(lambda_i)) U^T L^T with M = L L^T and L^-1 K L^-T = U diag(lambda) U^T
+  /// (lambda ascending; damping_ratio[i] applies to the i-th mode).
+  ///
+  /// Reads the upper triangle of M only. Returns false (out untouched) if M is not finite or not positive
+  /// definite. No allocation, no exception. Same loops as reflexarm.control._kernels.modal_damping_into.
+  bool computeModalDamping(
+    const Eigen::Ref<const Eigen::MatrixXd> & M,
+    const Eigen::Ref<const Eigen::VectorXd> & stiffness,
+    const Eigen::Ref<const Eigen::VectorXd> & damping_ratio,
+    ModalDampingWorkspace & ws,
+    Eigen::Ref<Eigen::MatrixXd> out) noexcept;
+
+} // namespace reflexarm

@@ -1,0 +1,86 @@
+// reflexarm: parameters of the controller, checked once in Controller::configure.
+//
+// Names follow the paper (Vorndamme et al., "Soft Robotics for the Hydraulic Atlas Arms") and the Python
+// package (reflexarm.control.Controller, reflexarm.control.contract.InputBounds). Units are SI.
+#pragma once
+
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+#include <Eigen/Core>
+
+namespace reflexarm
+{
+
+  /// Error in the parameters given to Controller::configure (never thrown by update()).
+  class ConfigError : public std::invalid_argument
+  {
+  public:
+    explicit ConfigError(const std::string & what)
+    : std::invalid_argument(what)
+    {
+    }
+  };
+
+  /// What a detected collision does (latched until reset()).
+  enum class Reaction
+  {
+    Gravity = 0,   ///< eq. (13): gravity compensation only
+    Compliant = 1, ///< kappa_eps -> 0 (compliant mode of Fig. 3)
+    None = 2       ///< detection is reported only
+  };
+
+  const char * reactionName(Reaction r) noexcept;
+
+  /// Plausibility bounds of the inputs (same fields and defaults as reflexarm.control.InputBounds).
+  struct InputBounds
+  {
+    double position_margin = 0.2;  ///< q, q_d may exceed the joint limits by this [rad]
+    double velocity_factor = 10.0; ///< |dq|, |dq_d| <= this x velocity limit [-]
+    double torque_factor = 3.0;    ///< |tau_m| <= this x torque limit [-]
+    double max_force = 2000.0;     ///< |wrist force component| [N]
+    double max_moment = 200.0;     ///< |wrist moment component| [Nm]
+    double gravity_tolerance = 1.0;  ///< | |gravity| - |model gravity| | [m/s^2]
+    double max_acceleration = 1000.0; ///< |ddq_d| [rad/s^2]
+    double max_velocity = 100.0;   ///< |dq| bound of joints without a velocity limit [rad/s]
+    double max_torque = 1e4;       ///< |tau_m| bound of joints without a torque limit [Nm]
+  };
+
+  /// Everything Controller::configure needs besides the Pinocchio model.
+  ///
+  /// Vectors are per joint (size n = model.nv); a vector of size 1 is broadcast to n.
+  struct ControllerParams
+  {
+    Eigen::VectorXd stiffness = Eigen::VectorXd::Constant(1, 300.0);   ///< K [Nm/rad], > 0
+    Eigen::VectorXd damping_ratio = Eigen::VectorXd::Constant(1, 0.7); ///< D_xi [-], >= 0
+    Eigen::VectorXd observer_gain = Eigen::VectorXd::Constant(1, 5.0); ///< K_o [1/s], > 0
+    /// K_o of a second observer used for detection only; empty: one observer does both.
+    Eigen::VectorXd detection_observer_gain;
+    /// zeta [Nm] per joint for detection (12), > 0; empty: detection off.
+    Eigen::VectorXd threshold = Eigen::VectorXd::Constant(1, 11.0);
+    Reaction reaction = Reaction::Gravity;
+    int kappa_f = 0;   ///< friction compensation in (2) and (6) (0/1)
+    int kappa_eps = 0; ///< disturbance compensation in (2) (0/1)
+    int kappa_ext = 0; ///< wrist-wrench term in (6), "EFC" (0/1)
+    double residual_limit = 30.0; ///< cut-off of the compensated residual [Nm]
+    double switch_time = 0.1;     ///< kappa_eps ramp time [s]; 0 switches at once
+    double dt = 1e-3;             ///< nominal control period [s]
+    int damping_update_period = 10; ///< recompute the modal damping every this many accepted ticks
+    /// Friction model tau_f = coulomb * clip(dq / velocity_band, -1, 1) + viscous * dq.
+    Eigen::VectorXd friction_coulomb = Eigen::VectorXd::Zero(1); ///< [Nm], >= 0
+    Eigen::VectorXd friction_viscous = Eigen::VectorXd::Zero(1); ///< [Nms/rad], >= 0
+    double friction_velocity_band = 0.02;                        ///< [rad/s], > 0
+    /// Index of the wrist force/torque sensor frame in model.frames (its LOCAL Jacobian is used).
+    std::size_t sensor_frame_id = 0;
+    /// Saturation of the command [Nm] per joint (+inf: none). Empty: the model's effort limits, joints
+    /// without a finite positive one unsaturated (the Python Controller's torque_limit="model").
+    Eigen::VectorXd torque_limit;
+    /// Largest change of the command [Nm/s] per joint; empty: no rate limit.
+    Eigen::VectorXd torque_rate_limit;
+    InputBounds input_bounds;
+    double period_band_low = 0.5;  ///< integrated period clipped to [low, high] x dt
+    double period_band_high = 2.0;
+  };
+
+} // namespace reflexarm

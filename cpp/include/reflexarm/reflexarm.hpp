@@ -1,0 +1,8 @@
+// reflexarm: the real-time core (umbrella header).
+#pragma once
+
+#include "reflexarm/controller.hpp"
+#include "reflexarm/fault.hpp"
+#include "reflexarm/modal_damping.hpp"
+#include "reflexarm/params.hpp"
+#include "reflexarm/signals.hpp"

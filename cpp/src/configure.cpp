@@ -1,0 +1,238 @@
+// reflexarm::Controller::configure: checks the parameters once and sizes every buffer (not real-time).
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+#include "reflexarm/controller.hpp"
+
+namespace reflexarm
+{
+
+  namespace
+  {
+    constexpr double kInf = std::numeric_limits<double>::infinity();
+
+    std::string listOf(const Eigen::VectorXd & v)
+    {
+      std::ostringstream os;
+      os.precision(17);
+      os << "[";
+      for (Eigen::Index i = 0; i < v.size(); ++i)
+        os << (i ? ", " : "") << v[i];
+      os << "]";
+      return os.str();
+    }
+
+    enum class Sign
+    {
+      Any,
+      Positive,
+      NonNegative
+    };
+
+    /// value broadcast to n (size 1) and checked; allow_inf admits +inf (meaning "no bound").
+    Eigen::VectorXd
+    asVector(const Eigen::VectorXd & value, int n, const char * name, Sign sign, bool allow_inf = false)
+    {
+      Eigen::VectorXd out;
+      if (value.size() == 1)
+        out = Eigen::VectorXd::Constant(n, value[0]);
+      else if (value.size() == n)
+        out = value;
+      else
+      {
+        std::ostringstream os;
+        os << name << " must have " << n << " values (one per joint) or 1; got " << value.size();
+        throw ConfigError(os.str());
+      }
+      for (Eigen::Index i = 0; i < n; ++i)
+      {
+        const double x = out[i];
+        const bool finite_ok = std::isfinite(x) || (allow_inf && x == kInf);
+        if (!finite_ok)
+          throw ConfigError(std::string(name) + " must be finite; got " + listOf(out));
+        if (sign == Sign::Positive && !(x > 0.0))
+          throw ConfigError(std::string(name) + " must be positive; got " + listOf(out));
+        if (sign == Sign::NonNegative && !(x >= 0.0))
+          throw ConfigError(std::string(name) + " must be non-negative; got " + listOf(out));
+      }
+      return out;
+    }
+
+    void checkPositive(double x, const char * name)
+    {
+      if (!std::isfinite(x) || !(x > 0.0))
+      {
+        std::ostringstream os;
+        os.precision(17);
+        os << name << " must be a positive number; got " << x;
+        throw ConfigError(os.str());
+      }
+    }
+
+    int checkSwitch(int value, const char * name)
+    {
+      if (value != 0 && value != 1)
+        throw ConfigError(std::string(name) + " must be 0 or 1; got " + std::to_string(value));
+      return value;
+    }
+  } // namespace
+
+  void Controller::configure(const Model & model, const ControllerParams & p)
+  {
+    configured_ = false;
+    if (model.nq != model.nv)
+      throw ConfigError(
+        "model has nq=" + std::to_string(model.nq) + " != nv=" + std::to_string(model.nv)
+        + ": only fixed-base arms with 1-DoF joints are supported");
+    if (model.nv == 0)
+      throw ConfigError("model has no joints");
+    const int n = model.nv;
+    checkPositive(p.dt, "dt");
+    ControllerParams q = p;
+    q.stiffness = asVector(p.stiffness, n, "stiffness", Sign::Positive);
+    q.damping_ratio = asVector(p.damping_ratio, n, "damping_ratio", Sign::NonNegative);
+    q.observer_gain = asVector(p.observer_gain, n, "observer_gain", Sign::Positive);
+    const bool use_det = p.detection_observer_gain.size() > 0;
+    if (use_det)
+      q.detection_observer_gain =
+        asVector(p.detection_observer_gain, n, "detection_observer_gain", Sign::Positive);
+    const bool has_detector = p.threshold.size() > 0;
+    if (has_detector)
+      q.threshold = asVector(p.threshold, n, "threshold", Sign::Positive);
+    q.kappa_f = checkSwitch(p.kappa_f, "kappa_f");
+    q.kappa_eps = checkSwitch(p.kappa_eps, "kappa_eps");
+    q.kappa_ext = checkSwitch(p.kappa_ext, "kappa_ext");
+    checkPositive(p.residual_limit, "residual_limit");
+    if (!std::isfinite(p.switch_time) || p.switch_time < 0.0)
+      throw ConfigError("switch_time must be a non-negative number of seconds; got " + std::to_string(p.switch_time));
+    if (p.damping_update_period < 1)
+      throw ConfigError(
+        "damping_update_period must be a positive integer; got " + std::to_string(p.damping_update_period));
+    q.friction_coulomb = asVector(p.friction_coulomb, n, "friction_coulomb", Sign::NonNegative);
+    q.friction_viscous = asVector(p.friction_viscous, n, "friction_viscous", Sign::NonNegative);
+    checkPositive(p.friction_velocity_band, "friction_velocity_band");
+    if (p.sensor_frame_id >= model.frames.size())
+      throw ConfigError(
+        "sensor_frame_id " + std::to_string(p.sensor_frame_id) + " is not a frame of the model (it has "
+        + std::to_string(model.frames.size()) + " frames)");
+    const InputBounds & b = p.input_bounds;
+    const double bounds[] = {b.position_margin, b.velocity_factor, b.torque_factor,
+                             b.max_force,       b.max_moment,      b.gravity_tolerance,
+                             b.max_acceleration, b.max_velocity,    b.max_torque};
+    const char * bound_names[] = {"position_margin", "velocity_factor",  "torque_factor",
+                                  "max_force",       "max_moment",       "gravity_tolerance",
+                                  "max_acceleration", "max_velocity",    "max_torque"};
+    for (int k = 0; k < 9; ++k)
+      checkPositive(bounds[k], (std::string("InputBounds.") + bound_names[k]).c_str());
+    // observer stability at the longest integrated period
+    const double lo = p.period_band_low, hi = p.period_band_high;
+    if (!(0.0 < lo && lo <= 1.0 && 1.0 <= hi && hi < kInf))
+      throw ConfigError(
+        "period_band must satisfy 0 < low <= 1 <= high < inf; got (" + std::to_string(lo) + ", "
+        + std::to_string(hi) + ")");
+    double k_o = q.observer_gain.maxCoeff();
+    if (use_det)
+      k_o = std::max(k_o, q.detection_observer_gain.maxCoeff());
+    if (q.observer_gain.maxCoeff() * p.dt >= 1.0 || (use_det && q.detection_observer_gain.maxCoeff() * p.dt >= 1.0))
+      throw ConfigError("observer_gain * dt must be < 1 for the discrete observer to be stable");
+    if (k_o * p.dt * hi >= 1.0)
+      throw ConfigError(
+        "observer_gain * dt * period_band[1] must be < 1 for the observer to stay stable at the longest "
+        "integrated period");
+    // torque limit: given (+inf = none) or the model's effort limits
+    Eigen::VectorXd effort = model.upperEffortLimit;
+    if (p.torque_limit.size() == 0)
+    {
+      q.torque_limit = effort;
+      for (int i = 0; i < n; ++i)
+        if (!(std::isfinite(effort[i]) && effort[i] > 0.0))
+          q.torque_limit[i] = kInf;
+    }
+    else
+      q.torque_limit = asVector(p.torque_limit, n, "torque_limit", Sign::Positive, true);
+    if (p.torque_rate_limit.size() > 0)
+      q.torque_rate_limit = asVector(p.torque_rate_limit, n, "torque_rate_limit", Sign::Positive);
+
+    // ---------------------------------------------------------------- everything checked: allocate
+    params_ = q;
+    n_ = n;
+    model_ = model;
+    model0_ = model;
+    model0_.gravity.linear().setZero();
+    data_g_ = Data(model_);
+    data_c_ = Data(model_);
+    data_j_ = Data(model_);
+    data_m_ = Data(model_);
+    data_p_ = Data(model0_);
+    data_ff_ = Data(model0_);
+    K_ = q.stiffness;
+    xi_ = q.damping_ratio;
+    ko_ = q.observer_gain;
+    ko_det_ = use_det ? q.detection_observer_gain : Eigen::VectorXd::Zero(n);
+    threshold_ = has_detector ? q.threshold : Eigen::VectorXd::Constant(n, kInf);
+    coulomb_ = q.friction_coulomb;
+    viscous_ = q.friction_viscous;
+    use_det_ = use_det;
+    has_detector_ = has_detector;
+    inv_band_ = 1.0 / p.friction_velocity_band;
+    limit_ = p.residual_limit;
+    period_lo_ = lo * p.dt;
+    period_hi_ = hi * p.dt;
+    timing_.band_low = period_lo_;
+    timing_.band_high = period_hi_;
+    gravity_ = model.gravity.linear();
+    g_norm_ = gravity_.norm();
+    g_tol_ = b.gravity_tolerance;
+    force_max_ = b.max_force;
+    moment_max_ = b.max_moment;
+    q_lo_.resize(n);
+    q_hi_.resize(n);
+    dq_max_.resize(n);
+    tau_m_max_.resize(n);
+    for (int i = 0; i < n; ++i)
+    {
+      const double lower = model.lowerPositionLimit[i], upper = model.upperPositionLimit[i];
+      q_lo_[i] = std::isfinite(lower) ? lower - b.position_margin : -kInf;
+      q_hi_[i] = std::isfinite(upper) ? upper + b.position_margin : kInf;
+      const double vel = model.upperVelocityLimit[i];
+      dq_max_[i] = (std::isfinite(vel) && vel > 0.0) ? b.velocity_factor * vel : b.max_velocity;
+      // tau_m is judged against the saturation, or the model's effort limit when saturation is off
+      const double ref = std::isfinite(q.torque_limit[i]) ? q.torque_limit[i] : effort[i];
+      tau_m_max_[i] = (std::isfinite(ref) && ref > 0.0) ? b.torque_factor * ref : b.max_torque;
+    }
+    ddq_max_ = Eigen::VectorXd::Constant(n, b.max_acceleration);
+    tau_max_ = q.torque_limit;
+    tau_step_ = q.torque_rate_limit.size() > 0 ? Eigen::VectorXd(q.torque_rate_limit * p.dt)
+                                                : Eigen::VectorXd::Constant(n, kInf);
+    zeros_.setZero(n);
+    g_.setZero(n);
+    p_.setZero(n);
+    ff_.setZero(n);
+    tau_new_.setZero(n);
+    last_q_.setZero(n);
+    tau_prev_.setZero(n);
+    tau_safe_.setZero(n);
+    J_.setZero(6, n);
+    M_.setZero(n, n);
+    D_.setZero(n, n);
+    D_new_.setZero(n, n);
+    modal_.resize(n);
+    over_.setZero(n);
+    sat_.setZero(n);
+    first_joints_.setZero(n);
+    obs_.resize(n);
+    obs_det_.resize(n);
+    gravity_staged_ = false;
+    has_last_q_ = false;
+    has_prev_tau_ = false;
+    kappa_f_ = q.kappa_f;
+    kappa_eps_ = q.kappa_eps;
+    kappa_ext_ = q.kappa_ext;
+    kappa_eps_before_reaction_ = kappa_eps_;
+    reacted_ = false;
+    configured_ = true;
+    reset();
+  }
+
+} // namespace reflexarm

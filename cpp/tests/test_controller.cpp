@@ -1,0 +1,341 @@
+// C++ tests of the reflexarm core: no heap allocation inside update(), bounded finite commands under bad
+// inputs, modal damping against Eigen's generalized eigensolver, Python-repr formatting of fault values.
+// Exit code 0 when every check passes; prints "N passed, M failed".
+#include <atomic>
+#include <execinfo.h>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <new>
+#include <random>
+#include <string>
+
+#include <Eigen/Eigenvalues>
+
+#include "pinocchio/algorithm/crba.hpp"
+#include "pinocchio/multibody/sample-models.hpp"
+
+#include "reflexarm/model_io.hpp"
+#include "reflexarm/reflexarm.hpp"
+
+// ------------------------------------------------------------------ counting operator new
+static std::atomic<long> g_allocations{0};
+static std::atomic<bool> g_counting{false};
+static bool g_trace = false;
+extern "C" void * __libc_malloc(std::size_t);
+extern "C" void * __libc_calloc(std::size_t, std::size_t);
+extern "C" void * __libc_realloc(void *, std::size_t);
+
+void * operator new(std::size_t size)
+{
+  if (g_counting.load(std::memory_order_relaxed))
+    g_allocations.fetch_add(1, std::memory_order_relaxed);
+  if (void * p = __libc_malloc(size ? size : 1))
+    return p;
+  throw std::bad_alloc();
+}
+void * operator new[](std::size_t size)
+{
+  return operator new(size);
+}
+void operator delete(void * p) noexcept
+{
+  std::free(p);
+}
+void operator delete[](void * p) noexcept
+{
+  std::free(p);
+}
+void operator delete(void * p, std::size_t) noexcept
+{
+  std::free(p);
+}
+void operator delete[](void * p, std::size_t) noexcept
+{
+  std::free(p);
+}
+
+// Eigen (and C code) allocate through malloc, not operator new: count the malloc family too (glibc).
+extern "C" void * malloc(std::size_t size)
+{
+  if (g_counting.load(std::memory_order_relaxed))
+  {
+    g_allocations.fetch_add(1, std::memory_order_relaxed);
+    if (g_trace)
+    {
+      g_counting = false;
+      void * frames[40];
+      int k = backtrace(frames, 40);
+      backtrace_symbols_fd(frames, k, 2);
+      std::abort();
+    }
+  }
+  return __libc_malloc(size);
+}
+extern "C" void * calloc(std::size_t count, std::size_t size)
+{
+  if (g_counting.load(std::memory_order_relaxed))
+    g_allocations.fetch_add(1, std::memory_order_relaxed);
+  return __libc_calloc(count, size);
+}
+extern "C" void * realloc(void * ptr, std::size_t size)
+{
+  if (g_counting.load(std::memory_order_relaxed))
+    g_allocations.fetch_add(1, std::memory_order_relaxed);
+  return __libc_realloc(ptr, size);
+}
+
+static int g_passed = 0, g_failed = 0;
+#define CHECK(cond, ...)                                                                                     \
+  do                                                                                                         \
+  {                                                                                                          \
+    if (cond)                                                                                                \
+      ++g_passed;                                                                                            \
+    else                                                                                                     \
+    {                                                                                                        \
+      ++g_failed;                                                                                            \
+      std::printf("FAILED %s:%d: %s: ", __FILE__, __LINE__, #cond);                                          \
+      std::printf(__VA_ARGS__);                                                                              \
+      std::printf("\n");                                                                                     \
+    }                                                                                                        \
+  } while (0)
+
+namespace
+{
+  pinocchio::Model makeArm()
+  {
+    pinocchio::Model model;
+    pinocchio::buildModels::manipulator(model);
+    const int n = model.nv;
+    model.lowerPositionLimit = Eigen::VectorXd::Constant(n, -3.0);
+    model.upperPositionLimit = Eigen::VectorXd::Constant(n, 3.0);
+    model.upperVelocityLimit = Eigen::VectorXd::Constant(n, 3.0);
+    model.upperEffortLimit = Eigen::VectorXd::Constant(n, 200.0);
+    return model;
+  }
+
+  struct Run
+  {
+    long allocations = 0;
+    long ticks = 0, faults = 0, non_finite = 0, beyond_limit = 0;
+    bool detected = false;
+  };
+
+  // n_ticks ticks of a sine reference with noise; every 97th tick a NaN q, every 131st an implausible
+  // tau_m, every 173rd a repeated time stamp; kappa switches flipped on the way. Counts allocations
+  // inside update() (and setSwitches) only.
+  Run runTicks(reflexarm::Controller & ctrl, int n_ticks, double push)
+  {
+    const int n = ctrl.nv();
+    reflexarm::Command cmd;
+    ctrl.initCommand(cmd);
+    Eigen::VectorXd q(n), dq(n), tau_m(n), q_d(n), dq_d(n), ddq_d(n);
+    Eigen::Matrix<double, 6, 1> wrench;
+    Eigen::Vector3d gravity(0.0, 0.0, -9.81);
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    Run run;
+    double t = 0.0;
+    for (int k = 0; k < n_ticks; ++k)
+    {
+      t += 1e-3;
+      for (int i = 0; i < n; ++i)
+      {
+        q_d[i] = 0.3 * std::sin(2.0 * t + i);
+        dq_d[i] = 0.6 * std::cos(2.0 * t + i);
+        ddq_d[i] = -1.2 * std::sin(2.0 * t + i);
+        q[i] = q_d[i] + 3.4e-4 * u(rng);
+        dq[i] = dq_d[i] + 5.5e-2 * u(rng);
+        tau_m[i] = 10.0 * u(rng) + (k > n_ticks / 2 ? push : 0.0);
+      }
+      for (int i = 0; i < 6; ++i)
+        wrench[i] = 2.3 * u(rng);
+      double tk = t;
+      if (k % 97 == 5)
+        q[1] = std::nan("");
+      if (k % 131 == 7)
+        tau_m[0] = 1e6;
+      if (k % 173 == 9)
+        tk = t - 1e-3;
+      reflexarm::State s{q, dq, tau_m, wrench, gravity};
+      reflexarm::Reference r{q_d, dq_d, ddq_d};
+      g_allocations = 0;
+      g_counting = true;
+      if (k == 300)
+        ctrl.setSwitches(1, 1, 1);
+      if (k == 600)
+        ctrl.setSwitches(-1, 0, -1);
+      const auto code = ctrl.update(tk, 1e-3, s, r, cmd);
+      g_counting = false;
+      run.allocations += g_allocations;
+      ++run.ticks;
+      run.faults += code != reflexarm::FaultCode::None;
+      for (int i = 0; i < n; ++i)
+      {
+        run.non_finite += !std::isfinite(cmd.tau[i]);
+        run.beyond_limit += std::abs(cmd.tau[i]) > ctrl.torqueMax()[i];
+      }
+    }
+    run.detected = ctrl.detected();
+    return run;
+  }
+
+  void testNoAllocation()
+  {
+    const pinocchio::Model model = makeArm();
+    for (int variant = 0; variant < 3; ++variant)
+    {
+      reflexarm::ControllerParams p;
+      p.sensor_frame_id = model.frames.size() - 1;
+      p.kappa_ext = variant == 0;
+      p.kappa_eps = variant != 2;
+      p.kappa_f = 1;
+      p.friction_coulomb = Eigen::VectorXd::Constant(1, 2.0);
+      p.friction_viscous = Eigen::VectorXd::Constant(1, 1.0);
+      p.damping_update_period = variant == 1 ? 1 : 10;
+      if (variant == 1)
+        p.detection_observer_gain = Eigen::VectorXd::Constant(1, 50.0);
+      p.reaction = static_cast<reflexarm::Reaction>(variant);
+      if (variant == 2)
+        p.torque_rate_limit = Eigen::VectorXd::Constant(1, 2000.0);
+      reflexarm::Controller ctrl;
+      ctrl.configure(model, p);
+      const Run run = runTicks(ctrl, 1500, 80.0);
+      CHECK(run.allocations == 0, "variant %d: %ld allocations in update()", variant, run.allocations);
+      CHECK(run.faults > 20, "variant %d: only %ld faults injected", variant, run.faults);
+      CHECK(run.non_finite == 0, "variant %d: %ld non-finite torques", variant, run.non_finite);
+      CHECK(run.beyond_limit == 0, "variant %d: %ld torques beyond the limit", variant, run.beyond_limit);
+      CHECK(run.detected, "variant %d: the 80 Nm push was not detected", variant);
+    }
+  }
+
+  void testFaultKeepsState()
+  {
+    const pinocchio::Model model = makeArm();
+    reflexarm::ControllerParams p;
+    p.kappa_eps = 1;
+    reflexarm::Controller ctrl;
+    ctrl.configure(model, p);
+    reflexarm::Command cmd;
+    ctrl.initCommand(cmd);
+    const int n = ctrl.nv();
+    Eigen::VectorXd q = Eigen::VectorXd::Constant(n, 0.1), z = Eigen::VectorXd::Zero(n);
+    Eigen::VectorXd tau = Eigen::VectorXd::Constant(n, 1.0);
+    Eigen::Matrix<double, 6, 1> w = Eigen::Matrix<double, 6, 1>::Zero();
+    Eigen::Vector3d g(0, 0, -9.81);
+    for (int k = 0; k < 3; ++k)
+      ctrl.update(1e-3 * (k + 1), 1e-3, {q, z, tau, w, g}, {q, z, z}, cmd);
+    const Eigen::VectorXd r_before = ctrl.observer().residual;
+    const Eigen::VectorXd i_before = ctrl.observer().integral;
+    Eigen::VectorXd bad = q;
+    bad[2] = 10.0; // beyond the joint limit + margin
+    const auto code = ctrl.update(4e-3, 1e-3, {bad, z, tau, w, g}, {q, z, z}, cmd);
+    CHECK(code == reflexarm::FaultCode::OutOfBounds, "code %d", static_cast<int>(code));
+    CHECK(cmd.mode == reflexarm::Mode::Fault, "mode %s", reflexarm::modeName(cmd.mode));
+    CHECK(ctrl.observer().residual == r_before && ctrl.observer().integral == i_before, "observer changed");
+    const std::string text(cmd.fault_text.data());
+    CHECK(
+      text == "measurement q[2] = 10 rad outside the plausible [-3.2, 3.2] rad (joint limits +- "
+              "InputBounds.position_margin)",
+      "text '%s'", text.c_str());
+    ctrl.observerState().integral[0] = std::nan("");
+    const auto code2 = ctrl.update(5e-3, 1e-3, {q, z, tau, w, g}, {q, z, z}, cmd);
+    const auto code3 = ctrl.update(6e-3, 1e-3, {q, z, tau, w, g}, {q, z, z}, cmd);
+    CHECK(
+      code2 == reflexarm::FaultCode::ObserverInvalid && code3 == reflexarm::FaultCode::ObserverInvalid
+        && cmd.collision,
+      "codes %d %d collision %d", static_cast<int>(code2), static_cast<int>(code3), cmd.collision);
+    ctrl.reset();
+    const auto code4 = ctrl.update(7e-3, 1e-3, {q, z, tau, w, g}, {q, z, z}, cmd);
+    CHECK(code4 == reflexarm::FaultCode::None, "after reset: code %d", static_cast<int>(code4));
+  }
+
+  void testModalDamping()
+  {
+    const pinocchio::Model model = makeArm();
+    pinocchio::Data data(model);
+    const int n = model.nv;
+    Eigen::VectorXd q = Eigen::VectorXd::LinSpaced(n, -0.5, 0.7);
+    pinocchio::crba(model, data, q);
+    Eigen::MatrixXd M = data.M;
+    M.triangularView<Eigen::StrictlyLower>() = M.transpose();
+    Eigen::VectorXd K = Eigen::VectorXd::LinSpaced(n, 100.0, 400.0), xi = Eigen::VectorXd::Constant(n, 0.7);
+    reflexarm::ModalDampingWorkspace ws(n);
+    Eigen::MatrixXd D(n, n);
+    CHECK(reflexarm::computeModalDamping(data.M, K, xi, ws, D), "factorization failed");
+    // generalized eigenproblem K v = lambda M v with V^T M V = I: V^T D V = diag(2 xi sqrt(lambda))
+    Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::MatrixXd> ges(Eigen::MatrixXd(K.asDiagonal()), M);
+    const Eigen::MatrixXd modal = ges.eigenvectors().transpose() * D * ges.eigenvectors();
+    Eigen::MatrixXd want = Eigen::MatrixXd::Zero(n, n);
+    for (int i = 0; i < n; ++i)
+      want(i, i) = 2.0 * 0.7 * std::sqrt(ges.eigenvalues()[i]);
+    const double err = (modal - want).cwiseAbs().maxCoeff();
+    // 1e-9: both are double-precision eigen decompositions of a well-conditioned 6x6 problem (entries ~10)
+    CHECK(err < 1e-9, "modal damping off by %g", err);
+    Eigen::MatrixXd bad = data.M;
+    bad(0, 0) = -1.0;
+    CHECK(!reflexarm::computeModalDamping(bad, K, xi, ws, D), "accepted a non-positive-definite M");
+  }
+
+  void testRepr()
+  {
+    const struct
+    {
+      double v;
+      const char * want;
+    } cases[] = {{0.1, "0.1"},     {100.0, "100.0"},     {1e-5, "1e-05"},     {0.0001, "0.0001"},
+                 {1e16, "1e+16"},  {1e15, "1000000000000000.0"}, {-2.5, "-2.5"}, {1.5e200, "1.5e+200"},
+                 {-0.0, "-0.0"},   {0.001, "0.001"},     {123.456, "123.456"}, {1.0 / 3.0, "0.3333333333333333"}};
+    for (const auto & c : cases)
+    {
+      char buf[64];
+      reflexarm::formatRepr(c.v, buf, sizeof(buf));
+      CHECK(std::strcmp(buf, c.want) == 0, "repr(%.17g) = '%s', want '%s'", c.v, buf, c.want);
+    }
+  }
+
+  void testModelText()
+  {
+    const pinocchio::Model model = makeArm();
+    const pinocchio::Model back = reflexarm::modelFromString(reflexarm::modelToString(model));
+    CHECK(back == model, "model changed through its text form");
+    bool threw = false;
+    try
+    {
+      reflexarm::modelFromString("not a model");
+    }
+    catch (const std::runtime_error &)
+    {
+      threw = true;
+    }
+    CHECK(threw, "garbage text was accepted");
+  }
+} // namespace
+
+void testCounterCounts()
+{
+  // the counter must see both kinds of allocation, or a 0 above would mean nothing
+  g_allocations = 0;
+  g_counting = true;
+  int * volatile x = new int(3);
+  Eigen::VectorXd * volatile v = new Eigen::VectorXd(Eigen::VectorXd::Zero(50));
+  g_counting = false;
+  const long seen = g_allocations;
+  delete v;
+  delete x;
+  CHECK(seen >= 3, "the allocation counter saw %ld of 3 allocations", seen);
+}
+
+int main()
+{
+  testCounterCounts();
+  g_trace = std::getenv("TRACE_ALLOC") != nullptr;
+  testNoAllocation();
+  testFaultKeepsState();
+  testModalDamping();
+  testRepr();
+  testModelText();
+  std::printf("%d passed, %d failed\n", g_passed, g_failed);
+  return g_failed == 0 ? 0 : 1;
+}
