@@ -365,13 +365,11 @@ namespace reflexarm
           tau -= eps_w * res;
         }
       }
-      if (!std::isfinite(tau))
+      if (!std::isfinite(tau)) // the observers are part-way updated: they latch as invalid either way
       {
+        obs_invalid_ = true;
         if (!std::isfinite(obs_acc))
-        {
-          obs_invalid_ = true;
           return reject(FaultCode::ObserverInvalid, cmd);
-        }
         return reject(fault(FaultCode::OutputNonFinite, Signal::Model, i, tau, 0.0, 0.0), cmd);
       }
       std::uint8_t sat = 0; // bounded torque: rate limit, then saturation
@@ -494,8 +492,9 @@ namespace reflexarm
     }
     tau_prev_ = cmd.tau;
     has_prev_tau_ = true;
-    // an invalid observer never reports "no collision"
-    cmd.collision = code == FaultCode::ObserverInvalid ? true : (has_detector_ && detected_);
+    // detection is off (invalid observer, or a non-finite law that latched it): never "no collision"
+    const bool detection_off = code == FaultCode::ObserverInvalid || code == FaultCode::OutputNonFinite;
+    cmd.collision = detection_off ? true : (has_detector_ && detected_);
     return code;
   }
 

@@ -66,7 +66,7 @@ namespace reflexarm
     case FaultCode::ObserverInvalid:
       return "observer state invalid (latched until reset)";
     case FaultCode::OutputNonFinite:
-      return "non-finite control law";
+      return "non-finite control law (latched until reset, as an invalid observer)";
     }
     return "?";
   }
@@ -281,7 +281,7 @@ namespace reflexarm
         std::snprintf(buf, size, "observer state invalid (non-finite): collision detection is off until reset()");
       break;
     case FaultCode::OutputNonFinite:
-      written = std::snprintf(buf, size, "non-finite control law on joint %d", info.index);
+      written = std::snprintf(buf, size, "non-finite control law on joint %d: collision detection is off until reset()", info.index);
       break;
     default:
       written = std::snprintf(buf, size, "fault %d", static_cast<int>(code));

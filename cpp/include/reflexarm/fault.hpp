@@ -20,7 +20,7 @@ namespace reflexarm
     ModelNonFinite = -5,          ///< a dynamics term of the model is NaN/inf
     MassNotPositiveDefinite = -6, ///< the damping update's Cholesky factorization failed
     ObserverInvalid = -7,         ///< latched until reset(): detection is off
-    OutputNonFinite = -8          ///< the control law gave NaN/inf (never expected)
+    OutputNonFinite = -8          ///< the control law gave NaN/inf (never expected); latches as -7
   };
 
   /// The signal a fault is about (ids as in the Python kernel).
