@@ -312,4 +312,3 @@ def paper_sweep(
         "figure": fig,
     }
     return PaperSweepResult(res, summary, fig, files)
-
