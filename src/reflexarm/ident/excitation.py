@@ -15,6 +15,15 @@ candidate is at rest at both ends by construction.
 of one period (``scipy.optimize.minimize``, SLSQP) subject to joint position (with a margin), velocity and
 acceleration limits evaluated on a dense time grid, and finally checks the limits on the trajectory
 sampled at 1 kHz (scaling the amplitudes down if a peak fell between grid points).
+
+Repeatability: a seeded call gives the same trajectory bit for bit on one machine with the same BLAS
+library and thread count. On another CPU (OpenBLAS picks its kernels per CPU) or with another number
+of BLAS threads the optimizer's path differs after a few iterations: measured for the Atlas arm with
+L = 4 after 12 iterations, the condition number came out 48, 94 and 153 under
+``OPENBLAS_CORETYPE=Haswell``, ``Nehalem`` and ``Sandybridge``, and 1 vs 2 threads changed the result
+in the fifth digit. The unoptimized start (``maxiter=0``) is the same everywhere (seeded coefficients,
+closed-form scaling). To run the same excitation elsewhere, save the design (``reflexarm excite``
+writes excitation.json) and pass it on (``identify dynamics --excitation``).
 """
 
 from __future__ import annotations
