@@ -2,8 +2,8 @@
 //
 // The model crosses the language boundary as text (pin.Model.saveToString() in Python, Boost
 // serialization): the Python `pin.Model` is a Boost.Python object that nanobind cannot take directly.
-// Inputs are float64 C-contiguous numpy vectors (anything else is refused, not copied: the caller
-// converts once). update() returns the compiled kernel's status encoding (negative fault code, else
+// Inputs are float64 C-contiguous vectors (anything else raises TypeError instead of being copied
+// silently: the caller converts once). update() returns the compiled kernel's status encoding (negative fault code, else
 // n_over + (n_saturated << 8)); the command lives in buffers sized once, read through numpy views.
 #include <cmath>
 #include <string>
@@ -126,7 +126,8 @@ NB_MODULE(_core, m)
           return static_cast<int>(code);
         return c.cmd.n_collided + (c.cmd.n_saturated << kSatShift);
       },
-      "t"_a, "q"_a, "dq"_a, "tau_m"_a, "wrench"_a, "gravity"_a, "q_d"_a, "dq_d"_a, "ddq_d"_a,
+      "t"_a, "q"_a.noconvert(), "dq"_a.noconvert(), "tau_m"_a.noconvert(), "wrench"_a.noconvert(),
+      "gravity"_a.noconvert(), "q_d"_a.noconvert(), "dq_d"_a.noconvert(), "ddq_d"_a.noconvert(),
       "One tick; returns a negative fault code, else n_collided + (n_saturated << SAT_SHIFT).")
     .def("reset", [](PyController & c) { c.ctrl.reset(); })
     .def(
