@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -17,6 +18,7 @@ import pytest
 from reflexarm.control import Controller
 from reflexarm.control import _kernels as _k
 from reflexarm.control.contract import describe_fault
+from reflexarm.robots.robot_model import RobotModel
 from reflexarm.signals import Measurement, Reference
 
 core = pytest.importorskip(
@@ -29,15 +31,24 @@ N_TICKS = 300
 # and in the eigen-decomposition of the modal damping (Jacobi rotations vs LAPACK), each ~1e-13 relative on
 # quantities of ~1e2 Nm, and the observer's integral carries that over a few hundred ticks at most.
 ATOL = 1e-9
-BOUNDS = {"margin": 0.2, "velocity_factor": 10.0, "torque_factor": 3.0, "force": 2000.0, "moment": 200.0,
-          "g_tol": 1.0, "acc": 1000.0, "velocity": 100.0, "torque": 1e4}  # fmt: skip  (InputBounds defaults)
+BOUNDS = {
+    "margin": 0.2,
+    "velocity_factor": 10.0,
+    "torque_factor": 3.0,
+    "force": 2000.0,
+    "moment": 200.0,
+    "g_tol": 1.0,
+    "acc": 1000.0,
+    "velocity": 100.0,
+    "torque": 1e4,
+}  # fmt: skip  (InputBounds defaults)
 
 
 @dataclass
 class Oracle:
     """One control tick in plain numpy: eqs. (2), (4)-(6), (9)-(13) and the input contract."""
 
-    robot: object
+    robot: RobotModel
     stiffness: float = 300.0
     damping_ratio: float = 0.7
     observer_gain: float = 5.0
@@ -169,7 +180,7 @@ class Oracle:
         if eps_w != self.kappa_eps:
             inc = DT / self.switch_time
             eps_w = min(eps_w + inc, 1.0) if self.kappa_eps > eps_w else max(eps_w - inc, 0.0)
-        D = self.D
+        D: np.ndarray | None = self.D
         if self.countdown == 0 and not self.gravity_mode:
             Mu = pin.crba(model, self.data, q)
             D = self.modal_damping(np.triu(Mu) + np.triu(Mu, 1).T)
@@ -241,7 +252,7 @@ class Oracle:
 
 
 # ---------------------------------------------------------------------- the run both sides see
-def core_controller(robot, o: Oracle) -> core.Controller:
+def core_controller(robot, o: Oracle) -> Any:
     """The C++ controller with the oracle's settings (the model crosses as pin.Model.saveToString text)."""
     p = core.ControllerParams()
     p.stiffness, p.damping_ratio = np.array([o.stiffness]), np.array([o.damping_ratio])
@@ -311,7 +322,7 @@ def expected_text(fault: tuple) -> str:
     return describe_fault(code, work)
 
 
-def compare(k: int, want: dict, ctrl: core.Controller, status: int) -> None:
+def compare(k: int, want: dict, ctrl: Any, status: int) -> None:
     where = f"tick {k}"
     code = status if status < 0 else 0
     assert code == want["code"], f"{where}: code {code} ({ctrl.fault!r}), oracle {want['code']}"
@@ -331,7 +342,7 @@ def compare(k: int, want: dict, ctrl: core.Controller, status: int) -> None:
         assert ctrl.fault == "", where
 
 
-def run_both(robot, o: Oracle, ctrl: core.Controller, **kw) -> list[int]:
+def run_both(robot, o: Oracle, ctrl: Any, **kw) -> list[int]:
     codes = []
     for k, args in ticks(robot, **kw):
         if k == 200 and o.reaction == "none":  # a kappa_eps switch mid-run, ramped over switch_time
@@ -364,8 +375,12 @@ def test_detection_and_reaction_equal_oracle(atlas, reaction, detection_gain):
     run_both(atlas, o, ctrl, push=40.0)
     assert o.detected and ctrl.detected, "the 40 Nm push was not detected: the test would prove nothing"
     assert 0.1 < ctrl.first_time < N_TICKS * DT
-    assert ctrl.mode == o.mode == {"gravity": "gravity_compensation", "compliant": "compliant"}.get(
-        reaction, "precise_ee_compliant" if o.kappa_eps else "compliant"
+    assert (
+        ctrl.mode
+        == o.mode
+        == {"gravity": "gravity_compensation", "compliant": "compliant"}.get(
+            reaction, "precise_ee_compliant" if o.kappa_eps else "compliant"
+        )
     )
     o.reset()
     ctrl.reset()
