@@ -1,0 +1,190 @@
+// reflexarm in a periodic 1 kHz C++ loop against a MuJoCo plant (the robot's own MJCF file).
+//
+// What a ros2_control controller would do, in one file: configure() once (on_configure), reset() when
+// the loop starts (on_activate), update() every period (update). The plant is MuJoCo through its C API
+// (two 0.5 ms steps per tick, joint friction of the file); a 60 N push on the hand from t = 1.5 s is
+// detected and answered by gravity compensation (13). Prints the median/p99/max time of update() and
+// fails if update() allocated on the heap.
+//
+//   realtime_loop [robot.xml] [seconds] [--busy]     (--busy: no sleep between ticks, for comparison)
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <ctime>
+#include <new>
+#include <string>
+#include <vector>
+
+#include <mujoco/mujoco.h>
+
+#include "reflexarm/reflexarm.hpp"
+
+pinocchio::Model loadModel(const std::string & path); // load_model.cpp
+
+// ------------------------------------------------------------------ allocation counter (operator new, malloc)
+static std::atomic<long> g_allocations{0};
+static std::atomic<bool> g_counting{false};
+extern "C" void * __libc_malloc(std::size_t);
+void * operator new(std::size_t size)
+{
+  if (g_counting.load(std::memory_order_relaxed))
+    g_allocations.fetch_add(1, std::memory_order_relaxed);
+  if (void * p = __libc_malloc(size ? size : 1))
+    return p;
+  throw std::bad_alloc();
+}
+void * operator new[](std::size_t size) { return operator new(size); }
+void operator delete(void * p) noexcept { std::free(p); }
+void operator delete[](void * p) noexcept { std::free(p); }
+void operator delete(void * p, std::size_t) noexcept { std::free(p); }
+void operator delete[](void * p, std::size_t) noexcept { std::free(p); }
+extern "C" void * malloc(std::size_t size)
+{
+  if (g_counting.load(std::memory_order_relaxed))
+    g_allocations.fetch_add(1, std::memory_order_relaxed);
+  return __libc_malloc(size);
+}
+
+static double nowSeconds()
+{
+  timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
+
+int main(int argc, char ** argv)
+{
+  const std::string path = argc > 1 && argv[1][0] != '\0' ? argv[1] : REFLEXARM_DEFAULT_ROBOT;
+  const double seconds = argc > 2 ? std::atof(argv[2]) : 3.0;
+  const bool busy = argc > 3 && std::string(argv[3]) == "--busy";
+  constexpr double dt = 1e-3;
+
+  // ---------------------------------------------------------------- the controller (on_configure)
+  const pinocchio::Model model = loadModel(path);
+  const int n = model.nv;
+  reflexarm::ControllerParams params;
+  params.stiffness = Eigen::VectorXd::Constant(1, 300.0);
+  params.kappa_f = 1;
+  params.kappa_eps = 1;
+  params.friction_coulomb = model.upperDryFrictionLimit; // the file's friction (a real arm: its identified friction)
+  params.friction_viscous = model.damping;
+  params.sensor_frame_id = model.existFrame("wrist_ft") ? model.getFrameId("wrist_ft") : model.frames.size() - 1;
+  reflexarm::Controller controller;
+  controller.configure(model, params);
+  reflexarm::Command command;
+  controller.initCommand(command);
+
+  // ---------------------------------------------------------------- the plant
+  char error[1000] = "";
+  mjModel * m = mj_loadXML(path.c_str(), nullptr, error, sizeof(error));
+  if (!m)
+  {
+    std::fprintf(stderr, "MuJoCo cannot load %s: %s\n", path.c_str(), error);
+    return 2;
+  }
+  if (m->nv != n)
+  {
+    std::fprintf(stderr, "MuJoCo has %d DoF, Pinocchio %d\n", m->nv, n);
+    return 2;
+  }
+  mjData * d = mj_makeData(m);
+  const int substeps = std::max(1, static_cast<int>(std::lround(dt / m->opt.timestep)));
+  Eigen::VectorXd q0(n);
+  for (int i = 0; i < n; ++i) // a pose inside the joint ranges
+    q0[i] = std::clamp(0.0, model.lowerPositionLimit[i] + 0.4, model.upperPositionLimit[i] - 0.4);
+  for (int i = 0; i < n; ++i)
+    d->qpos[i] = q0[i];
+  mj_forward(m, d);
+  int hand = mj_name2id(m, mjOBJ_BODY, "l_hand");
+  if (hand < 0)
+    hand = m->nbody - 1;
+
+  // ---------------------------------------------------------------- buffers of the loop (sized once)
+  Eigen::VectorXd q(n), dq(n), tau_m = Eigen::VectorXd::Zero(n), q_d(n), dq_d(n), ddq_d(n);
+  Eigen::Matrix<double, 6, 1> wrench = Eigen::Matrix<double, 6, 1>::Zero();
+  Eigen::Vector3d gravity(m->opt.gravity[0], m->opt.gravity[1], m->opt.gravity[2]);
+  const long ticks = static_cast<long>(seconds / dt);
+  std::vector<double> durations(static_cast<std::size_t>(ticks));
+  long allocations = 0, late = 0, faults = 0;
+
+  controller.reset(); // on_activate
+  timespec next;
+  clock_gettime(CLOCK_MONOTONIC, &next);
+  for (long k = 0; k < ticks; ++k)
+  {
+    const double t = static_cast<double>(k + 1) * dt;
+    for (int i = 0; i < n; ++i)
+    {
+      const double w = 2.0 * M_PI * 0.5;
+      q_d[i] = q0[i] + 0.2 * std::sin(w * t);
+      dq_d[i] = 0.2 * w * std::cos(w * t);
+      ddq_d[i] = -0.2 * w * w * std::sin(w * t);
+      q[i] = d->qpos[i];
+      dq[i] = d->qvel[i];
+    }
+    const reflexarm::State state{q, dq, tau_m, wrench, gravity};
+    const reflexarm::Reference reference{q_d, dq_d, ddq_d};
+    g_allocations.store(0, std::memory_order_relaxed);
+    g_counting.store(true, std::memory_order_relaxed);
+    const double t0 = nowSeconds();
+    const reflexarm::FaultCode code = controller.update(t, dt, state, reference, command);
+    const double t1 = nowSeconds();
+    g_counting.store(false, std::memory_order_relaxed);
+    allocations += g_allocations.load(std::memory_order_relaxed);
+    durations[static_cast<std::size_t>(k)] = t1 - t0;
+    faults += code != reflexarm::FaultCode::None;
+    // actuate: the motors deliver the command (the measured motor torque of the next tick)
+    tau_m = command.tau;
+    for (int i = 0; i < n; ++i)
+      d->qfrc_applied[i] = command.tau[i];
+    for (int a = 0; a < 6; ++a)
+      d->xfrc_applied[6 * hand + a] = 0.0;
+    if (t >= 1.5 && t < 2.0)
+      d->xfrc_applied[6 * hand + 0] = 60.0; // a push on the hand [N]
+    for (int s = 0; s < substeps; ++s)
+      mj_step(m, d);
+    // sleep until the next period (absolute deadline: no drift)
+    next.tv_nsec += 1000000;
+    if (next.tv_nsec >= 1000000000)
+    {
+      next.tv_nsec -= 1000000000;
+      next.tv_sec += 1;
+    }
+    timespec now;
+    clock_gettime(CLOCK_MONOTONIC, &now);
+    if (busy)
+      continue;
+    if (now.tv_sec > next.tv_sec || (now.tv_sec == next.tv_sec && now.tv_nsec > next.tv_nsec))
+      ++late;
+    else
+      clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &next, nullptr);
+  }
+
+  std::vector<double> sorted = durations;
+  std::sort(sorted.begin(), sorted.end());
+  auto pct = [&](double p) {
+    return 1e6 * sorted[std::min(sorted.size() - 1, static_cast<std::size_t>(p * static_cast<double>(sorted.size())))];
+  };
+  std::printf("robot: %s (%d joints), %ld ticks at 1 kHz, %d MuJoCo step(s) of %.4g s per tick\n", path.c_str(), n,
+              ticks, substeps, m->opt.timestep);
+  std::printf("update(): median %.2f us, p99 %.2f us, max %.2f us (p99/median %.2f)\n", pct(0.5), pct(0.99),
+              1e6 * sorted.back(), pct(0.99) / pct(0.5));
+  std::printf("late periods: %ld, faults: %ld, collision detected at t = %.3f s, mode %s\n", late, faults,
+              controller.firstDetectionTime(), reflexarm::modeName(controller.mode()));
+  std::printf("heap allocations inside update(): %ld\n", allocations);
+  mj_deleteData(d);
+  mj_deleteModel(m);
+  if (allocations != 0)
+  {
+    std::fprintf(stderr, "FAILED: update() allocated %ld times\n", allocations);
+    return 1;
+  }
+  if (!controller.detected())
+  {
+    std::fprintf(stderr, "FAILED: the push was not detected\n");
+    return 1;
+  }
+  return 0;
+}
