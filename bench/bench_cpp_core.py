@@ -109,9 +109,8 @@ def main() -> None:
     robot = load_robot("atlas_v5_left_arm")
     states = make_states(robot)
     print(f"{robot.name}, n={robot.n}, {N_STATES} states x {args.rounds} rounds (medians of per-round medians)")
-    print(
-        f"{'configuration':<14}{'core.update':>13}{'pin floor':>12}{'Controller':>13}{'core/floor':>12}{'core/Ctrl':>11}"
-    )
+    head = ("configuration", "core.update", "pin floor", "Controller", "core/floor", "core/Ctrl")
+    print(f"{head[0]:<14}{head[1]:>13}{head[2]:>12}{head[3]:>13}{head[4]:>12}{head[5]:>11}")
     for efc in (False, True):
         runs = {"core": make_core(robot, efc), "floor": make_floor(robot, efc), "py": make_python(robot, efc)}
         for fn, reset in runs.values():  # warm-up pass
