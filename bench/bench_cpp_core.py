@@ -11,6 +11,7 @@ wrist-wrench term) Pinocchio calls of a tick made from Python and nothing else, 
 from __future__ import annotations
 
 import argparse
+import importlib
 import time
 from collections.abc import Callable
 
@@ -54,7 +55,7 @@ def per_call(fn: Callable[[tuple], object], states: list[tuple], reset: Callable
 
 
 def make_core(robot, efc: bool):
-    from reflexarm import _core as core
+    core = importlib.import_module("reflexarm._core")  # built by cpp/build.sh
 
     p = core.ControllerParams()
     p.kappa_f = p.kappa_eps = 1
