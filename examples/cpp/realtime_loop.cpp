@@ -19,6 +19,9 @@
 
 #include <mujoco/mujoco.h>
 
+#include "pinocchio/algorithm/frames.hpp"
+#include "pinocchio/algorithm/rnea.hpp"
+
 #include "reflexarm/reflexarm.hpp"
 
 pinocchio::Model loadModel(const std::string & path); // load_model.cpp
@@ -106,7 +109,23 @@ int main(int argc, char ** argv)
   Eigen::Matrix<double, 6, 1> wrench = Eigen::Matrix<double, 6, 1>::Zero();
   Eigen::Vector3d gravity(m->opt.gravity[0], m->opt.gravity[1], m->opt.gravity[2]);
   const long ticks = static_cast<long>(seconds / dt);
-  std::vector<double> durations(static_cast<std::size_t>(ticks));
+  std::vector<double> durations(static_cast<std::size_t>(ticks)), floor_durations;
+  // --busy also times the tick's bare Pinocchio calls (g, C, two RNEAs) on the same state, alternating
+  // which goes first, for the ratio update() / floor inside C++
+  pinocchio::Model model0 = model;
+  model0.gravity.linear().setZero();
+  pinocchio::Data d_g(model), d_c(model), d_p(model0), d_ff(model0);
+  const Eigen::VectorXd zeros = Eigen::VectorXd::Zero(n);
+  auto floor_calls = [&]() {
+    const double f0 = nowSeconds();
+    pinocchio::computeGeneralizedGravity(model, d_g, q);
+    pinocchio::computeCoriolisMatrix(model, d_c, q, dq);
+    pinocchio::rnea(model0, d_p, q, zeros, dq);
+    pinocchio::rnea(model0, d_ff, q_d, zeros, ddq_d);
+    floor_durations.push_back(nowSeconds() - f0);
+  };
+  if (busy)
+    floor_durations.reserve(static_cast<std::size_t>(ticks));
   long allocations = 0, late = 0, faults = 0;
 
   controller.reset(); // on_activate
@@ -126,6 +145,8 @@ int main(int argc, char ** argv)
     }
     const reflexarm::State state{q, dq, tau_m, wrench, gravity};
     const reflexarm::Reference reference{q_d, dq_d, ddq_d};
+    if (busy && k % 2 == 0)
+      floor_calls();
     g_allocations.store(0, std::memory_order_relaxed);
     g_counting.store(true, std::memory_order_relaxed);
     const double t0 = nowSeconds();
@@ -135,6 +156,8 @@ int main(int argc, char ** argv)
     allocations += g_allocations.load(std::memory_order_relaxed);
     durations[static_cast<std::size_t>(k)] = t1 - t0;
     faults += code != reflexarm::FaultCode::None;
+    if (busy && k % 2 == 1)
+      floor_calls();
     // actuate: the motors deliver the command (the measured motor torque of the next tick)
     tau_m = command.tau;
     for (int i = 0; i < n; ++i)
@@ -173,6 +196,13 @@ int main(int argc, char ** argv)
               1e6 * sorted.back(), pct(0.99) / pct(0.5));
   std::printf("late periods: %ld, faults: %ld, collision detected at t = %.3f s, mode %s\n", late, faults,
               controller.firstDetectionTime(), reflexarm::modeName(controller.mode()));
+  if (busy)
+  {
+    std::sort(floor_durations.begin(), floor_durations.end());
+    const double floor_median = 1e6 * floor_durations[floor_durations.size() / 2];
+    std::printf("bare Pinocchio calls (g, C, 2 x RNEA): median %.2f us; update()/calls %.2f\n", floor_median,
+                pct(0.5) / floor_median);
+  }
   std::printf("heap allocations inside update(): %ld\n", allocations);
   mj_deleteData(d);
   mj_deleteModel(m);
