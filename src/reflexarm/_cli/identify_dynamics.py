@@ -200,9 +200,13 @@ def dynamics_study_command(args: argparse.Namespace) -> int:
     )
     base = st.results["sequential"].base
     print(f"{robot.name}: {base.n_base} base parameters of {base.n_standard}")
-    print(
-        f"excitation: condition number {st.excitation.condition_initial:.4g} -> {st.excitation.condition_optimized:.4g}"
-    )
+    if args.excitation is None:
+        print(
+            f"excitation: condition number {st.excitation.condition_initial:.4g} -> "
+            f"{st.excitation.condition_optimized:.4g} (optimized here; saved to excitation.json)"
+        )
+    else:
+        print(f"excitation: {args.excitation}, condition number {st.excitation.condition_optimized:.4g}")
     rows = st.table()
     write_csv(out / "table1_mse.csv", rows)
     print(
