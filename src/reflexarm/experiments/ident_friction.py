@@ -11,16 +11,16 @@ from dataclasses import dataclass
 from typing import Any
 
 from reflexarm.experiments.ident_runs import HYDRAULIC_JOINTS, simulate_log
-from reflexarm.ident.estimation import FrictionParameters
-from reflexarm.ident.joint_friction import (
-    DEFAULT_SETTLE_TIME,
+from reflexarm.ident import (
     ConstantVelocityTrajectory,
     FrictionFit,
+    FrictionParameters,
+    RobotLog,
     friction_from_fits,
     identify_joint_friction,
     plan_friction_experiment,
 )
-from reflexarm.ident.logs import RobotLog
+from reflexarm.ident.joint_friction import DEFAULT_SETTLE_TIME
 from reflexarm.robots.friction import CoulombViscousFriction
 from reflexarm.robots.robot_model import RobotModel
 from reflexarm.sim import PAPER_NOISE, SensorNoise

@@ -25,7 +25,7 @@ import numpy.typing as npt
 
 from reflexarm.control import Controller
 from reflexarm.errors import ConfigError
-from reflexarm.ident.logs import RobotLog
+from reflexarm.ident import RobotLog
 from reflexarm.robots.friction import CoulombViscousFriction
 from reflexarm.robots.robot_model import RobotModel
 from reflexarm.signals import Command, Measurement

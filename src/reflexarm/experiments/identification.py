@@ -35,17 +35,21 @@ from reflexarm.experiments.ident_runs import (
     scenario_extra,
     simulate_log,
 )
-from reflexarm.ident.base_parameters import compute_base_parameters
-from reflexarm.ident.consistency import is_physically_consistent, project_physically_consistent
-from reflexarm.ident.estimation import (
+from reflexarm.ident import (
     DynamicsIdentification,
+    ExcitationDesign,
+    FourierTrajectory,
     FrictionParameters,
+    RobotLog,
     TorqueValidation,
+    compute_base_parameters,
     identify_dynamics,
+    optimize_excitation,
+    preprocess_log,
+    project_physically_consistent,
     validate_model,
 )
-from reflexarm.ident.excitation import ExcitationDesign, FourierTrajectory, optimize_excitation
-from reflexarm.ident.logs import RobotLog, preprocess_log
+from reflexarm.ident.consistency import is_physically_consistent
 from reflexarm.robots.perturbation import perturb_model
 from reflexarm.robots.robot_model import RobotModel, load_robot
 from reflexarm.sim import PAPER_NOISE, SensorNoise
