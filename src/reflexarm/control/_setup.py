@@ -54,7 +54,7 @@ def resolve_torque_limit(robot: RobotModel, torque_limit: npt.ArrayLike | str | 
                 f"(got {effort[missing].tolist()}): their torque is not saturated; pass torque_limit= [Nm] "
                 "to bound it",
                 UserWarning,
-                stacklevel=4,
+                stacklevel=3,  # the caller of Controller(...)
             )
             effort[missing] = np.inf
         return effort
