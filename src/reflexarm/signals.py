@@ -55,7 +55,9 @@ class Command(NamedTuple):
         tau: commanded motor torque tau_d (n,) [Nm]; always finite.
         residual: observer output tau_eps_hat (n,) [Nm] that the collision detector looks at (the
             detection observer's when two observers run in parallel), before the compensation cut-off.
-        collision: True once a collision has been detected (latched until ``reset``).
+        collision: True once a collision has been detected (latched until ``reset``); also True in every
+            command while the observer state is invalid (detection off, ``fault`` says so), never False
+            from an invalid residual.
         collided_joints: indices of joints whose |residual| exceeded the threshold this tick.
         mode: active control mode name (see :mod:`reflexarm.control.modes`).
         fault: non-empty when the tick's inputs broke the controller's contract (or its observer is
