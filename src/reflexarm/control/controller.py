@@ -321,9 +321,11 @@ class Controller:
             t, q, dq, tau_m, wrench, gravity = measurement
             q_d, dq_d, ddq_d = reference
             F = _F64  # another dtype would make the compiled call fail slowly (~1 ms): convert it first
+            # == not `is`: arrays made by a numba function loaded from its on-disk cache carry an unpickled
+            # float64 dtype object that is equal to, but not, the np.dtype(np.float64) singleton
             if not (
-                q.dtype is F and dq.dtype is F and tau_m.dtype is F and wrench.dtype is F and gravity.dtype is F
-                and q_d.dtype is F and dq_d.dtype is F and ddq_d.dtype is F
+                q.dtype == F and dq.dtype == F and tau_m.dtype == F and wrench.dtype == F and gravity.dtype == F
+                and q_d.dtype == F and dq_d.dtype == F and ddq_d.dtype == F
             ):  # fmt: skip
                 raise TypeError("not float64")  # handled below, outside this try
             gm = self._gravity_in_model
