@@ -57,6 +57,7 @@ def test_the_real_log_is_repaired_and_says_so(panda_log):
     assert after < 0.5 * before
 
 
+@pytest.mark.slow  # ~30 s alone, 150 s on a loaded 2-core machine (the consistency projection)
 def test_identify_on_60_percent_validate_on_40_percent(panda_log):
     log, split_time, _ = panda_log
     robot = load_robot("panda")
