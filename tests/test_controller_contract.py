@@ -308,3 +308,28 @@ def test_the_supervisor_logs_an_invalid_observer_as_a_fault_not_a_collision(atla
     sup.controller.observer.residual[0] = np.inf
     assert sup.step(good(atlas, 1), ref).collision
     assert [(x.to_mode, x.cause) for x in sup.transitions] == [("precise_stiff", "task"), ("fault", "fault")]
+
+
+def test_float64_arrays_with_an_equal_but_distinct_dtype_object_take_the_fast_path(atlas):
+    # arrays made by a numba function loaded from its on-disk cache carry an unpickled float64 dtype
+    import pickle
+
+    f64 = pickle.loads(pickle.dumps(np.dtype(np.float64)))
+    assert f64 is not np.dtype(np.float64)
+    ctrl = Controller(atlas)
+    ref = Reference.hold(atlas.home)
+    ctrl.step(good(atlas, 0), ref)  # the first tick checks the types
+    converted = []
+    convert = ctrl._step_converted  # white box: count the ticks that take the conversion path
+
+    def counting(m: Measurement, r: Reference):  # type: ignore[no-untyped-def]
+        converted.append(m.t)
+        return convert(m, r)
+
+    ctrl._step_converted = counting  # type: ignore[method-assign]
+    for k in range(1, 4):
+        m = Measurement(k * DT, *(np.asarray(v, dtype=f64) for v in good(atlas, k)[1:]))
+        assert m.q.dtype is not np.dtype(np.float64)
+        assert ctrl.step(m, ref).fault == ""
+    ctrl.step(good(atlas, 4)._replace(q=atlas.home.astype(np.float32)), ref)
+    assert converted == [4 * DT]  # only the float32 tick was converted
