@@ -333,3 +333,21 @@ def test_float64_arrays_with_an_equal_but_distinct_dtype_object_take_the_fast_pa
         assert ctrl.step(m, ref).fault == ""
     ctrl.step(good(atlas, 4)._replace(q=atlas.home.astype(np.float32)), ref)
     assert converted == [4 * DT]  # only the float32 tick was converted
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (
+            dict(observer_gain=600.0),
+            r"observer_gain \* dt \* period_band\[1\] must be < 1 .* got 600.0 1/s \* 0.001 s \* 2.0",
+        ),
+        (dict(period_band=(1.5, 2.0)), r"period_band must satisfy 0 < low <= 1 <= high < inf; got \(1.5, 2.0\)"),
+        (dict(period_band=3.0), r"period_band must be \(low, high\) multiples of dt; got 3.0"),
+        (dict(input_bounds={"max_force": 1.0}), "input_bounds must be an InputBounds; got dict"),
+        (dict(torque_rate_limit=-1.0), "torque_rate_limit must be positive"),
+    ],
+)
+def test_contract_parameters_are_checked(atlas, kwargs, message):
+    with pytest.raises(ConfigError, match=message):
+        Controller(atlas, **kwargs)
