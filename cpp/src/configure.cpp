@@ -213,6 +213,7 @@ namespace reflexarm
     last_q_.setZero(n);
     tau_prev_.setZero(n);
     tau_safe_.setZero(n);
+    q_buf_.setZero(n);
     J_.setZero(6, n);
     M_.setZero(n, n);
     D_.setZero(n, n);

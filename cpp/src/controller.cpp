@@ -224,17 +224,20 @@ namespace reflexarm
       gm = s.gravity;
       gravity_staged_ = true;
     }
-    // dynamics terms
+    // dynamics terms (argument types as in libpinocchio_default's explicit instantiations: Eigen::Ref vectors,
+    // a VectorXd for the frame Jacobian; other types would compile the algorithms in this file again)
+    const ConstVectorRef zeros(zeros_);
     g_ = pinocchio::computeGeneralizedGravity(model_, data_g_, s.q);
     const Eigen::MatrixXd & C = pinocchio::computeCoriolisMatrix(model_, data_c_, s.q, s.dq);
-    p_ = pinocchio::rnea(model0_, data_p_, s.q, zeros_, s.dq);     // M(q) dq
-    ff_ = pinocchio::rnea(model0_, data_ff_, r.q_d, zeros_, r.ddq_d); // M(q_d) ddq_d
+    p_ = pinocchio::rnea(model0_, data_p_, s.q, zeros, s.dq);     // M(q) dq
+    ff_ = pinocchio::rnea(model0_, data_ff_, r.q_d, zeros, r.ddq_d); // M(q_d) ddq_d
     const bool kappa_ext = kappa_ext_ != 0;
     if (kappa_ext)
     {
+      q_buf_ = s.q;
       J_.setZero();
       pinocchio::computeFrameJacobian(
-        model_, data_j_, s.q, static_cast<pinocchio::FrameIndex>(params_.sensor_frame_id), pinocchio::LOCAL, J_);
+        model_, data_j_, q_buf_, static_cast<pinocchio::FrameIndex>(params_.sensor_frame_id), pinocchio::LOCAL, J_);
     }
     double eps_w = eps_weight_;
     if (eps_weight_ != static_cast<double>(kappa_eps_)) // bumpless kappa_eps ramp
@@ -469,7 +472,8 @@ namespace reflexarm
     tau_safe_.setZero();
     if (has_last_q_)
     {
-      const auto & g = pinocchio::computeGeneralizedGravity(model_, data_g_, last_q_);
+      const ConstVectorRef last_q(last_q_);
+      const auto & g = pinocchio::computeGeneralizedGravity(model_, data_g_, last_q);
       if (g.allFinite())
         tau_safe_ = g;
     }

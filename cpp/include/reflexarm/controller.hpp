@@ -132,7 +132,7 @@ namespace reflexarm
     double g_norm_ = 0.0, g_tol_ = 0.0, force_max_ = 0.0, moment_max_ = 0.0;
     bool use_det_ = false, has_detector_ = false;
     // buffers
-    Eigen::VectorXd zeros_, g_, p_, ff_, tau_new_, last_q_, tau_prev_, tau_safe_;
+    Eigen::VectorXd zeros_, g_, p_, ff_, tau_new_, last_q_, tau_prev_, tau_safe_, q_buf_;
     Eigen::Matrix<double, 6, Eigen::Dynamic> J_;
     Eigen::MatrixXd C_, M_, D_, D_new_;
     ModalDampingWorkspace modal_;
