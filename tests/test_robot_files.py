@@ -167,11 +167,6 @@ def test_disabled_springs_and_gravity_are_disabled_in_the_model_too(tmp_path: Pa
     np.testing.assert_array_equal(plant.measure().gravity, np.zeros(3))
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=AssertionError,
-    reason="needs Controller to add RobotModel.compute_spring_torque(q) to its g (issue 8, control/ helper)",
-)
 def test_controller_holds_a_spring_arm_without_a_false_collision(tmp_path: Path) -> None:
     robot = load_robot(_write(tmp_path, "spring_arm.xml", SPRING_ARM), ee_frame="tip")
     plant = Plant(robot, noise=SensorNoise.none())

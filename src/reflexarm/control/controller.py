@@ -197,6 +197,10 @@ class Controller:
         self._sensor_id = self.robot.sensor_frame_id
         self._zeros = np.zeros(n)
         self._zeros6n = np.zeros((6, n))
+        # joint springs of the robot file (Pinocchio has none): g_hat(q) includes K_s (q - q_s)
+        self._has_springs = self.robot.has_springs
+        self._spring_k, self._spring_q = self.robot.spring_stiffness, self.robot.spring_reference
+        self._spring = np.zeros(n)
         self._M = self._mats[_k.M_MAT]
         self.impedance.damping = self._mats[_k.D_MAT]  # one damping matrix, updated by the tick
         self._gravity = np.asarray(model.gravity.linear, dtype=float).copy()  # last accepted
@@ -335,6 +339,8 @@ class Controller:
                 self._model.gravity.linear = gm
             model = self._model
             g = pin.computeGeneralizedGravity(model, self._data_g, q)
+            if self._has_springs:
+                g = g + self._spring_torque(q)
             C = pin.computeCoriolisMatrix(model, self._data_c, q, dq)
             p = pin.rnea(self._model0, self._data_p, q, self._zeros, dq)  # M(q) dq
             ff = pin.rnea(self._model0, self._data_ff, q_d, self._zeros, ddq_d)  # M(q_d) ddq_d
@@ -387,6 +393,12 @@ class Controller:
             self._converting = False
             self._fast = not converted
 
+    def _spring_torque(self, q: np.ndarray) -> np.ndarray:
+        """K_s (q - q_s) into a preallocated buffer [Nm]."""
+        np.subtract(q, self._spring_q, out=self._spring)
+        np.multiply(self._spring, self._spring_k, out=self._spring)
+        return self._spring
+
     def _restore_gravity(self) -> None:
         """Put the last accepted gravity back into the model (after a candidate was not accepted)."""
         if self._gravity_staged:
@@ -427,6 +439,8 @@ class Controller:
         tau = np.zeros(self.n)
         if w[_k.HAS_LAST_Q]:
             g = pin.computeGeneralizedGravity(self._model, self._data_g, rows[_k.LAST_Q_ROW])
+            if self._has_springs:
+                g = g + self._spring_torque(rows[_k.LAST_Q_ROW])
             if np.all(np.isfinite(g)):
                 tau[:] = g
         bounded = tau.copy()

@@ -154,6 +154,8 @@ class JointImpedanceController:
         dq = np.asarray(dq, dtype=float)
         self.maybe_update_damping(q)
         nle = pin.nonLinearEffects(self._model, self._data, q, dq)
+        if self.robot.has_springs:
+            nle = nle + self.robot.compute_spring_torque(q)
         tau = self.gains.stiffness * (reference.q_d - q) + self.damping @ (reference.dq_d - dq) + nle
         tau = tau + self.compute_feedforward(np.asarray(reference.q_d, float), np.asarray(reference.ddq_d, float))
         if self.kappa_f:
