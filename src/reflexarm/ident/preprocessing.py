@@ -10,9 +10,16 @@ import warnings
 import numpy as np
 
 from reflexarm.errors import DataError
-from reflexarm.ident.logs import DEFAULT_CUTOFF_HZ, DEFAULT_FILTER_ORDER, LogRepairWarning, RobotLog
+from reflexarm.ident.robot_log import LogRepairWarning, RobotLog
 
-__all__ = ["DEFAULT_MAX_GAP_PERIODS", "MAX_GRID_FACTOR", "preprocess_log"]
+__all__ = ["DEFAULT_CUTOFF_HZ", "DEFAULT_FILTER_ORDER", "DEFAULT_MAX_GAP_PERIODS", "MAX_GRID_FACTOR", "preprocess_log"]
+
+#: Default low-pass cutoff for q, dq, ddq and the identification torques [Hz]. Identification
+#: trajectories have their content below a few Hz (the paper's Fourier trajectories, Gaz's 0.075 Hz x 5
+#: harmonics); 10 Hz keeps it undistorted while removing most of the differentiation noise.
+DEFAULT_CUTOFF_HZ = 10.0
+#: Butterworth order of the zero-phase filter (applied forwards and backwards: effective order 8).
+DEFAULT_FILTER_ORDER = 4
 
 #: Gaps (steps between samples) up to this many periods of the log are filled by interpolation; a longer
 #: gap splits the log into segments that are resampled and filtered separately (nothing is interpolated
@@ -73,8 +80,7 @@ def preprocess_log(
     if cutoff_hz is not None:
         if not 0 < cutoff_hz < 0.5 * fs:
             raise DataError(
-                f"{where}: filter cutoff {cutoff_hz!r} Hz must be between 0 and the Nyquist frequency "
-                f"{0.5 * fs:.4g} Hz"
+                f"{where}: filter cutoff {cutoff_hz!r} Hz must be between 0 and the Nyquist frequency {0.5 * fs:.4g} Hz"
             )
         b, a = butter(order, cutoff_hz / (0.5 * fs))
         # odd extension over two periods of the cutoff, so the edge transient of the filter dies out
@@ -87,9 +93,7 @@ def preprocess_log(
     edges = np.r_[0, cuts, len(log)]
     spans = [(int(i0), int(i1)) for i0, i1 in zip(edges[:-1], edges[1:], strict=True)]
     # grid sizes, checked before anything is allocated
-    sizes = [
-        (int(np.floor((log.t[i1 - 1] - log.t[i0]) / T + 1e-6)) + 1) if resample else i1 - i0 for i0, i1 in spans
-    ]
+    sizes = [(int(np.floor((log.t[i1 - 1] - log.t[i0]) / T + 1e-6)) + 1) if resample else i1 - i0 for i0, i1 in spans]
     total = sum(sizes)
     if total > MAX_GRID_FACTOR * len(log):
         raise DataError(
