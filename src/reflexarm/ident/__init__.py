@@ -1,5 +1,6 @@
 """Learning the model (Sec. II-D): logs in, single-joint friction, base parameters, Fourier excitation,
-weighted least squares (combined and sequential), validation, and the identified model written back.
+weighted least squares (combined and sequential) with the file's armature and joint springs as known
+terms, validation, and the identified model written back.
 
 Never imports :mod:`reflexarm.control`; the experiments that run the plant with the controller live in
 :mod:`reflexarm.experiments.identification`. Figures are in :mod:`reflexarm.ident.plots`.
@@ -29,6 +30,7 @@ from reflexarm.ident.joint_friction import (
     plan_friction_experiment,
     segment_constant_velocity,
 )
+from reflexarm.ident.known_terms import KnownJointTerms
 from reflexarm.ident.logs import DEFAULT_CUTOFF_HZ, LogRepairWarning, RobotLog, load_log, preprocess_log, save_log
 from reflexarm.ident.model_file import load_identified_model, read_identified_model, save_identified_model
 from reflexarm.ident.regressor import BatchRegressor, compute_friction_regressor
@@ -46,6 +48,7 @@ __all__ = [
     "FrictionParameters",
     "FrictionPoint",
     "IllConditionedWarning",
+    "KnownJointTerms",
     "LogRepairWarning",
     "PhysicalConsistencyWarning",
     "RobotLog",

@@ -37,6 +37,10 @@ class BatchRegressor:
         robot: the arm; its kinematics and gravity are copied at construction (later changes to the
             robot's inertial parameters do not matter: the regressor does not depend on them).
 
+    Rigid links only: a file's rotor armature and joint springs are not in Y (they have no link
+    parameters); with them, ``robot.compute_inverse_dynamics == Y @ pi + I_a ddq + K_s (q - q_s)``, and
+    identification subtracts them as known terms (:mod:`reflexarm.ident.known_terms`).
+
     Example:
         >>> reg = BatchRegressor(load_robot("panda"))
         >>> Y = reg.compute_regressor(q, dq, ddq)      # (N, n, 10 n)
