@@ -17,7 +17,9 @@ from reflexarm.ident import (
     FrictionParameters,
     RobotLog,
     identify_dynamics,
+    identify_joint_friction,
     load_log,
+    plan_friction_experiment,
     preprocess_log,
     project_physically_consistent,
     save_log,
@@ -154,3 +156,38 @@ def test_non_numeric_column_is_refused_with_its_name(tmp_path, suffix, kind):
         load_log(p)
     with pytest.raises(DataError, match=r"array 'tau' has dtype bool"):
         RobotLog.from_arrays(t, q, dq, tau > 0)
+
+
+def _friction_runs(robot, joint=2):
+    """Exact constant-velocity runs of one joint (rigid body + the robot's friction, no noise)."""
+    plan = plan_friction_experiment(robot, joint, speeds=(0.2, 0.5, 1.0))
+    t = np.arange(0.0, plan.duration, 1e-3)
+    q, dq, ddq = plan.evaluate(t)
+    fr = FrictionParameters.from_model(robot.friction)
+    tau = BatchRegressor(robot).compute_regressor(q, dq, ddq) @ robot.inertial_parameters() + fr.compute_torque(dq)
+    return plan, t, q, dq, tau
+
+
+def test_friction_runs_far_beyond_the_robots_limits_are_refused_like_the_dynamics_log(atlas):
+    """identify_joint_friction applies the robot-relative bounds of identify_dynamics (same message)."""
+    joint = 2
+    plan, t, q, dq, tau = _friction_runs(atlas, joint)
+    kw = {"windows": plan.windows, "position_window": plan.position_window(0.1), "settle": 0.1}
+    clean = identify_joint_friction(atlas, joint, t, q, dq, tau, **kw)
+    assert clean.coulomb == pytest.approx(atlas.friction.coulomb[joint], rel=1e-3)  # the data are sound
+    row = int(np.searchsorted(t, plan.windows[1, :2].mean()))  # mid-interval: inside the averaged samples
+    tau[row, joint] = 5e4  # passes the absolute bound (1e6 Nm), 800 x joint 3's effort limit (63 Nm)
+    expected = (
+        rf"joint 3 friction runs: 1 row\(s\) with implausible tau .*beyond 10 x the effort limits .* row {row} "
+        rf"\(t = {t[row]:g} s\) tau_3 = 50000"
+    )
+    with pytest.raises(ImplausibleDataError, match=expected):
+        identify_joint_friction(atlas, joint, t, q, dq, tau, **kw)
+    # without the check the glitch reaches the fit and moves it: the check is what stops it
+    glitched = identify_joint_friction(atlas, joint, t, q, dq, tau, check_limits=False, **kw)
+    assert abs(glitched.coulomb - clean.coulomb) > 1.0
+    tau[row, joint] = clean.compute_torque(dq[row, joint])  # repaired
+    with pytest.raises(ImplausibleDataError, match=r"joint 3 friction runs: .* implausible q .* degrees"):
+        identify_joint_friction(atlas, joint, t, np.degrees(q), dq, tau, **kw)
+    with pytest.raises(DataError, match=r"joint 3 friction runs: q must have shape \(\d+, 7\)"):
+        identify_joint_friction(atlas, joint, t, q[:, :3], dq, tau, **kw)

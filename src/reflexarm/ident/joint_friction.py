@@ -463,6 +463,7 @@ def identify_joint_friction(
     position_window: tuple[float, float] | None = None,
     offset: bool = False,
     settle: float = DEFAULT_SETTLE_TIME,
+    check_limits: bool = True,
 ) -> FrictionFit:
     """Segment, average and fit one joint's constant-velocity runs (see the module docstring).
 
@@ -476,7 +477,16 @@ def identify_joint_friction(
             (:meth:`ConstantVelocityTrajectory.position_window`).
         offset: fit an offset too.
         settle: seconds dropped at the start of each interval.
+        check_limits: refuse runs far outside ``robot``'s limits, as :func:`identify_dynamics` does
+            (:func:`~reflexarm.ident.plausibility.check_samples_against_robot`; needs a robot).
+
+    Raises:
+        ImplausibleDataError: ``check_limits`` and a torque, velocity or position far beyond the robot's.
     """
+    if check_limits and robot is not None:
+        from reflexarm.ident.plausibility import check_samples_against_robot
+
+        check_samples_against_robot(f"joint {joint + 1} friction runs", t, q, dq, tau, robot)
     intervals = segment_constant_velocity(
         t,
         np.asarray(dq)[:, joint],

@@ -8,7 +8,8 @@ Two layers of bounds, each a documented constant:
   corrupt files. A cell beyond its bound raises :class:`~reflexarm.errors.ImplausibleDataError` naming
   the column, the row, the value and the bound.
 * **relative to the robot** (:func:`check_log_against_robot`, applied by
-  :func:`~reflexarm.ident.identify_dynamics`): a measured torque beyond :data:`TORQUE_LIMIT_FACTOR` times
+  :func:`~reflexarm.ident.identify_dynamics` and, as :func:`check_samples_against_robot`, by
+  :func:`~reflexarm.ident.identify_joint_friction`): a measured torque beyond :data:`TORQUE_LIMIT_FACTOR` times
   the joint's effort limit, a velocity beyond :data:`VELOCITY_LIMIT_FACTOR` times its velocity limit,
   a position more than :data:`POSITION_MARGIN` outside its range. A real log stays within its robot's
   limits (a torque sensor saturates near them); a value 10x beyond is a glitch, a unit error (degrees)
@@ -24,11 +25,12 @@ from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
+import numpy.typing as npt
 
-from reflexarm.errors import ImplausibleDataError
+from reflexarm.errors import DataError, ImplausibleDataError
 
 if TYPE_CHECKING:
-    from reflexarm.ident.logs import RobotLog
+    from reflexarm.ident.robot_log import RobotLog
     from reflexarm.robots.robot_model import RobotModel
 
 __all__ = [
@@ -39,6 +41,7 @@ __all__ = [
     "BadSample",
     "check_absolute_bounds",
     "check_log_against_robot",
+    "check_samples_against_robot",
     "likely_bad_rows",
 ]
 
@@ -127,43 +130,57 @@ def check_log_against_robot(log: RobotLog, robot: RobotModel) -> None:
     docstring: torque beyond :data:`TORQUE_LIMIT_FACTOR` x effort limit, velocity beyond
     :data:`VELOCITY_LIMIT_FACTOR` x velocity limit, position :data:`POSITION_MARGIN` outside the range).
     Limits that are not finite and positive (a file without them, continuous joints) are not checked."""
+    check_samples_against_robot(log.source, log.t, log.q, log.dq, log.measured_torque, robot)
+
+
+def check_samples_against_robot(
+    source: str, t: npt.ArrayLike, q: npt.ArrayLike, dq: npt.ArrayLike, tau: npt.ArrayLike, robot: RobotModel
+) -> None:
+    """:func:`check_log_against_robot` for plain (N,) time and (N, n) position, velocity and measured
+    torque arrays (e.g. the constant-velocity runs of :func:`~reflexarm.ident.identify_joint_friction`);
+    ``source`` names them in the message."""
 
     def usable(limit: np.ndarray) -> np.ndarray:
         return np.isfinite(limit) & (limit > 0) & (limit < 1e30)
 
-    torque = log.measured_torque
+    tt = np.asarray(t, dtype=float).reshape(-1)
+    Q, DQ, torque = (np.asarray(a, dtype=float) for a in (q, dq, tau))
+    for name, a in (("q", Q), ("dq", DQ), ("tau", torque)):
+        if a.shape != (tt.size, robot.n):
+            raise DataError(
+                f"{source}: {name} must have shape ({tt.size}, {robot.n}) for {robot.name!r}; got {a.shape}"
+            )
     effort = robot.effort_limit
     ok = usable(effort)
     bound = np.where(ok, TORQUE_LIMIT_FACTOR * effort, np.inf)
     bad = np.abs(torque) > bound
     if bad.any():
-        found = _offenders(log.source, log.t, "tau", torque, bad, bound)
+        found = _offenders(source, tt, "tau", torque, bad, bound)
         rule = f"beyond {TORQUE_LIMIT_FACTOR:g} x the effort limits {effort.tolist()} Nm of {robot.name!r}"
-        raise _error(log.source, "tau", found, int(bad.any(axis=1).sum()), rule)
+        raise _error(source, "tau", found, int(bad.any(axis=1).sum()), rule)
     vel = robot.velocity_limit
     bound = np.where(usable(vel), VELOCITY_LIMIT_FACTOR * vel, np.inf)
-    bad = np.abs(log.dq) > bound
+    bad = np.abs(DQ) > bound
     if bad.any():
-        found = _offenders(log.source, log.t, "dq", log.dq, bad, bound)
+        found = _offenders(source, tt, "dq", DQ, bad, bound)
         rule = f"beyond {VELOCITY_LIMIT_FACTOR:g} x the velocity limits {vel.tolist()} rad/s of {robot.name!r}"
-        raise _error(log.source, "dq", found, int(bad.any(axis=1).sum()), rule)
+        raise _error(source, "dq", found, int(bad.any(axis=1).sum()), rule)
     lo, hi = robot.lower_limit, robot.upper_limit
     ranged = np.isfinite(lo) & np.isfinite(hi) & (hi > lo) & (hi - lo < 1e30)
     lo_b = np.where(ranged, lo - POSITION_MARGIN, -np.inf)
     hi_b = np.where(ranged, hi + POSITION_MARGIN, np.inf)
-    bad = (log.q < lo_b) | (log.q > hi_b)
+    bad = (Q < lo_b) | (Q > hi_b)
     if bad.any():
-        side = np.where(np.abs(log.q - lo_b) < np.abs(log.q - hi_b), lo_b, hi_b)
+        side = np.where(np.abs(Q - lo_b) < np.abs(Q - hi_b), lo_b, hi_b)
         cells = np.argwhere(bad)[:_SHOWN]
         found = [
-            BadSample(log.source, int(r), float(log.t[r]), f"q_{c + 1}", float(log.q[r, c]), float(side[r, c]))
-            for r, c in cells
+            BadSample(source, int(r), float(tt[r]), f"q_{c + 1}", float(Q[r, c]), float(side[r, c])) for r, c in cells
         ]
         rule = (
             f"more than {POSITION_MARGIN:.3g} rad outside the joint ranges of {robot.name!r}: lower {lo.tolist()}, "
             f"upper {hi.tolist()} rad; degrees instead of radians?"
         )
-        raise _error(log.source, "q", found, int(bad.any(axis=1).sum()), rule)
+        raise _error(source, "q", found, int(bad.any(axis=1).sum()), rule)
 
 
 #: A cell stands out when its magnitude is at least this many times its column's 99th percentile of
