@@ -169,7 +169,7 @@ class Oracle:
             return self.reject(fault)
         n, model = self.n, self.model
         model.gravity.linear = gravity  # a candidate until the tick is accepted
-        g = pin.computeGeneralizedGravity(model, self.data, q).copy()
+        g = pin.computeGeneralizedGravity(model, self.data, q) + self.robot.compute_spring_torque(q)
         C = pin.computeCoriolisMatrix(model, self.data, q, dq).copy()
         p = pin.rnea(self.model0, self.data0, q, np.zeros(n), dq).copy()
         ff = pin.rnea(self.model0, self.data0, q_d, np.zeros(n), ddq_d).copy()
@@ -243,7 +243,8 @@ class Oracle:
         self.model.gravity.linear = self.gravity
         tau = np.zeros(self.n)
         if self.last_q is not None:
-            tau = pin.computeGeneralizedGravity(self.model, self.data, self.last_q).copy()
+            g = pin.computeGeneralizedGravity(self.model, self.data, self.last_q)
+            tau = g + self.robot.compute_spring_torque(self.last_q)
         bounded = self.bound(tau)
         collision = True if fault[0] == _k.OBSERVER_INVALID else self.detected
         zeros = np.zeros(self.n, bool)
@@ -268,6 +269,8 @@ def core_controller(robot, o: Oracle) -> Any:
     p.friction_coulomb, p.friction_viscous = fr.coulomb.copy(), fr.viscous.copy()
     p.friction_velocity_band = fr.velocity_band
     p.sensor_frame_id = robot.sensor_frame_id
+    if robot.has_springs:
+        p.spring_stiffness, p.spring_reference = robot.spring_stiffness, robot.spring_reference
     if o.torque_rate_limit is not None:
         p.torque_rate_limit = np.array([o.torque_rate_limit])
     return core.Controller(robot.pin_model.saveToString(), p)
@@ -405,8 +408,24 @@ def test_invalid_observer_latches_until_reset_like_oracle(atlas):
     assert ctrl.fault == ""
 
 
-def test_core_equals_python_controller(atlas):
+def with_springs(robot: RobotModel) -> RobotModel:
+    """The robot with joint springs (MJCF stiffness/springref), which g_hat(q) includes."""
+    k_s = np.linspace(5.0, 40.0, robot.n)
+    return RobotModel(robot.pin_model.copy(), ee_frame=robot.ee_frame, sensor_frame=robot.sensor_frame,
+                      friction=robot.friction, home=robot.home, spring_stiffness=k_s,
+                      spring_reference=robot.home + 0.1)  # fmt: skip
+
+
+def test_joint_springs_enter_g_like_oracle(atlas):
+    robot = with_springs(atlas)
+    o = Oracle(robot, kappa_f=1, kappa_eps=1, threshold=None, reaction="none")
+    run_both(robot, o, core_controller(robot, o))
+
+
+@pytest.mark.parametrize("springs", [False, True])
+def test_core_equals_python_controller(atlas, springs):
     """The same run through reflexarm.control.Controller (the face that will delegate to the core)."""
+    atlas = with_springs(atlas) if springs else atlas
     kw = {"kappa_f": 1, "kappa_eps": 1, "kappa_ext": 1, "threshold": 11.0, "reaction": "gravity"}
     py = Controller(atlas, detection_observer_gain=30.0, torque_rate_limit=3000.0, **kw)
     o = Oracle(atlas, detection_observer_gain=30.0, torque_rate_limit=3000.0, **kw)

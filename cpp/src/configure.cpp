@@ -112,6 +112,12 @@ namespace reflexarm
     q.friction_coulomb = asVector(p.friction_coulomb, n, "friction_coulomb", Sign::NonNegative);
     q.friction_viscous = asVector(p.friction_viscous, n, "friction_viscous", Sign::NonNegative);
     checkPositive(p.friction_velocity_band, "friction_velocity_band");
+    const bool has_springs = p.spring_stiffness.size() > 0;
+    if (has_springs)
+    {
+      q.spring_stiffness = asVector(p.spring_stiffness, n, "spring_stiffness", Sign::NonNegative);
+      q.spring_reference = asVector(p.spring_reference, n, "spring_reference", Sign::Any);
+    }
     if (p.sensor_frame_id >= model.frames.size())
       throw ConfigError(
         "sensor_frame_id " + std::to_string(p.sensor_frame_id) + " is not a frame of the model (it has "
@@ -171,6 +177,9 @@ namespace reflexarm
     ko_ = q.observer_gain;
     ko_det_ = use_det ? q.detection_observer_gain : Eigen::VectorXd::Zero(n);
     threshold_ = has_detector ? q.threshold : Eigen::VectorXd::Constant(n, kInf);
+    has_springs_ = has_springs && (q.spring_stiffness.array() != 0.0).any();
+    spring_k_ = has_springs ? q.spring_stiffness : Eigen::VectorXd::Zero(n);
+    spring_q_ = has_springs ? q.spring_reference : Eigen::VectorXd::Zero(n);
     coulomb_ = q.friction_coulomb;
     viscous_ = q.friction_viscous;
     use_det_ = use_det;

@@ -228,6 +228,9 @@ namespace reflexarm
     // a VectorXd for the frame Jacobian; other types would compile the algorithms in this file again)
     const ConstVectorRef zeros(zeros_);
     g_ = pinocchio::computeGeneralizedGravity(model_, data_g_, s.q);
+    if (has_springs_) // joint springs of the robot file: g_hat(q) includes K_s (q - q_s)
+      for (int i = 0; i < n; ++i)
+        g_[i] = g_[i] + (s.q[i] - spring_q_[i]) * spring_k_[i];
     const Eigen::MatrixXd & C = pinocchio::computeCoriolisMatrix(model_, data_c_, s.q, s.dq);
     p_ = pinocchio::rnea(model0_, data_p_, s.q, zeros, s.dq);     // M(q) dq
     ff_ = pinocchio::rnea(model0_, data_ff_, r.q_d, zeros, r.ddq_d); // M(q_d) ddq_d
@@ -474,8 +477,12 @@ namespace reflexarm
     {
       const ConstVectorRef last_q(last_q_);
       const auto & g = pinocchio::computeGeneralizedGravity(model_, data_g_, last_q);
-      if (g.allFinite())
-        tau_safe_ = g;
+      tau_safe_ = g;
+      if (has_springs_)
+        for (int i = 0; i < n_; ++i)
+          tau_safe_[i] = tau_safe_[i] + (last_q_[i] - spring_q_[i]) * spring_k_[i];
+      if (!tau_safe_.allFinite())
+        tau_safe_.setZero();
     }
     int n_sat = 0;
     for (int i = 0; i < n_; ++i)

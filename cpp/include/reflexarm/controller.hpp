@@ -126,7 +126,8 @@ namespace reflexarm
     Model model_, model0_; // model0_: zero gravity, for M(q) x as RNEA(q, 0, x)
     Data data_g_, data_c_, data_j_, data_m_, data_p_, data_ff_;
     // parameters per joint
-    Eigen::VectorXd K_, xi_, ko_, ko_det_, threshold_, coulomb_, viscous_;
+    Eigen::VectorXd K_, xi_, ko_, ko_det_, threshold_, coulomb_, viscous_, spring_k_, spring_q_;
+    bool has_springs_ = false;
     Eigen::VectorXd q_lo_, q_hi_, dq_max_, ddq_max_, tau_m_max_, tau_max_, tau_step_;
     double inv_band_ = 0.0, limit_ = 0.0, period_lo_ = 0.0, period_hi_ = 0.0;
     double g_norm_ = 0.0, g_tol_ = 0.0, force_max_ = 0.0, moment_max_ = 0.0;

@@ -71,6 +71,9 @@ namespace reflexarm
     Eigen::VectorXd friction_coulomb = Eigen::VectorXd::Zero(1); ///< [Nm], >= 0
     Eigen::VectorXd friction_viscous = Eigen::VectorXd::Zero(1); ///< [Nms/rad], >= 0
     double friction_velocity_band = 0.02;                        ///< [rad/s], > 0
+    /// Joint springs of the robot file (Pinocchio has none): g_hat(q) includes K_s (q - q_s). Empty: none.
+    Eigen::VectorXd spring_stiffness; ///< K_s [Nm/rad], >= 0
+    Eigen::VectorXd spring_reference; ///< q_s [rad]
     /// Index of the wrist force/torque sensor frame in model.frames (its LOCAL Jacobian is used).
     std::size_t sensor_frame_id = 0;
     /// Saturation of the command [Nm] per joint (+inf: none). Empty: the model's effort limits, joints
