@@ -45,6 +45,7 @@ def test_identify_friction_from_user_logs(tmp_path, capsys, atlas):
     assert "mu_C [Nm]" in capsys.readouterr().out
 
 
+@pytest.mark.slow  # ~45 s: a simulated log, identification and validation
 def test_identify_dynamics_and_validate_from_a_log(tmp_path, capsys, atlas):
     rng = np.random.default_rng(0)
     tr = FourierTrajectory(2 * np.pi * 0.1, 0.15 * rng.normal(size=(7, 5)), 0.15 * rng.normal(size=(7, 5)), atlas.home)

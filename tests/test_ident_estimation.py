@@ -257,6 +257,7 @@ def test_identified_model_file_roundtrip_gives_the_controller_the_identified_tor
         load_identified_model(tmp_path / "other.json", robot)
 
 
+@pytest.mark.slow  # the consistency projection: ~115 s on 2 loaded cores
 def test_inconsistent_estimate_is_refused_then_projected(setup, tmp_path):
     """Corrupt a wrist inertia of an exact estimate so that M(q) is indefinite: saving warns, loading
     refuses, and the projection restores positive definite pseudo-inertias at a small cost in fit."""

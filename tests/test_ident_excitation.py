@@ -26,6 +26,7 @@ def design(atlas):
 CONDITION_RATIO = 0.4
 
 
+@pytest.mark.slow  # uses the optimized design (~30 s fixture)
 def test_optimization_lowers_the_condition_number(design, atlas):
     assert design.condition_optimized < CONDITION_RATIO * design.condition_initial
     # the reported numbers are what an independent evaluation of the same regressor gives
@@ -45,6 +46,7 @@ def test_seeded_optimization_is_repeatable_on_one_machine(atlas):
     assert first.condition_optimized == second.condition_optimized
 
 
+@pytest.mark.slow  # uses the optimized design (~30 s fixture)
 def test_optimized_trajectory_respects_the_limits_when_sampled_at_1khz(design, atlas):
     tr = design.trajectory
     t = np.arange(0.0, tr.period, 1e-3)
@@ -59,6 +61,7 @@ def test_optimized_trajectory_respects_the_limits_when_sampled_at_1khz(design, a
     assert max(design.limits_optimized.values()) <= 1.0
 
 
+@pytest.mark.slow  # uses the optimized design (~30 s fixture)
 def test_trajectory_starts_and_ends_at_rest_in_the_same_pose(design):
     tr = design.trajectory.with_periods(2)
     q, dq, ddq = tr.evaluate(np.array([0.0, tr.period, tr.duration]))
@@ -88,6 +91,7 @@ def test_sample_matches_evaluate_and_derivatives_are_consistent():
     np.testing.assert_allclose(np.gradient(dq, h, axis=0)[1:-1], ddq[1:-1], atol=1e-3 * np.abs(ddq).max())
 
 
+@pytest.mark.slow  # uses the optimized design (~30 s fixture)
 def test_trajectory_roundtrips_through_json(design, tmp_path):
     p = design.trajectory.save(tmp_path / "exc.json")
     back = FourierTrajectory.load(p)
