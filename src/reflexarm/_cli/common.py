@@ -53,7 +53,13 @@ def format_table(rows: Sequence[dict[str, object]], columns: Sequence[tuple[str,
 DEFAULT_MODEL_ERROR_PERCENT = 10.0
 
 
-def add_model_options(p: argparse.ArgumentParser, *, default_error: float = DEFAULT_MODEL_ERROR_PERCENT) -> None:
+def add_model_options(
+    p: argparse.ArgumentParser,
+    *,
+    default_error: float = DEFAULT_MODEL_ERROR_PERCENT,
+    default_seed: int | None = 0,
+    seed_help: str = "seed of the model errors (default 0)",
+) -> None:
     """``--model-error PCT``, ``--model-seed N`` and ``--model FILE``: the controller's model.
 
     The plant always has the robot file's true parameters; the controller gets them perturbed by
@@ -67,7 +73,7 @@ def add_model_options(p: argparse.ArgumentParser, *, default_error: float = DEFA
         help="the controller's model has uniform errors within +-PCT %% on masses, inertias, COM and friction "
         f"(Sec. III-C; default {default_error:g}; 0: the plant's exact model)",
     )
-    p.add_argument("--model-seed", type=int, default=0, help="seed of the model errors (default 0)")
+    p.add_argument("--model-seed", type=int, default=default_seed, help=seed_help)
     p.add_argument(
         "--model",
         type=Path,
@@ -116,12 +122,12 @@ class ModelChoice:
         return f"+-{100 * self.level:g} % model errors (seed {self.seed})"
 
 
-def model_choice(args: argparse.Namespace) -> ModelChoice:
-    """The :class:`ModelChoice` of ``--model-error``/``--model-seed``/``--model`` (see :func:`add_model_options`).
+def model_error_percent(args: argparse.Namespace) -> float:
+    """The checked ``--model-error`` level [%] of :func:`add_model_options` (0 with ``--model``).
 
     Raises:
-        ConfigError: a negative or >= 100 % level, a negative seed, or ``--model`` together with an
-            explicit ``--model-error`` (an identified model is used as it is).
+        ConfigError: a negative or >= 100 % level, a negative seed, a missing ``--model`` file, or
+            ``--model`` together with an explicit ``--model-error`` (an identified model is used as it is).
     """
     pct = args.model_error
     if args.model is not None:
@@ -131,14 +137,20 @@ def model_choice(args: argparse.Namespace) -> ModelChoice:
             )
         if not Path(args.model).is_file():
             raise ConfigError(f"--model: no such file {str(args.model)!r}")
-        return ModelChoice(0.0, int(args.model_seed), Path(args.model))
+        pct = 0.0
     if pct is None:
         pct = float(getattr(args, "_default_model_error", DEFAULT_MODEL_ERROR_PERCENT))
     if not math.isfinite(pct) or not 0.0 <= pct < 100.0:
         raise ConfigError(f"--model-error must be a percentage in [0, 100); got {pct:g}")
-    if args.model_seed < 0:
+    if args.model_seed is not None and args.model_seed < 0:
         raise ConfigError(f"--model-seed must be a non-negative integer; got {args.model_seed}")
-    return ModelChoice(pct / 100.0, int(args.model_seed), None)
+    return float(pct)
+
+
+def model_choice(args: argparse.Namespace) -> ModelChoice:
+    """The :class:`ModelChoice` of ``--model-error``/``--model-seed``/``--model`` (see :func:`add_model_options`)."""
+    pct = model_error_percent(args)
+    return ModelChoice(pct / 100.0, int(args.model_seed), None if args.model is None else Path(args.model))
 
 
 def model_error_line(robot: RobotModel, model: RobotModel) -> str:

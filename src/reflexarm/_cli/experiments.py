@@ -4,13 +4,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
-from pathlib import Path
 from typing import Any
 
-from reflexarm._cli.common import add_common, format_table, out_dir
+from reflexarm._cli.common import add_common, add_model_options, format_table, model_error_percent, out_dir
 
 
 def _add_setup_options(p: argparse.ArgumentParser, friction: str, kappa_f: int) -> None:
@@ -30,26 +28,11 @@ def _add_setup_options(p: argparse.ArgumentParser, friction: str, kappa_f: int) 
         help="friction compensation in (2) and (6): 1 in the paper's simulation (its model errors scale the "
         f"friction coefficients), 0 in its experiments on the real arm (default {kappa_f})",
     )
-    p.add_argument(
-        "--model-error",
-        type=float,
-        default=None,
-        metavar="PCT",
-        help="the controller's model has uniform errors within +-PCT %% on masses, inertias, COM and friction "
-        "(Sec. III-C; default 10; 0: the plant's exact model)",
-    )
-    p.add_argument(
-        "--model-seed",
-        type=int,
-        default=None,
-        help="seed of the model-error draw (default: derived from --seed, as each trial of a sweep)",
-    )
-    p.add_argument(
-        "--model",
-        type=Path,
-        default=None,
-        metavar="FILE",
-        help="use the identified model in FILE (written by 'identify dynamics') instead of a perturbed one",
+    add_model_options(
+        p,
+        default_error=10.0,
+        default_seed=None,
+        seed_help="seed of the model-error draw (default: derived from --seed, as each trial of a sweep)",
     )
     p.add_argument("--noise-scale", type=float, default=1.0, help="factor on the paper's sensor noise (default 1)")
 
@@ -58,20 +41,7 @@ def _setup(args: argparse.Namespace, **overrides: Any) -> Any:
     from reflexarm.errors import ConfigError
     from reflexarm.experiments.compensation import CompensationSetup
 
-    pct = args.model_error
-    if args.model is not None:
-        if pct is not None and pct != 0.0:
-            raise ConfigError(
-                f"--model {args.model} is used as identified; got --model-error {pct:g} as well (drop one of them)"
-            )
-        if not Path(args.model).is_file():
-            raise ConfigError(f"--model: no such file {str(args.model)!r}")
-        pct = 0.0
-    pct = 10.0 if pct is None else pct
-    if not (math.isfinite(pct) and 0.0 <= pct < 100.0):
-        raise ConfigError(f"--model-error must be a percentage in [0, 100); got {pct:g}")
-    if args.model_seed is not None and args.model_seed < 0:
-        raise ConfigError(f"--model-seed must be a non-negative integer; got {args.model_seed}")
+    pct = model_error_percent(args)
     if args.noise_scale < 0:
         raise ConfigError(f"--noise-scale must be non-negative; got {args.noise_scale:g}")
     return CompensationSetup(

@@ -17,29 +17,9 @@ column (CSV, Parquet)   meaning                                                 
 An ``.npz`` file holds arrays instead of columns: ``t`` (N,), ``q``, ``dq``, ``tau`` (N, n), optional
 ``ddq`` (N, n) and ``wrench`` (N, 6).
 
-Validation is strict and every error names the file, the column or row and the problem
-(:class:`~reflexarm.errors.DataError`): missing or unknown columns, joint columns that are not 1..n,
-a joint count that does not match the robot, NaN/inf, time going backwards, a column or array whose
-dtype is not a number (booleans, text, objects, complex, dates: a boolean column is not taken as 0/1),
-values beyond the absolute plausibility bounds of :mod:`reflexarm.ident.plausibility` (e.g. |tau| >
-1e6 Nm; :class:`~reflexarm.errors.ImplausibleDataError` lists the rows, columns and values). Rows are
-reported 0-based among the data rows (for a CSV file, row r is on line r + 2). The bounds relative to a
-robot's limits are applied by :func:`~reflexarm.ident.identify_dynamics`, which knows the robot.
-
-Real logs are messy, so two defects are repaired (with a :class:`LogRepairWarning` saying what was done)
-instead of rejected, unless ``repair=False``:
-
-* **exact repeats**: a row whose every value except the time equals the previous row is the same robot
-  sample read twice by the host; it is dropped.
-* **jittery host time stamps**: when the steps are not (close to) multiples of one period, the samples
-  are re-timed on a grid of the nominal period T (the median step). The log itself says how many periods
-  lie between two samples where that is unambiguous: the measured displacement over the mean measured
-  velocity, ``dt = (dq_mean . delta_q) / |dq_mean|^2``, when it lands within 0.2 T of a whole number
-  of periods. Those step counts are aligned with the host clock (which is right on average but jitters
-  locally) by a Viterbi search over each sample's tick (``_align_ticks``), so the result neither
-  drifts from the host clock nor follows its jitter. The warning reports the largest shift and how much
-  better delta_q and dq dt agree afterwards; if no alignment stays within :data:`MAX_RETIME_SHIFT`
-  periods of the host clock, the host time is kept.
+Validation is strict and every error names the file, the column or row and the problem; exact repeats
+and jittery host time stamps are repaired with a :class:`LogRepairWarning` (unless ``repair=False``).
+:mod:`reflexarm.ident.robot_log` describes each check and repair.
 
 :func:`preprocess_log` then resamples to a uniform grid (positions by cubic Hermite interpolation with
 the measured velocities as slopes, velocities by a cubic spline, the other signals linearly; only gaps
