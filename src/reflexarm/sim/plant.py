@@ -14,9 +14,10 @@ import numpy.typing as npt
 from reflexarm.errors import ConfigError, ModelError, SimulationError
 from reflexarm.robots.friction import CoulombViscousFriction
 from reflexarm.robots.robot_model import RobotModel, load_robot
-from reflexarm.signals import Measurement
 from reflexarm.sim import _kernels
 from reflexarm.sim._builder import SENSOR_FORCE, SENSOR_TORQUE, build_robot_spec
+from reflexarm.sim._plant_forces import _AppliedForce, _PlantForces
+from reflexarm.sim._plant_sensors import _PlantSensors
 from reflexarm.sim.noise import PAPER_NOISE, SensorNoise
 from reflexarm.sim.scene import Scene
 
@@ -24,22 +25,11 @@ __all__ = ["Plant"]
 
 #: A state whose velocity norm exceeds this [rad/s or m/s] is treated as diverged.
 MAX_SPEED = 1e3
-#: Noise samples are drawn in blocks of this many ticks (one ``Generator.uniform`` call per block).
-_NOISE_BLOCK = 1024
 
 ExtraTorque = Callable[[np.ndarray, np.ndarray, float], npt.ArrayLike]
 
 
-class _AppliedForce:
-    __slots__ = ("body", "force", "point_local")
-
-    def __init__(self, body: int, force: np.ndarray, point_local: np.ndarray) -> None:
-        self.body = body
-        self.force = force
-        self.point_local = point_local
-
-
-class Plant:
+class Plant(_PlantSensors, _PlantForces):
     """The simulated arm: MuJoCo rigid-body dynamics, true friction, scene contacts and noisy sensors.
 
     The MuJoCo model is compiled from ``robot.source`` (the same file the Pinocchio model was read from),
@@ -341,165 +331,6 @@ class Plant:
             reason = f"a speed of {math.sqrt(vv):.3g} exceeds {MAX_SPEED:g} rad/s or m/s"
         self._failed = f"simulation diverged near t = {self._tick * self.control_period:.4f} s: {reason}"
         raise SimulationError(self._failed + "; check the controller gains and the torque command")
-
-    # ------------------------------------------------------------------ sensors
-    def _next_noise(self) -> np.ndarray:
-        if self._noise_i >= self._noise_rows.shape[0]:
-            self._noise_rows = self._rng.uniform(-1.0, 1.0, (_NOISE_BLOCK, self._dim)) * self._levels
-            self._noise_i = 0
-        row: np.ndarray = self._noise_rows[self._noise_i]
-        self._noise_i += 1
-        return row
-
-    def _measurement_vector(self, noise: np.ndarray) -> np.ndarray:
-        """A fresh (3n + 9,) vector: q, dq, tau_m, wrench (6), gravity (3), plus ``noise``."""
-        out = np.empty(self._dim)
-        _kernels.measurement(
-            self._qpos,
-            self._qvel,
-            self._tau,
-            self._gravity,
-            self._cinert,
-            self._cvel,
-            self._cacc,
-            self._cfrc_for_sensor,
-            self._sensordata,
-            self._subtree_com,
-            self._site_xpos,
-            self._site_xmat,
-            self._idx,
-            noise,
-            out,
-        )
-        return out
-
-    def measure(self) -> Measurement:
-        """What the robot's sensors report now (with noise): q, dq, tau_m (the motor torque applied over the
-        last control period, i.e. the previous command; 0 after reset), the load-compensated wrist wrench
-        (environment on the tool, sensor frame, about the sensor origin) and gravity in the base frame."""
-        if self._failed is not None:
-            raise SimulationError(f"the plant failed earlier ({self._failed}); call reset() first")
-        out = self._measurement_vector(self._next_noise() if self._noisy else self._zero_noise)
-        n = self.n
-        return Measurement(
-            float(self._data.time),
-            out[:n],
-            out[n : 2 * n],
-            out[2 * n : 3 * n],
-            out[3 * n : 3 * n + 6],
-            out[3 * n + 6 :],
-        )
-
-    def true_wrench(self) -> np.ndarray:
-        """The wrist wrench of :meth:`measure` without noise (6,) [N, Nm]."""
-        n = self.n
-        return self._measurement_vector(self._zero_noise)[3 * n : 3 * n + 6]
-
-    # ------------------------------------------------------------------ true external quantities
-    def true_external_torque(self, out: np.ndarray | None = None) -> np.ndarray:
-        """tau_ext (n,) [Nm]: sum over the arm's bodies of J^T F of every external force on them.
-
-        The external wrenches are MuJoCo's ``cfrc_ext`` (contacts with scene objects, applied forces,
-        equality constraints) of the last physics evaluation; ``J_b^T F_b`` is evaluated as the dot product
-        of each dof's motion axis ``cdof`` with the wrenches summed over its subtree (both com-based about
-        the same point, so this is exact). Internal forces (joint friction, joint limits) are not included.
-        ``out``: optional (n,) array to write into (no allocation).
-        """
-        res = np.empty(self.n) if out is None else out
-        _kernels.external_joint_torque(
-            self._cfrc_ext,
-            self._cdof,
-            self._arm_bodies,
-            self._body_parent,
-            self._dof_body,
-            self._arm_dofs,
-            self._acc6,
-            res,
-        )
-        return res
-
-    def ee_contact_force(self, out: np.ndarray | None = None) -> np.ndarray:
-        """Force (3,) [N], world frame, that the environment exerts on the bodies beyond the wrist sensor
-        (contacts and applied forces, last physics evaluation). ``out``: optional (3,) array to write into."""
-        res = np.empty(3) if out is None else out
-        _kernels.sum_force(self._cfrc_ext, self._load_bodies, res)
-        return res
-
-    # ------------------------------------------------------------------ applied forces and poses
-    def _body_id(self, name: str | int | None) -> int:
-        m = self._model
-        if name is None:
-            return self._ee_body
-        if isinstance(name, (int, np.integer)):
-            if not 0 < int(name) < m.nbody:
-                raise ConfigError(f"body id {name} out of range 1..{m.nbody - 1}")
-            return int(name)
-        bid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name)
-        if bid < 0:
-            names = [m.body(i).name for i in range(m.nbody)]
-            raise ConfigError(f"unknown body {name!r}; bodies are: {', '.join(names)}")
-        return int(bid)
-
-    def body_pose(self, name: str) -> tuple[np.ndarray, np.ndarray]:
-        """(position (3,), quaternion (w, x, y, z)) of a body in the world, at the last physics evaluation
-        (exact at the current state for bodies without joints, e.g. mocap bodies)."""
-        bid = self._body_id(name)
-        return self._data.xpos[bid].copy(), self._data.xquat[bid].copy()
-
-    def ee_position(self) -> np.ndarray:
-        """World position of the end-effector site (3,) [m] (last physics evaluation)."""
-        return np.array(self._data.site_xpos[self._ee_site])
-
-    def apply_external_force(
-        self, force_world: npt.ArrayLike, point_world: npt.ArrayLike | None = None, body: str | int | None = None
-    ) -> int:
-        """Apply a force [N] (world frame, constant until cleared) at a point moving with ``body``.
-
-        ``body`` defaults to the body carrying the end-effector site; ``point_world`` (world coordinates at
-        the time of the call) defaults to the end-effector site position, or to the centre of mass of
-        ``body`` when a body is named. The point is stored in the body's
-        frame, so it moves with the body; the force keeps its world direction. It is applied through
-        ``xfrc_applied`` (force at the body's COM plus the moment (p - com) x f, refreshed each tick).
-        Returns a handle for :meth:`clear_external_force`.
-        """
-        f = np.asarray(force_world, dtype=float)
-        if f.shape != (3,) or not np.all(np.isfinite(f)):
-            raise ConfigError(f"force_world must be a finite 3-vector [N]; got {force_world!r}")
-        bid = self._body_id(body)
-        d = self._data
-        if point_world is None:
-            p = d.site_xpos[self._ee_site].copy() if body is None else d.xipos[bid].copy()
-        else:
-            p = np.asarray(point_world, dtype=float)
-            if p.shape != (3,) or not np.all(np.isfinite(p)):
-                raise ConfigError(f"point_world must be a finite 3-vector [m]; got {point_world!r}")
-        R = d.xmat[bid].reshape(3, 3)
-        local = R.T @ (p - d.xpos[bid])
-        handle = self._next_force
-        self._next_force += 1
-        self._forces[handle] = _AppliedForce(bid, f.copy(), local)
-        self._apply_forces()
-        return handle
-
-    def clear_external_force(self, handle: int | None = None) -> None:
-        """Remove one applied force (by handle) or all of them."""
-        if handle is None:
-            self._forces.clear()
-        elif handle in self._forces:
-            del self._forces[handle]
-        else:
-            raise ConfigError(f"no applied force with handle {handle!r}; active: {sorted(self._forces)}")
-        self._apply_forces()
-
-    def _apply_forces(self) -> None:
-        d = self._data
-        xfrc = self._xfrc
-        xfrc[:] = 0.0
-        for f in self._forces.values():
-            b = f.body
-            p = d.xpos[b] + d.xmat[b].reshape(3, 3) @ f.point_local
-            xfrc[b, :3] += f.force
-            xfrc[b, 3:] += np.cross(p - d.xipos[b], f.force)
 
 
 def _check_timing(timestep: float, control_period: float) -> tuple[float, float, int]:
