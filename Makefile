@@ -3,14 +3,37 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
+DEPS_STAMP := $(VENV)/.build-deps-stamp
 OUT ?= results
+
+# The C++ core needs cmake (>= 3.18) and a C++17 compiler ($$CXX, c++, g++ or clang++) on the machine.
+CHECK_TOOLCHAIN = command -v cmake >/dev/null 2>&1 || { \
+	  echo "error: cmake not found: reflexarm's C++ core (cpp/) needs cmake >= 3.18 and a C++17 compiler" >&2; \
+	  echo "       install them (Debian/Ubuntu: sudo apt-get install cmake g++) and run make again" >&2; exit 1; }; \
+	command -v "$${CXX:-c++}" >/dev/null 2>&1 || command -v g++ >/dev/null 2>&1 || command -v clang++ >/dev/null 2>&1 || { \
+	  echo "error: no C++ compiler found (\$$CXX, c++, g++, clang++): reflexarm's C++ core (cpp/) needs a C++17 compiler" >&2; \
+	  echo "       install one (Debian/Ubuntu: sudo apt-get install g++) and run make again" >&2; exit 1; }
 
 .PHONY: install demo test test-fast bench lint clean
 
-$(STAMP): pyproject.toml
-	$(PYTHON) -m venv $(VENV)
+# The C++ sources of the module reflexarm._core (cpp/tests and the C++ example are not part of it): a change
+# re-runs the install, which recompiles what changed in build/ (scikit-build-core, no build isolation).
+CORE_SOURCES := cpp/CMakeLists.txt $(wildcard cpp/cmake/* cpp/include/reflexarm/*.hpp cpp/src/*.cpp cpp/bindings/*.cpp)
+
+# 1) the virtual environment and the build requirements ([build-system].requires of pyproject.toml, pinned to
+#    the runtime wheels); 2) the package itself, editable, with the C++ core compiled into build/.
+$(DEPS_STAMP): pyproject.toml
+	@$(CHECK_TOOLCHAIN)
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[dev]"
+	$(BIN)/python -c 'import tomllib; print("\n".join(tomllib.load(open("pyproject.toml", "rb"))["build-system"]["requires"]))' > $(VENV)/build-requirements.txt
+	$(BIN)/python -m pip install --quiet -r $(VENV)/build-requirements.txt
+	touch $(DEPS_STAMP)
+
+$(STAMP): $(DEPS_STAMP) $(CORE_SOURCES)
+	@$(CHECK_TOOLCHAIN)
+	rm -f src/reflexarm/_core*.so # a module copied there by an old cpp/build.sh: the installed one is the only one
+	$(BIN)/python -m pip install --quiet --no-build-isolation -e ".[dev]"
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -32,4 +55,4 @@ lint: $(STAMP)
 	$(BIN)/mypy
 
 clean:
-	rm -rf $(VENV) $(OUT) .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(VENV) $(OUT) build .pytest_cache .mypy_cache .ruff_cache

@@ -55,7 +55,7 @@ def per_call(fn: Callable[[tuple], object], states: list[tuple], reset: Callable
 
 
 def make_core(robot, efc: bool):
-    core = importlib.import_module("reflexarm._core")  # built by cpp/build.sh
+    core = importlib.import_module("reflexarm._core")  # built by make install (scikit-build-core)
 
     p = core.ControllerParams()
     p.kappa_f = p.kappa_eps = 1

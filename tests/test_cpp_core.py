@@ -22,7 +22,7 @@ from reflexarm.robots.robot_model import RobotModel
 from reflexarm.signals import Measurement, Reference
 
 core = pytest.importorskip(
-    "reflexarm._core", reason="C++ core not built: run cpp/build.sh (needs cmake, g++ and the build requirements)"
+    "reflexarm._core", reason="C++ core not built: run make install (needs cmake and a C++17 compiler)"
 )
 
 DT = 1e-3
