@@ -1,21 +1,6 @@
 """Robot logs in: load CSV / Parquet / npz, validate, repair, resample, filter and differentiate.
 
-Log schema (SI units, the robot model's joint order, joints numbered from 1 as in the paper):
-
-======================  ==========================================================  ========
-column (CSV, Parquet)   meaning                                                     required
-======================  ==========================================================  ========
-``t``                   time [s], non-decreasing                                    yes
-``q_1`` .. ``q_n``      joint positions [rad]                                       yes
-``dq_1`` .. ``dq_n``    joint velocities [rad/s]                                    yes
-``tau_1`` .. ``tau_n``  measured joint (motor) torques tau_m [Nm]                   yes
-``ddq_1`` .. ``ddq_n``  joint accelerations [rad/s^2] (else derived, see below)     no
-``fx fy fz mx my mz``   wrist wrench on the arm beyond the sensor, sensor frame      no
-                        [N, Nm] (removed from the torques as tau_ext, eq. (14))
-======================  ==========================================================  ========
-
-An ``.npz`` file holds arrays instead of columns: ``t`` (N,), ``q``, ``dq``, ``tau`` (N, n), optional
-``ddq`` (N, n) and ``wrench`` (N, 6).
+The log schema (columns, units, the npz layout) is documented once, in :mod:`reflexarm.ident.log_files`.
 
 Validation is strict and every error names the file, the column or row and the problem; exact repeats
 and jittery host time stamps are repaired with a :class:`LogRepairWarning` (unless ``repair=False``).
