@@ -33,7 +33,7 @@ $(DEPS_STAMP): pyproject.toml
 $(STAMP): $(DEPS_STAMP) $(CORE_SOURCES)
 	@$(CHECK_TOOLCHAIN)
 	rm -f src/reflexarm/_core*.so # a module copied there by an old cpp/build.sh: the installed one is the only one
-	$(BIN)/python -m pip install --quiet --no-build-isolation -e ".[dev]"
+	$(BIN)/python -m pip install --quiet --no-build-isolation -e ".[dev,video]"
 	touch $(STAMP)
 
 install: $(STAMP)
