@@ -11,20 +11,16 @@ from typing import Any
 
 import numpy as np
 
+from reflexarm._cli.robot_options import DEFAULT_ROBOT, add_robot_options, load_robot_from_args
 from reflexarm.errors import ConfigError
-
-DEFAULT_ROBOT = "atlas_v5_left_arm"
 
 
 def robot_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--robot", default=DEFAULT_ROBOT, help=f"built-in name or .urdf/.xml file (default {DEFAULT_ROBOT})")
-    p.add_argument("--ee-frame", default=None, help="end-effector frame (user robot files)")
+    add_robot_options(p, default=DEFAULT_ROBOT)
 
 
 def load_robot_arg(args: argparse.Namespace) -> Any:
-    from reflexarm.robots import load_robot
-
-    return load_robot(args.robot, ee_frame=args.ee_frame)
+    return load_robot_from_args(args)
 
 
 def write_csv(path: Path, rows: list[dict[str, object]]) -> Path:
