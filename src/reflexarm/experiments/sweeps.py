@@ -340,7 +340,15 @@ def run_sweep(
 
     from tqdm.auto import tqdm
 
-    bar = tqdm(total=len(tasks), initial=len(skipped), disable=not progress, desc=out.name or "sweep", unit="run")
+    from reflexarm._progress import show_progress
+
+    bar = tqdm(
+        total=len(tasks),
+        initial=len(skipped),
+        disable=not show_progress(progress),
+        desc=out.name or "sweep",
+        unit="run",
+    )
     try:
         if todo:
             it = (

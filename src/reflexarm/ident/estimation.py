@@ -313,7 +313,9 @@ def _refuse_non_finite(values: dict[str, np.ndarray], logs: Sequence[RobotLog]) 
 
 
 def _progress(it, progress: bool, lg: RobotLog):  # type: ignore[no-untyped-def]
-    if not progress:
+    from reflexarm._progress import show_progress
+
+    if not show_progress(progress):
         yield from it
         return
     from tqdm import tqdm

@@ -229,7 +229,9 @@ def optimize_excitation(
         x0 = par.pack(start.a, start.b, start.offset)
     cond0 = float(np.exp(log_cond(x0)))
     bar = None
-    if progress and maxiter > 0:
+    from reflexarm._progress import show_progress
+
+    if show_progress(progress) and maxiter > 0:
         from tqdm import tqdm
 
         bar = tqdm(total=int(maxiter), desc="excitation", unit="it", leave=False)

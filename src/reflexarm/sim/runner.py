@@ -13,6 +13,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from reflexarm._progress import show_progress
 from reflexarm.errors import ConfigError
 from reflexarm.signals import Command, Measurement, Reference
 from reflexarm.sim.plant import Plant
@@ -182,7 +183,7 @@ def _loop(
     """N ticks recorded into ``rec`` block by block; ``flush()`` after every full block and at the end
     (``flush`` None: ``rec`` holds all N ticks, nothing is flushed)."""
     bar = None
-    if progress:
+    if show_progress(progress):
         from tqdm.auto import tqdm
 
         bar = tqdm(total=N, unit="tick", desc="simulating", mininterval=0.5)
