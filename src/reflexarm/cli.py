@@ -12,6 +12,7 @@ import importlib
 import sys
 from collections.abc import Sequence
 
+from reflexarm import __version__
 from reflexarm.errors import ReflexArmError
 
 _COMMAND_MODULES = ("simulate", "identify", "experiments", "tools")
@@ -23,6 +24,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="reflexarm",
         description="Impedance control, momentum observer, collision handling and identification for robot arms.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in _COMMAND_MODULES:
