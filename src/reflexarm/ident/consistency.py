@@ -32,6 +32,7 @@ import numpy as np
 import scipy.optimize
 
 from reflexarm.errors import IdentificationError
+from reflexarm.ident._blas_threads import DEFAULT_BLAS_THREADS, blas_threads
 from reflexarm.ident.estimation import DynamicsIdentification, FrictionParameters, mass_matrix_margin
 from reflexarm.robots.robot_model import RobotModel
 
@@ -80,6 +81,7 @@ def project_physically_consistent(
     robot: RobotModel,
     *,
     max_nfev: int = 3000,
+    threads: int | None = DEFAULT_BLAS_THREADS,
 ) -> DynamicsIdentification:
     """The nearest physically consistent identification (see the module docstring).
 
@@ -87,6 +89,7 @@ def project_physically_consistent(
         result: an identification (with its information matrix).
         robot: the robot; its nominal inertias start the search (made strictly consistent if needed).
         max_nfev: evaluation budget of the solver.
+        threads: BLAS threads (default 1, as :func:`~reflexarm.ident.identify_dynamics`); None: as configured.
 
     Returns:
         A copy of ``result`` with the projected beta_b (and, for the combined method, the friction moved
@@ -115,7 +118,8 @@ def project_physically_consistent(
                 "re-identify on a clean log (identify_dynamics names the likely bad rows)"
             )
     try:
-        return _project(result, robot, max_nfev)
+        with blas_threads(threads):
+            return _project(result, robot, max_nfev)
     except (ValueError, np.linalg.LinAlgError, FloatingPointError) as e:
         raise IdentificationError(
             f"projecting the {result.method} identification onto physically consistent parameters failed: "

@@ -41,6 +41,7 @@ import numpy as np
 import numpy.typing as npt
 
 from reflexarm.errors import IdentificationError, NonFiniteEstimateError
+from reflexarm.ident._blas_threads import DEFAULT_BLAS_THREADS, blas_threads
 from reflexarm.ident._measured_torque import _rhs
 from reflexarm.ident._weighted_least_squares import _GramAccumulator
 from reflexarm.ident.base_parameters import (
@@ -101,6 +102,7 @@ def identify_dynamics(
     min_speed: float = 0.0,
     progress: bool = False,
     check_limits: bool = True,
+    threads: int | None = DEFAULT_BLAS_THREADS,
 ) -> DynamicsIdentification:
     """Identify beta_b (and friction) from a log by weighted least squares, eq. (18).
 
@@ -123,6 +125,9 @@ def identify_dynamics(
         check_limits: refuse logs that leave the robot's limits by far
             (:func:`~reflexarm.ident.plausibility.check_log_against_robot`: torque beyond 10 x the effort
             limit, velocity beyond 10 x the velocity limit, position a quarter turn outside the range).
+        threads: BLAS threads for the Gram products and solves (default 1, see
+            :mod:`reflexarm.ident._blas_threads`: many BLAS threads lose badly on a busy machine); None
+            leaves BLAS as configured.
 
     Warns:
         IllConditionedWarning: the regressor is rank deficient or its condition number (column-
@@ -136,6 +141,27 @@ def identify_dynamics(
         ImplausibleDataError: (a DataError) ``check_limits`` and a log far outside the robot's limits;
             the message names the rows, columns, values and bounds.
     """
+    with blas_threads(threads):
+        return _identify_dynamics(
+            robot, log, method, friction, offset, noise_variance, base, condition_limit, min_speed, progress,
+            check_limits,
+        )  # fmt: skip
+
+
+def _identify_dynamics(
+    robot: RobotModel,
+    log: RobotLog | Sequence[RobotLog],
+    method: str,
+    friction: FrictionParameters | CoulombViscousFriction | None,
+    offset: bool,
+    noise_variance: npt.ArrayLike | Literal["estimate"] | None,
+    base: BaseParameters | None,
+    condition_limit: float,
+    min_speed: float,
+    progress: bool,
+    check_limits: bool,
+) -> DynamicsIdentification:
+    """:func:`identify_dynamics` with BLAS threads set."""
     if method not in METHODS:
         raise IdentificationError(f"unknown identification method {method!r}; choose one of: {', '.join(METHODS)}")
     logs = [log] if isinstance(log, RobotLog) else list(log)
