@@ -18,6 +18,7 @@ from reflexarm.errors import ConfigError
 from reflexarm.signals import Command, Measurement, Reference
 from reflexarm.sim.plant import Plant
 from reflexarm.sim.recording import RunStatistics, _Recorder
+from reflexarm.sim.run_observers import attach_observers
 from reflexarm.sim.scene import Scene
 from reflexarm.sim.trace import Trace, TraceWriter
 
@@ -80,6 +81,7 @@ def run_closed_loop(
         failing tick is included when its command was computed).
     """
     N, meta = _check(plant, controller, trajectory, duration)
+    callback = attach_observers(plant, callback)  # reflexarm.sim.run_observers (video, stills)
     rec = _Recorder(N, plant.n)
     try:
         _loop(plant, controller, trajectory, N, rec, None, progress, callback, reset_controller)
@@ -123,6 +125,7 @@ def stream_closed_loop(
         to the exception as ``.statistics``, with ``error`` set) and in the file, which is closed.
     """
     N, meta = _check(plant, controller, trajectory, duration)
+    callback = attach_observers(plant, callback)  # reflexarm.sim.run_observers (video, stills)
     if isinstance(block_size, bool) or not isinstance(block_size, int) or block_size < 1:
         raise ConfigError(f"block_size must be a positive number of ticks; got {block_size!r}")
     stats = RunStatistics(plant.n, path=None if path is None else Path(path))
