@@ -211,23 +211,18 @@ def build_plant(
 ) -> tuple[Plant, RobotModel]:
     """The true arm with the setup's friction variant and scaled paper noise (reset at the posture)."""
     robot = true_robot(setup.robot)
-    extra = None
     true_friction = None
     if setup.plant_friction != "dry":
         true_friction = CoulombViscousFriction.zeros(robot.n)
-    if setup.plant_friction == "smooth":
-        law = robot.friction
-
-        def extra(q: np.ndarray, dq: np.ndarray, t: float) -> np.ndarray:
-            return -law.compute_torque(dq)
-
+    # the smooth law is evaluated by MuJoCo (actuators with a velocity bias), not by a Python callback
+    smooth = robot.friction if setup.plant_friction == "smooth" else None
     plant = Plant(
         robot,
         scene=list(scenes),
         noise=setup.sensor_noise(noise_scale),
         seed=seed,
         true_friction=true_friction,
-        extra_joint_torque=extra,
+        smooth_friction=smooth,
     )
     plant.reset(held_posture(setup, robot))
     return plant, robot

@@ -232,8 +232,50 @@ def _set_friction(
             joint.solimp_friction = list(FRICTION_SOLIMP)
 
 
+#: Name prefixes of the actuators that carry the smooth joint friction (see :func:`add_smooth_friction`).
+SMOOTH_COULOMB_PREFIX = "reflexarm_smooth_coulomb_"
+SMOOTH_VISCOUS_PREFIX = "reflexarm_smooth_viscous_"
+
+
+def add_smooth_friction(spec: mujoco.MjSpec, joint_names: list[str], friction: CoulombViscousFriction) -> None:
+    """The passive joint torque ``-(mu_C clip(dq / band, -1, 1) + d_v dq)`` as MuJoCo actuators (no stiction).
+
+    Two force-only actuators per joint with zero gain (``ctrl`` does nothing) and an affine velocity bias:
+    the Coulomb part ``-(mu_C / band) dq`` clamped to ``[-mu_C, mu_C]`` (``forcerange``), which is exactly
+    ``-mu_C clip(dq / band, -1, 1)``, and the viscous part ``-d_v dq``. MuJoCo evaluates them in C at every
+    physics step, and the plant's ``implicitfast`` integrator treats their velocity slope implicitly. The
+    former Python callback added the same torque explicitly, which inside the band (slope mu_C / band, up to
+    515 Nms/rad) is unstable on the light wrist joints at 0.5 ms: held at half its Coulomb level, where the
+    law gives dq = band / 2 = 0.01 rad/s, wry2 chattered at a mean 1.2 rad/s (std 1.7); here it moves at
+    0.0100 rad/s. Joints with mu_C = 0 (or d_v = 0) get no Coulomb (viscous) actuator.
+    """
+    if friction.n != len(joint_names):
+        raise ModelError(f"smooth_friction has {friction.n} joints; the robot has {len(joint_names)}")
+    band = float(friction.velocity_band)
+    for i, name in enumerate(joint_names):
+        mu, dv = float(friction.coulomb[i]), float(friction.viscous[i])
+        for prefix, slope, limit in ((SMOOTH_COULOMB_PREFIX, mu / band, mu), (SMOOTH_VISCOUS_PREFIX, dv, 0.0)):
+            if slope == 0.0:
+                continue
+            act = spec.add_actuator(name=f"{prefix}{name}", target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+            act.gaintype = mujoco.mjtGain.mjGAIN_FIXED
+            act.gainprm[0] = 0.0
+            act.biastype = mujoco.mjtBias.mjBIAS_AFFINE
+            act.biasprm[:3] = [0.0, 0.0, -slope]
+            act.ctrllimited = mujoco.mjtLimited.mjLIMITED_FALSE
+            if limit > 0.0:
+                act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+                act.forcerange = [-limit, limit]
+            else:
+                act.forcelimited = mujoco.mjtLimited.mjLIMITED_FALSE
+
+
 def build_robot_spec(
-    robot: RobotModel, *, true_friction: CoulombViscousFriction | None, timestep: float
+    robot: RobotModel,
+    *,
+    true_friction: CoulombViscousFriction | None,
+    timestep: float,
+    smooth_friction: CoulombViscousFriction | None = None,
 ) -> tuple[mujoco.MjSpec, BuildInfo]:
     """The robot part of the plant's MjSpec (the scene is added by the caller)."""
     if robot.source is None:
@@ -250,6 +292,8 @@ def build_robot_spec(
             geom.contype = ARM_CONTYPE
             geom.conaffinity = ARM_CONAFFINITY
     _set_friction(spec, joint_names, true_friction, timestep)
+    if smooth_friction is not None:
+        add_smooth_friction(spec, joint_names, smooth_friction)
     # Scene objects at rest may sleep (MuJoCo islands: a resting cinderblock costs nothing until the arm
     # touches it, which wakes it); the arm itself never sleeps, its torques change every tick.
     spec.joint(joint_names[0]).parent.sleep = mujoco.mjtSleepPolicy.mjSLEEP_NEVER

@@ -55,7 +55,12 @@ class Plant(_PlantSensors, _PlantForces):
         true_friction: joint friction of the true arm (MuJoCo ``frictionloss`` = Coulomb mu_C [Nm],
             ``damping`` = viscous d_v [Nms/rad]); default: what the file says (for Atlas: Table I).
         extra_joint_torque: ``f(q, dq, t) -> (n,)`` extra passive joint torque [Nm] added to the motor
-            torque at every physics substep (e.g. a Stribeck or stiction law the model lacks).
+            torque at every physics substep (e.g. a Stribeck or stiction law the model lacks). A Python
+            call per substep: prefer ``smooth_friction`` for that law.
+        smooth_friction: an extra joint friction without stiction, ``-(mu_C clip(dq / band, -1, 1) +
+            d_v dq)`` (the controller library's smooth sign), evaluated by MuJoCo at every physics step
+            (actuators with an affine velocity bias, see ``_builder.add_smooth_friction``): no Python per
+            substep, and the compiled loop plays it as it is. Usually given with ``true_friction`` zero.
 
     Raises:
         ModelError: the file cannot be loaded into MuJoCo (message names the file).
@@ -73,6 +78,7 @@ class Plant(_PlantSensors, _PlantForces):
         control_period: float = 1e-3,
         true_friction: CoulombViscousFriction | None = None,
         extra_joint_torque: ExtraTorque | None = None,
+        smooth_friction: CoulombViscousFriction | None = None,
     ) -> None:
         if not isinstance(robot, RobotModel):
             robot = load_robot(robot)
@@ -92,6 +98,9 @@ class Plant(_PlantSensors, _PlantForces):
         if extra_joint_torque is not None and not callable(extra_joint_torque):
             raise ConfigError(f"extra_joint_torque must be callable f(q, dq, t); got {extra_joint_torque!r}")
         self._extra = extra_joint_torque
+        if smooth_friction is not None and not isinstance(smooth_friction, CoulombViscousFriction):
+            raise ConfigError(f"smooth_friction must be a CoulombViscousFriction; got {type(smooth_friction).__name__}")
+        self.smooth_friction = smooth_friction
         if scene is None:
             scenes: list[Scene] = []
         elif isinstance(scene, Scene):
@@ -103,7 +112,9 @@ class Plant(_PlantSensors, _PlantForces):
                     raise ConfigError(f"scene must be a Scene or a sequence of Scenes; got {type(s).__name__}")
         self.scenes = scenes
 
-        spec, info = build_robot_spec(robot, true_friction=true_friction, timestep=self.timestep)
+        spec, info = build_robot_spec(
+            robot, true_friction=true_friction, timestep=self.timestep, smooth_friction=smooth_friction
+        )
         for s in scenes:
             try:
                 s.build(spec, robot)
@@ -245,6 +256,13 @@ class Plant(_PlantSensors, _PlantForces):
                 "viscous": self.true_friction.viscous.tolist(),
             },
             "extra_joint_torque": None if self._extra is None else getattr(self._extra, "__name__", repr(self._extra)),
+            "smooth_friction": None
+            if self.smooth_friction is None
+            else {
+                "coulomb": self.smooth_friction.coulomb.tolist(),
+                "viscous": self.smooth_friction.viscous.tolist(),
+                "velocity_band": self.smooth_friction.velocity_band,
+            },
             "scene": [s.describe() for s in self.scenes],
         }
 
