@@ -73,7 +73,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "runs are simulated on the plant with the impedance controller",
     )
     f.add_argument(
-        "--joints", default="1,2,3,4", help="joints to simulate, 1-based (default 1,2,3,4: the hydraulic ones)"
+        "--joints",
+        default=None,
+        help="joints to simulate, 1-based, comma-separated (default: the hydraulic joints 1-4 on the Atlas arm, "
+        "every joint on other arms)",
     )
     f.add_argument("--speeds", default=None, help="comma-separated speeds [rad/s] (default 0.1,0.2,0.35,0.5,0.75,1)")
     f.add_argument("--scenario", choices=("table1", "stribeck"), default="table1", help="plant friction (simulation)")
@@ -248,13 +251,13 @@ def _identify_friction(args: argparse.Namespace) -> int:
             if not intervals:
                 raise ConfigError(f"{Path(path).name}: no constant-velocity interval of joint {j + 1} found")
             pts = friction_points(robot, j, proc.t, proc.q, proc.dq, proc.tau, intervals)
-            fits.append(fit_friction(pts, offset=not args.no_offset))
+            fits.append(fit_friction(pts, offset=not args.no_offset, robot=robot))
         friction = friction_from_fits(fits, robot.n)
     else:
-        from reflexarm.experiments.identification import run_friction_experiments, scenario_extra
+        from reflexarm.experiments.identification import hydraulic_joints, run_friction_experiments, scenario_extra
         from reflexarm.robots import perturb_model
 
-        joints = parse_joints(args.joints, robot.n)
+        joints = parse_joints(args.joints, robot.n) if args.joints else list(hydraulic_joints(robot) or range(robot.n))
         say(
             args,
             f"simulating constant-velocity runs of joints {[j + 1 for j in joints]} on the {args.scenario} plant ...",

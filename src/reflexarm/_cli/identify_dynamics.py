@@ -168,7 +168,6 @@ def _load_excitation(robot: Any, path: str) -> Any:
 def dynamics_study_command(args: argparse.Namespace) -> int:
     """The simulated Table I study; prints, plots and saves the same (possibly projected) models."""
     from reflexarm.experiments.identification import (
-        HYDRAULIC_JOINTS,
         MOVING_SPEED,
         PAPER_TABLE1_MSE,
         compare_methods,
@@ -216,16 +215,20 @@ def dynamics_study_command(args: argparse.Namespace) -> int:
         f"and over the samples with |dq_j| >= {MOVING_SPEED:g} rad/s:"
     )
     print(format_table(rows, TABLE_COLUMNS))
-    for what, joints in (("hydraulic joints 1-4", HYDRAULIC_JOINTS), ("all joints", None)):
+    groups = [(st.compared_label(), st.compared_joints)] if st.is_paper_arm else []
+    for what, joints in groups + [(f"all {robot.n} joints", None)]:
         mean = st.mean_mse(joints)
         print(f"mean MSE, {what}: " + ", ".join(f"{k} {v:.3f}" for k, v in mean.items()))
-    h = st.hydraulic_mse()
-    paper = {m: float(np.mean(np.asarray(PAPER_TABLE1_MSE[m])[list(HYDRAULIC_JOINTS)])) for m in PAPER_TABLE1_MSE}
-    print(
-        f"hydraulic joints, sequential against combined: {compare_methods(h['combined'], h['sequential'])} "
-        f"(moving samples: {compare_methods(h['combined_moving_samples'], h['sequential_moving_samples'])}); "
-        f"paper: {compare_methods(paper['combined'], paper['sequential'])}"
+    h = st.compared_mse()
+    line = (
+        f"{st.compared_label()}, sequential against combined: {compare_methods(h['combined'], h['sequential'])} "
+        f"(moving samples: {compare_methods(h['combined_moving_samples'], h['sequential_moving_samples'])})"
     )
+    if st.is_paper_arm:
+        js = list(st.compared_joints)
+        paper = {m: float(np.mean(np.asarray(PAPER_TABLE1_MSE[m])[js])) for m in PAPER_TABLE1_MSE}
+        line += f"; paper: {compare_methods(paper['combined'], paper['sequential'])}"
+    print(line)
     for m in st.notes["projected"]:  # type: ignore[attr-defined]
         print(f"{m}: M(q) of the least-squares estimate is not positive definite everywhere; the saved and "
               f"validated model is the nearest consistent one ({st.results[m].notes[-1]})")  # fmt: skip
@@ -248,7 +251,8 @@ def dynamics_study_command(args: argparse.Namespace) -> int:
             "min_speed": st.min_speed,
             "condition_initial": st.excitation.condition_initial,
             "condition_optimized": st.excitation.condition_optimized,
-            "hydraulic_mse": st.hydraulic_mse(),
+            "compared_joints": [j + 1 for j in st.compared_joints],
+            "compared_mse": h,
             "mean_mse": st.mean_mse(),
             "base_relative_error": rel,
             "friction_fits": st.friction.table(robot.joint_names),

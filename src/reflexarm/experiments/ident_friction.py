@@ -10,7 +10,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from reflexarm.experiments.ident_runs import HYDRAULIC_JOINTS, simulate_log
+from reflexarm.errors import ConfigError
+from reflexarm.experiments.ident_runs import hydraulic_joints, simulate_log
 from reflexarm.ident import (
     ConstantVelocityTrajectory,
     FrictionFit,
@@ -110,10 +111,22 @@ def _friction_run(
     return fit, plan, log
 
 
+def _check_joints(joints: Sequence[int], robot: RobotModel) -> tuple[int, ...]:
+    """``joints`` as a tuple of 0-based indices of ``robot``; ConfigError naming the bad ones (1-based)."""
+    js = tuple(int(j) for j in joints)
+    bad = [j for j in js if not 0 <= j < robot.n]
+    if bad or not js:
+        raise ConfigError(
+            f"friction joints {[j + 1 for j in bad] if bad else '(none)'} (1-based) are not joints of "
+            f"{robot.name!r}; it has joints 1..{robot.n} ({', '.join(robot.joint_names)})"
+        )
+    return js
+
+
 def run_friction_experiments(
     robot: RobotModel,
     *,
-    joints: Sequence[int] = HYDRAULIC_JOINTS,
+    joints: Sequence[int] | None = None,
     speeds: Sequence[float] | None = None,
     travel: float = 1.5,
     model: RobotModel | None = None,
@@ -130,7 +143,8 @@ def run_friction_experiments(
 
     Args:
         robot: the true arm (plant).
-        joints: 0-based joints to run (default: the Atlas arm's hydraulic joints).
+        joints: 0-based joints to run (default: the hydraulic joints on the Atlas arm, every joint on
+            other arms; see :func:`~reflexarm.experiments.ident_runs.hydraulic_joints`).
         speeds: speeds [rad/s] (default: :data:`~reflexarm.ident.joint_friction.DEFAULT_SPEEDS`).
         travel: travel of each move [rad].
         model: the controller's model, also used to remove the rigid-body torque (default: ``robot``).
@@ -143,6 +157,9 @@ def run_friction_experiments(
         progress: progress bars.
     """
     model = model if model is not None else robot
+    if joints is None:
+        joints = hydraulic_joints(robot) or tuple(range(robot.n))
+    joints = _check_joints(joints, robot)
     args = (model, speeds, travel, noise, seed, true_friction, extra_joint_torque, offset)
     if n_jobs == 1 or len(joints) == 1:
         runs = [_friction_run(robot, j, *args, progress) for j in joints]

@@ -41,12 +41,15 @@ __all__ = [
     "StribeckFriction",
     "TrackingComparison",
     "compare_tracking",
+    "hydraulic_joints",
     "scenario_extra",
     "simulate_log",
 ]
 
 #: The hydraulic joints of the Atlas arm (shz, shx, ely, elx), 0-based.
 HYDRAULIC_JOINTS = (0, 1, 2, 3)
+#: Names (suffixes) of the Atlas arm's hydraulic joints, left or right arm.
+_HYDRAULIC_SUFFIXES = ("_arm_shz", "_arm_shx", "_arm_ely", "_arm_elx")
 #: Plant friction scenarios of :func:`run_identification_study`.
 SCENARIOS = ("table1", "stribeck")
 #: Stiffness of the impedance controller during identification runs [Nm/rad] (the paper's "stiff").
@@ -91,6 +94,14 @@ class StribeckFriction:
             "smoothing": self.smoothing,
             "coulomb": self.coulomb.tolist(),
         }
+
+
+def hydraulic_joints(robot: RobotModel) -> tuple[int, ...]:
+    """0-based indices of the Atlas arm's hydraulic joints in ``robot`` (by joint name); () on other arms.
+
+    The paper reports Table I's difference on these joints; on any other arm the study compares all joints.
+    """
+    return tuple(j for j, name in enumerate(robot.joint_names) if name.endswith(_HYDRAULIC_SUFFIXES))
 
 
 def scenario_extra(robot: RobotModel, scenario: str) -> StribeckFriction | None:

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from reflexarm.errors import ConfigError
 from reflexarm.experiments.ident_friction import FrictionExperiment, run_friction_experiments
 from reflexarm.experiments.ident_runs import (
     HYDRAULIC_JOINTS,
@@ -32,6 +33,7 @@ from reflexarm.experiments.ident_runs import (
     StribeckFriction,
     TrackingComparison,
     compare_tracking,
+    hydraulic_joints,
     scenario_extra,
     simulate_log,
 )
@@ -68,6 +70,7 @@ __all__ = [
     "TrackingComparison",
     "compare_methods",
     "compare_tracking",
+    "hydraulic_joints",
     "run_friction_experiments",
     "run_identification_study",
     "scenario_extra",
@@ -150,6 +153,7 @@ class IdentificationStudy:
         comb, seq = self.results["combined"], self.results["sequential"]
         vc, vs = self.validations["combined"], self.validations["sequential"]
         mc, ms = vc.mse_moving(MOVING_SPEED), vs.mse_moving(MOVING_SPEED)
+        paper = self.is_paper_arm
         rows = []
         for j in range(self.robot.n):
             rows.append(
@@ -159,8 +163,8 @@ class IdentificationStudy:
                     "mse_sequential": float(vs.mse[j]),
                     "mse_moving_combined": float(mc[j]),
                     "mse_moving_sequential": float(ms[j]),
-                    "paper_mse_combined": PAPER_TABLE1_MSE["combined"][j] if self.robot.n == 7 else None,
-                    "paper_mse_sequential": PAPER_TABLE1_MSE["sequential"][j] if self.robot.n == 7 else None,
+                    "paper_mse_combined": PAPER_TABLE1_MSE["combined"][j] if paper else None,
+                    "paper_mse_sequential": PAPER_TABLE1_MSE["sequential"][j] if paper else None,
                     "mu_C_single_joint": float(seq.friction.coulomb[j]),
                     "d_v_single_joint": float(seq.friction.viscous[j]),
                     "mu_C_combined": float(comb.friction.coulomb[j]),
@@ -184,9 +188,41 @@ class IdentificationStudy:
         )
         return out
 
+    @property
+    def is_paper_arm(self) -> bool:
+        """True on the Atlas arm of the paper (7 joints, four of them hydraulic): Table I applies."""
+        return self.robot.n == len(PAPER_TABLE1_MSE["combined"]) and hydraulic_joints(self.robot) == HYDRAULIC_JOINTS
+
+    @property
+    def compared_joints(self) -> tuple[int, ...]:
+        """0-based joints the methods are compared on: the hydraulic ones on the Atlas arm (as the
+        paper), every joint on other arms."""
+        return hydraulic_joints(self.robot) or tuple(range(self.robot.n))
+
+    def compared_label(self) -> str:
+        """The joints of :attr:`compared_joints` in words (1-based), e.g. ``"hydraulic joints 1-4"``."""
+        js = self.compared_joints
+        if hydraulic_joints(self.robot):
+            return "hydraulic joints " + ", ".join(str(j + 1) for j in js)
+        return f"all {self.robot.n} joints"
+
+    def compared_mse(self) -> dict[str, float]:
+        """:meth:`mean_mse` over :attr:`compared_joints`."""
+        return self.mean_mse(self.compared_joints)
+
     def hydraulic_mse(self) -> dict[str, float]:
-        """:meth:`mean_mse` over the hydraulic joints (where the paper reports the difference)."""
-        return self.mean_mse(HYDRAULIC_JOINTS)
+        """:meth:`mean_mse` over the hydraulic joints (where the paper reports the difference).
+
+        Raises:
+            ConfigError: the arm has no hydraulic (Atlas) joints; use :meth:`compared_mse`.
+        """
+        js = hydraulic_joints(self.robot)
+        if not js:
+            raise ConfigError(
+                f"robot {self.robot.name!r} has no hydraulic Atlas joints (joints: "
+                f"{', '.join(self.robot.joint_names)}); use compared_mse() (all joints)"
+            )
+        return self.mean_mse(js)
 
 
 def validation_trajectory(robot: RobotModel, seed: int, base_frequency: float) -> FourierTrajectory:
@@ -209,7 +245,7 @@ def run_identification_study(
     excitation: ExcitationDesign | None = None,
     periods: int = 2,
     friction_speeds: Sequence[float] | None = None,
-    friction_joints: Sequence[int] = tuple(range(7)),
+    friction_joints: Sequence[int] | None = None,
     min_speed: float = MOVING_SPEED,
     project: bool = True,
     noise: SensorNoise = PAPER_NOISE,
@@ -231,7 +267,8 @@ def run_identification_study(
             coefficients differ between machines, pass a saved design for identical runs).
         periods: periods of the excitation run (the validation run has as many of its own trajectory).
         friction_speeds: speeds of the single-joint runs.
-        friction_joints: joints with single-joint runs (default: all seven, as in Table I).
+        friction_joints: 0-based joints with single-joint runs (default: every joint of ``robot``, as
+            Table I does for the seven of the Atlas arm).
         min_speed: both methods leave out the rows with |dq_j| below this [rad/s] (see the module
             docstring).
         project: validate (and hand out) the physically consistent projection of an estimate whose M(q)
@@ -247,7 +284,7 @@ def run_identification_study(
     base = compute_base_parameters(robot)
     fr = run_friction_experiments(
         robot,
-        joints=friction_joints,
+        joints=tuple(range(robot.n)) if friction_joints is None else friction_joints,
         speeds=friction_speeds,
         model=nominal,
         noise=noise,

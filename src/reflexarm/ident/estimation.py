@@ -49,7 +49,7 @@ from reflexarm.ident.base_parameters import (
     compute_base_parameters,
     warn_if_ill_conditioned,
 )
-from reflexarm.ident.friction_parameters import FrictionParameters
+from reflexarm.ident.friction_parameters import FrictionParameters, check_friction_against_robot
 from reflexarm.ident.identification_result import (
     _CHUNK,
     DynamicsIdentification,
@@ -301,6 +301,8 @@ def _identify_dynamics(
         fr = fixed
     if est_offset:
         fr = replace(fr, offset=x[k : k + n])
+    if method == "combined":
+        check_friction_against_robot(fr, robot, source="combined identification", stacklevel=4)
     return DynamicsIdentification(
         method=method,
         robot_name=robot.name,

@@ -6,6 +6,8 @@ turns it into the controller's :class:`~reflexarm.robots.friction.CoulombViscous
 
 from __future__ import annotations
 
+import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -13,8 +15,16 @@ import numpy.typing as npt
 
 from reflexarm.errors import IdentificationError
 from reflexarm.robots.friction import DEFAULT_VELOCITY_BAND, CoulombViscousFriction
+from reflexarm.robots.robot_model import RobotModel
 
-__all__ = ["FrictionParameters"]
+__all__ = [
+    "COULOMB_EFFORT_FRACTION",
+    "VISCOUS_EFFORT_FRACTION",
+    "FrictionParameters",
+    "ImplausibleFrictionWarning",
+    "check_friction_against_robot",
+    "check_friction_plausibility",
+]
 
 
 @dataclass(frozen=True)
@@ -87,3 +97,129 @@ class FrictionParameters:
             )
         except (KeyError, TypeError, ValueError) as e:
             raise IdentificationError(f"malformed friction description: {e}") from e
+
+
+class ImplausibleFrictionWarning(UserWarning):
+    """An identified friction coefficient is negative or implausibly large for the joint.
+
+    Attributes:
+        joint: 0-based joint index (messages give it 1-based, with the joint's name).
+        parameter: ``"coulomb"`` (mu_C [Nm]) or ``"viscous"`` (d_v [Nms/rad]).
+        value: the identified value.
+        bound: the bound it violates (0 for a negative value).
+    """
+
+    def __init__(self, message: str, *, joint: int, parameter: str, value: float, bound: float) -> None:
+        super().__init__(message)
+        self.joint = joint
+        self.parameter = parameter
+        self.value = value
+        self.bound = bound
+
+
+#: mu_C above this fraction of the joint's effort limit is reported as implausible: such a joint would
+#: spend more than half of its motor's torque on Coulomb friction alone (the robot files shipped here have
+#: 1-16 %: Panda 0.15-0.64 Nm of 12-87 Nm, Atlas arm 0.1-10.3 Nm of 25-112 Nm).
+COULOMB_EFFORT_FRACTION = 0.5
+#: d_v times the velocity limit above this fraction of the effort limit is implausible: viscous friction
+#: alone would exceed the motor's torque before the joint reaches its velocity limit.
+VISCOUS_EFFORT_FRACTION = 1.0
+
+
+def check_friction_plausibility(
+    friction: FrictionParameters,
+    *,
+    joint_names: Sequence[str] | None = None,
+    effort_limit: npt.ArrayLike | None = None,
+    velocity_limit: npt.ArrayLike | None = None,
+    joints: Sequence[int] | None = None,
+    source: str = "identified friction",
+    stacklevel: int = 2,
+) -> list[ImplausibleFrictionWarning]:
+    """Warn (:class:`ImplausibleFrictionWarning`) for each negative or implausibly large coefficient.
+
+    Negative mu_C or d_v is not friction (it would feed energy in); the controller's model clips it to 0
+    (:meth:`FrictionParameters.to_model`). Too large: mu_C above :data:`COULOMB_EFFORT_FRACTION` of the
+    effort limit, or d_v times the velocity limit above :data:`VISCOUS_EFFORT_FRACTION` of it (checked
+    only where the limits are finite and positive).
+
+    Args:
+        friction: the coefficients.
+        joint_names: names for the messages (default ``joint <k>``).
+        effort_limit, velocity_limit: per joint [Nm], [rad/s] (e.g. from the robot file).
+        joints: 0-based joints to check (default all).
+        source: what the coefficients are, for the messages.
+
+    Returns:
+        The warnings issued.
+    """
+    n = friction.n
+    names = list(joint_names) if joint_names is not None else [f"joint {j + 1}" for j in range(n)]
+    effort = np.full(n, np.inf) if effort_limit is None else np.broadcast_to(np.asarray(effort_limit, float), (n,))
+    vlim = np.full(n, np.inf) if velocity_limit is None else np.broadcast_to(np.asarray(velocity_limit, float), (n,))
+    issued: list[ImplausibleFrictionWarning] = []
+
+    def warn(j: int, parameter: str, value: float, bound: float, why: str) -> None:
+        unit = "Nm" if parameter == "coulomb" else "Nms/rad"
+        symbol = "mu_C" if parameter == "coulomb" else "d_v"
+        w = ImplausibleFrictionWarning(
+            f"{source}: joint {j + 1} ({names[j]}) {parameter} friction {symbol} = {value:.4g} {unit} {why}",
+            joint=j,
+            parameter=parameter,
+            value=value,
+            bound=bound,
+        )
+        warnings.warn(w, stacklevel=stacklevel + 1)
+        issued.append(w)
+
+    for j in range(n) if joints is None else joints:
+        mu, dv = float(friction.coulomb[j]), float(friction.viscous[j])
+        for parameter, value in (("coulomb", mu), ("viscous", dv)):
+            if value < 0:
+                warn(
+                    j,
+                    parameter,
+                    value,
+                    0.0,
+                    "is negative: friction cannot drive the joint (unmodelled effects, a torque offset or too "
+                    "little motion in one direction?); the controller's model clips it to 0",
+                )
+        ok_effort = np.isfinite(effort[j]) and effort[j] > 0
+        if ok_effort and mu > COULOMB_EFFORT_FRACTION * effort[j]:
+            warn(
+                j,
+                "coulomb",
+                mu,
+                COULOMB_EFFORT_FRACTION * effort[j],
+                f"is implausibly large: above {COULOMB_EFFORT_FRACTION:g} x the effort limit {effort[j]:.4g} Nm",
+            )
+        if ok_effort and np.isfinite(vlim[j]) and vlim[j] > 0 and dv * vlim[j] > VISCOUS_EFFORT_FRACTION * effort[j]:
+            warn(
+                j,
+                "viscous",
+                dv,
+                VISCOUS_EFFORT_FRACTION * effort[j] / vlim[j],
+                f"is implausibly large: at the velocity limit {vlim[j]:.4g} rad/s it would take "
+                f"{dv * vlim[j]:.4g} Nm, above the effort limit {effort[j]:.4g} Nm",
+            )
+    return issued
+
+
+def check_friction_against_robot(
+    friction: FrictionParameters,
+    robot: RobotModel,
+    *,
+    joints: Sequence[int] | None = None,
+    source: str = "identified friction",
+    stacklevel: int = 2,
+) -> list[ImplausibleFrictionWarning]:
+    """:func:`check_friction_plausibility` with ``robot``'s joint names, effort and velocity limits."""
+    return check_friction_plausibility(
+        friction,
+        joint_names=robot.joint_names,
+        effort_limit=np.asarray(robot.pin_model.effortLimit, dtype=float),
+        velocity_limit=robot.velocity_limit,
+        joints=joints,
+        source=source,
+        stacklevel=stacklevel + 1,
+    )

@@ -36,6 +36,7 @@ from reflexarm.ident.constant_velocity_trajectory import (  # the planning const
     plan_friction_experiment,
 )
 from reflexarm.ident.estimation import FrictionParameters
+from reflexarm.ident.friction_parameters import check_friction_against_robot, check_friction_plausibility
 from reflexarm.ident.regressor import BatchRegressor
 from reflexarm.robots.robot_model import RobotModel
 
@@ -221,8 +222,13 @@ class FrictionFit:
         return self.viscous * v + self.coulomb * np.sign(v) + (self.offset or 0.0)
 
 
-def fit_friction(points: Sequence[FrictionPoint], *, offset: bool = False) -> FrictionFit:
+def fit_friction(
+    points: Sequence[FrictionPoint], *, offset: bool = False, robot: RobotModel | None = None
+) -> FrictionFit:
     """Least-squares fit of ``tau = d_v v + mu_C sgn(v) [+ offset]`` to the points of one joint.
+
+    Warns (:class:`~reflexarm.ident.friction_parameters.ImplausibleFrictionWarning`) if mu_C or d_v comes
+    out negative, or (given ``robot``: its effort and velocity limits) implausibly large.
 
     Raises:
         IdentificationError: fewer points than parameters, or no point in one of the two directions
@@ -248,6 +254,13 @@ def fit_friction(points: Sequence[FrictionPoint], *, offset: bool = False) -> Fr
     r = tau - A @ x
     s2 = float(r @ r) / max(v.size - k, 1)
     cov = s2 * np.linalg.inv(A.T @ A)
+    j = points[0].joint
+    n = robot.n if robot is not None else j + 1
+    fitted = FrictionParameters(np.where(np.arange(n) == j, x[0], 0.0), np.where(np.arange(n) == j, x[1], 0.0))
+    if robot is not None:
+        check_friction_against_robot(fitted, robot, joints=[j], source="single-joint friction fit", stacklevel=2)
+    else:
+        check_friction_plausibility(fitted, joints=[j], source="single-joint friction fit", stacklevel=2)
     return FrictionFit(
         joint=points[0].joint,
         coulomb=float(x[1]),
@@ -306,7 +319,7 @@ def identify_joint_friction(
     )
     if not intervals:
         raise IdentificationError(f"joint {joint + 1}: no constant-velocity interval found in the data")
-    return fit_friction(friction_points(robot, joint, t, q, dq, tau, intervals), offset=offset)
+    return fit_friction(friction_points(robot, joint, t, q, dq, tau, intervals), offset=offset, robot=robot)
 
 
 def friction_from_fits(
