@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from ident_arms import SIX_DOF_TOOL, write_six_dof_urdf
 
+from ident_arms import SIX_DOF_TOOL, write_six_dof_urdf
 from reflexarm import load_robot
 from reflexarm.cli import main
 from reflexarm.experiments.identification import hydraulic_joints, run_friction_experiments
@@ -65,7 +65,8 @@ def test_plausible_friction_gives_no_warning(six_dof: RobotModel) -> None:
 
 def test_a_single_joint_fit_with_negative_coulomb_warns() -> None:
     # torque falls with speed in both directions: mu_C = -0.5, d_v = 1 (joint index 1 -> "joint 2")
-    pts = [FrictionPoint(1, v, 1.0 * v - 0.5 * np.sign(v), 0.01, 100, 0.0, 1.0) for v in (-1.0, -0.5, -0.2, 0.2, 0.5, 1.0)]
+    speeds = (-1.0, -0.5, -0.2, 0.2, 0.5, 1.0)
+    pts = [FrictionPoint(1, v, 1.0 * v - 0.5 * np.sign(v), 0.01, 100, 0.0, 1.0) for v in speeds]
     with pytest.warns(ImplausibleFrictionWarning, match=r"joint 2 \(joint 2\) coulomb friction mu_C = -0\.5 Nm"):
         fit = fit_friction(pts)
     assert fit.coulomb == pytest.approx(-0.5)
