@@ -27,6 +27,7 @@ namespace
   template<typename T>
   using View = nb::ndarray<nb::numpy, const T, nb::ndim<1>>;
   using MatView = nb::ndarray<nb::numpy, const double, nb::ndim<2>>;
+  using WritableView = nb::ndarray<nb::numpy, double, nb::ndim<1>>;
   constexpr int kSatShift = 8; // as reflexarm.control._kernels.SAT_SHIFT
 
   struct PyController
@@ -49,6 +50,19 @@ namespace
     if (name == "none")
       return reflexarm::Reaction::None;
     throw reflexarm::ConfigError("unknown reaction '" + name + "'; choose one of: gravity, compliant, none");
+  }
+
+  int tick(PyController & c, double t, double period, const In & q, const In & dq, const In & tau_m,
+           const In & wrench, const In & gravity, const In & q_d, const In & dq_d, const In & ddq_d)
+  {
+    const Map mq = asMap(q), mdq = asMap(dq), mtau = asMap(tau_m), mw = asMap(wrench), mg = asMap(gravity);
+    const Map mqd = asMap(q_d), mdqd = asMap(dq_d), mddqd = asMap(ddq_d);
+    const reflexarm::State s{mq, mdq, mtau, mw, mg};
+    const reflexarm::Reference r{mqd, mdqd, mddqd};
+    const auto code = c.ctrl.update(t, period, s, r, c.cmd);
+    if (code != reflexarm::FaultCode::None)
+      return static_cast<int>(code);
+    return c.cmd.n_collided + (c.cmd.n_saturated << kSatShift);
   }
 
   template<typename T>
@@ -119,18 +133,21 @@ NB_MODULE(_core, m)
       "update",
       [](PyController & c, double t, const In & q, const In & dq, const In & tau_m, const In & wrench,
          const In & gravity, const In & q_d, const In & dq_d, const In & ddq_d) {
-        const Map mq = asMap(q), mdq = asMap(dq), mtau = asMap(tau_m), mw = asMap(wrench), mg = asMap(gravity);
-        const Map mqd = asMap(q_d), mdqd = asMap(dq_d), mddqd = asMap(ddq_d);
-        const reflexarm::State s{mq, mdq, mtau, mw, mg};
-        const reflexarm::Reference r{mqd, mdqd, mddqd};
-        const auto code = c.ctrl.update(t, 0.0, s, r, c.cmd);
-        if (code != reflexarm::FaultCode::None)
-          return static_cast<int>(code);
-        return c.cmd.n_collided + (c.cmd.n_saturated << kSatShift);
+        return tick(c, t, 0.0, q, dq, tau_m, wrench, gravity, q_d, dq_d, ddq_d);
       },
-      "t"_a, "q"_a.noconvert(), "dq"_a.noconvert(), "tau_m"_a.noconvert(), "wrench"_a.noconvert(),
+      "t"_a.noconvert(), "q"_a.noconvert(), "dq"_a.noconvert(), "tau_m"_a.noconvert(), "wrench"_a.noconvert(),
       "gravity"_a.noconvert(), "q_d"_a.noconvert(), "dq_d"_a.noconvert(), "ddq_d"_a.noconvert(),
-      "One tick; returns a negative fault code, else n_collided + (n_saturated << SAT_SHIFT).")
+      "One tick, the period measured from the time stamps (t must be a float); returns a negative fault code, "
+      "else n_collided + (n_saturated << SAT_SHIFT).")
+    .def(
+      "update_with_period",
+      [](PyController & c, double t, double period, const In & q, const In & dq, const In & tau_m,
+         const In & wrench, const In & gravity, const In & q_d, const In & dq_d, const In & ddq_d) {
+        return tick(c, t, period, q, dq, tau_m, wrench, gravity, q_d, dq_d, ddq_d);
+      },
+      "t"_a, "period"_a, "q"_a.noconvert(), "dq"_a.noconvert(), "tau_m"_a.noconvert(), "wrench"_a.noconvert(),
+      "gravity"_a.noconvert(), "q_d"_a.noconvert(), "dq_d"_a.noconvert(), "ddq_d"_a.noconvert(),
+      "One tick with ros2_control's measured period [s] (0: from the time stamps); returns as update().")
     .def("reset", [](PyController & c) { c.ctrl.reset(); })
     .def(
       "set_switches",
@@ -217,7 +234,39 @@ NB_MODULE(_core, m)
     .def(
       "_set_observer_integral",
       [](PyController & c, int joint, double value) { c.ctrl.observerState().integral[joint] = value; },
-      "joint"_a, "value"_a, "Test hook: overwrite one entry of the observer's integral (e.g. with NaN).");
+      "joint"_a, "value"_a, "Test hook: overwrite one entry of the observer's integral (e.g. with NaN).")
+    .def_prop_ro(
+      "observer_arrays",
+      [](nb::handle_t<PyController> h) {
+        auto & c = nb::cast<PyController &>(h);
+        const size_t n = static_cast<size_t>(c.ctrl.nv());
+        auto w = [&](Eigen::VectorXd & v) { return WritableView(v.data(), {n}, h); };
+        auto & o = c.ctrl.observerState();
+        auto & d = c.ctrl.detectionObserverState();
+        return std::make_tuple(w(o.integral), w(o.p0), w(o.residual), w(d.integral), w(d.p0), w(d.residual));
+      },
+      "Writable views of both observers' states: (integral, p0, residual) of the compensation observer, then "
+      "of the detection observer (zeros when there is none). For diagnostics and tests.");
+
+  m.def(
+    "modal_damping",
+    [](const Eigen::MatrixXd & M, const Eigen::VectorXd & stiffness,
+       const Eigen::VectorXd & damping_ratio) -> nb::object {
+      const Eigen::Index n = M.rows();
+      if (M.cols() != n || stiffness.size() != n || damping_ratio.size() != n)
+        throw reflexarm::ConfigError(
+          "modal_damping: M must be n x n and stiffness, damping_ratio of size n; got M " + std::to_string(M.rows())
+          + " x " + std::to_string(M.cols()) + ", stiffness " + std::to_string(stiffness.size())
+          + ", damping_ratio " + std::to_string(damping_ratio.size()));
+      reflexarm::ModalDampingWorkspace ws(n);
+      Eigen::MatrixXd out = Eigen::MatrixXd::Zero(n, n);
+      if (!reflexarm::computeModalDamping(M, stiffness, damping_ratio, ws, out))
+        return nb::none();
+      return nb::cast(out);
+    },
+    "M"_a, "stiffness"_a, "damping_ratio"_a,
+    "D of eq. (2) by double diagonalization (reads the upper triangle of M); None if M is not finite or not "
+    "positive definite.");
 
   m.def(
     "describe_fault",

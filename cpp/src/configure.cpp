@@ -1,4 +1,6 @@
-// reflexarm::Controller::configure: checks the parameters once and sizes every buffer (not real-time).
+// reflexarm::Controller::configure (checks the parameters once and sizes every buffer, not real-time), reset,
+// the mode logic and the kappa switches.
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -243,6 +245,80 @@ namespace reflexarm
     reacted_ = false;
     configured_ = true;
     reset();
+  }
+
+  // ------------------------------------------------------------------------------------------ reset & mode
+  void Controller::reset() noexcept
+  {
+    if (!configured_)
+      return;
+    if (reacted_ && params_.reaction == Reaction::Compliant)
+      kappa_eps_ = kappa_eps_before_reaction_;
+    reacted_ = false;
+    obs_.integral.setZero();
+    obs_.p0.setZero();
+    obs_.residual.setZero();
+    obs_det_.integral.setZero();
+    obs_det_.p0.setZero();
+    obs_det_.residual.setZero();
+    detected_ = false;
+    first_time_ = std::numeric_limits<double>::quiet_NaN();
+    first_joints_.setZero();
+    damping_countdown_ = 0;
+    started_ = false;
+    has_t_ = false;
+    last_t_ = 0.0;
+    elapsed_ = 0.0;
+    obs_invalid_ = false;
+    timing_.n_periods = 0;
+    timing_.sum_period = 0.0;
+    timing_.min_period = 0.0;
+    timing_.max_period = 0.0;
+    timing_.clipped = 0;
+    eps_weight_ = static_cast<double>(kappa_eps_);
+    updateMode();
+  }
+
+  void Controller::updateMode() noexcept
+  {
+    gravity_mode_ = reacted_ && params_.reaction == Reaction::Gravity;
+    if (gravity_mode_)
+      mode_ = Mode::GravityCompensation;
+    else if (!kappa_eps_)
+      mode_ = Mode::Compliant;
+    else
+      mode_ = kappa_ext_ ? Mode::PreciseEeCompliant : Mode::PreciseStiff;
+  }
+
+  void Controller::setSwitches(int kappa_f, int kappa_eps, int kappa_ext) noexcept
+  {
+    if (kappa_f == 0 || kappa_f == 1)
+      kappa_f_ = kappa_f;
+    if (kappa_eps == 0 || kappa_eps == 1)
+    {
+      kappa_eps_ = kappa_eps;
+      if (params_.switch_time == 0.0)
+        eps_weight_ = static_cast<double>(kappa_eps_);
+    }
+    if (kappa_ext == 0 || kappa_ext == 1)
+      kappa_ext_ = kappa_ext;
+    updateMode();
+  }
+
+  void Controller::initCommand(Command & command) const
+  {
+    command.resize(n_);
+    command.fault_text[0] = '\0';
+    command.mode = mode_;
+  }
+
+  void Controller::restoreGravity() noexcept
+  {
+    if (gravity_staged_)
+    {
+      model_.gravity.linear() = gravity_;
+      gravity_staged_ = false;
+    }
   }
 
 } // namespace reflexarm

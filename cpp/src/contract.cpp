@@ -1,10 +1,12 @@
-// reflexarm::Controller's input contract, checked before any state changes: the order, bounds and faults of
-// reflexarm/control/contract.py and _kernels.py (the Python package's issue-8 contract).
+// reflexarm::Controller's input contract, checked before any state changes (order, bounds and fault codes of
+// the contract documented in reflexarm.control.Controller), and the safe command of a rejected tick.
 #include "reflexarm/controller.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
+
+#include "pinocchio/algorithm/rnea.hpp"
 
 namespace reflexarm
 {
@@ -117,6 +119,54 @@ namespace reflexarm
       code = checkAbs(r.dq_d, dq_max_, Signal::DqDesired, fault_);
     if (code == FaultCode::None)
       code = checkAbs(r.ddq_d, ddq_max_, Signal::DdqDesired, fault_);
+    return code;
+  }
+
+  // ------------------------------------------------------------------------------------------ safe command
+  FaultCode Controller::reject(FaultCode code, Command & cmd) noexcept
+  {
+    restoreGravity();
+    cmd.fault_code = code;
+    cmd.fault = code == FaultCode::ObserverInvalid ? FaultInfo{} : fault_;
+    describeFault(code, cmd.fault, cmd.fault_text.data(), cmd.fault_text.size());
+    cmd.mode = Mode::Fault;
+    cmd.n_collided = 0;
+    cmd.collided.setZero();
+    cmd.residual = detectionResidual();
+    // safe command: gravity compensation at the last accepted position (zero before the first)
+    tau_safe_.setZero();
+    if (has_last_q_)
+    {
+      const ConstVectorRef last_q(last_q_);
+      tau_safe_ = pinocchio::computeGeneralizedGravity(model_, data_g_, last_q);
+      if (has_springs_)
+        for (int i = 0; i < n_; ++i)
+          tau_safe_[i] = tau_safe_[i] + (last_q_[i] - spring_q_[i]) * spring_k_[i];
+      if (!tau_safe_.allFinite())
+        tau_safe_.setZero();
+    }
+    int n_sat = 0;
+    for (int i = 0; i < n_; ++i)
+    {
+      double b = tau_safe_[i];
+      if (has_prev_tau_)
+        b = std::min(std::max(b, tau_prev_[i] - tau_step_[i]), tau_prev_[i] + tau_step_[i]);
+      b = std::min(std::max(b, -tau_max_[i]), tau_max_[i]);
+      cmd.saturated[i] = b != tau_safe_[i] ? 1 : 0;
+      n_sat += cmd.saturated[i];
+      cmd.tau[i] = b;
+    }
+    cmd.n_saturated = n_sat;
+    if (code == FaultCode::BadShape) // a programming error: the Python face raises; nothing is committed
+    {
+      cmd.collision = has_detector_ && detected_;
+      return code;
+    }
+    tau_prev_ = cmd.tau;
+    has_prev_tau_ = true;
+    // detection is off (invalid observer, or a non-finite law that latched it): never "no collision"
+    const bool detection_off = code == FaultCode::ObserverInvalid || code == FaultCode::OutputNonFinite;
+    cmd.collision = detection_off ? true : (has_detector_ && detected_);
     return code;
   }
 

@@ -95,6 +95,8 @@ namespace reflexarm
       return "reference ddq_d";
     case Signal::Model:
       return "model";
+    case Signal::Period:
+      return "update period";
     }
     return "input";
   }
@@ -106,6 +108,7 @@ namespace reflexarm
       switch (signal)
       {
       case Signal::Time:
+      case Signal::Period:
         return "s";
       case Signal::Q:
       case Signal::QDesired:
@@ -144,6 +147,8 @@ namespace reflexarm
         return "InputBounds.max_acceleration";
       case Signal::Gravity:
         return "model gravity +- InputBounds.gravity_tolerance";
+      case Signal::Period:
+        return "a period >= 0; 0: measured from the time stamps";
       default:
         return "bound";
       }

@@ -59,11 +59,13 @@ namespace reflexarm
     /// before it is restored. Keeps the last command (the rate limit goes on) and the damping matrix.
     void reset() noexcept;
 
-    /// One control tick. `time` is the measurement's time stamp [s]: the observer integrates the time
-    /// since the last accepted stamp clipped to the period band (a rejected tick does not advance the
-    /// clock, so the integrated period cannot come from `period`); `period` (ros2_control's measured
-    /// period) is not used by the math. Writes `command` (sized by initCommand) and returns its fault
-    /// code (None for an accepted tick). Never allocates, never throws.
+    /// One control tick. `time` is the measurement's time stamp [s] (strictly increasing over accepted ticks).
+    /// `period` [s] is ros2_control's measured time since the previous update() call: the observer integrates
+    /// the sum of the periods given since the last accepted tick (rejected calls included), clipped to the
+    /// period band. `period = 0` measures that time from the stamps instead (time - last accepted time),
+    /// which is what the Python Controller does; both agree when the stamps advance by the periods. A
+    /// negative or non-finite period is a fault (Signal::Period). Writes `command` (sized by initCommand)
+    /// and returns its fault code (None for an accepted tick). Never allocates, never throws.
     FaultCode update(
       double time, double period, const State & state, const Reference & reference, Command & command) noexcept;
 
@@ -102,6 +104,7 @@ namespace reflexarm
     const ObserverState & detectionObserver() const noexcept { return obs_det_; }
     /// Mutable observer states, for diagnostics and tests (e.g. to exercise the invalid-observer latch).
     ObserverState & observerState() noexcept { return obs_; }
+    ObserverState & detectionObserverState() noexcept { return obs_det_; }
     const Eigen::VectorXd & lastCommand() const noexcept { return tau_prev_; }
     const Eigen::Vector3d & gravity() const noexcept { return gravity_; } ///< last accepted
     // plausibility bounds per joint
@@ -119,6 +122,34 @@ namespace reflexarm
     FaultCode reject(FaultCode code, Command & cmd) noexcept;
     void updateMode() noexcept;
     void restoreGravity() noexcept;
+    // the steps of update(), in order (controller.cpp)
+    bool commandFits(const Command & cmd) const noexcept;
+    FaultCode notReady(Command & cmd) const noexcept;
+    FaultCode checkPeriod(double period) noexcept;
+    void stageGravity(const ConstVectorRef & gravity) noexcept;
+    void computeDynamics(const State & s, const Reference & r, bool update_damping) noexcept;
+    FaultCode checkModelTerms(bool update_damping) noexcept;
+    void commitInputs(const ConstVectorRef & q, bool update_damping) noexcept;
+    double advanceClock(double t, double period) noexcept;
+    void updateObservers(const State & s, double h) noexcept;
+    bool observersFinite() const noexcept;
+    int detect() noexcept;
+    double rampedEpsWeight() const noexcept;
+    FaultCode controlLaw(const State & s, const Reference & r, double eps_w) noexcept;
+    int boundTorque() noexcept;
+    void commitTick(double eps_w) noexcept;
+    void react(double t, int n_over, Command & cmd) noexcept;
+    void writeCommand(int n_sat, Command & cmd) const noexcept;
+    /// tau_f of joint i: coulomb * clip(dq / velocity_band, -1, 1) + viscous * dq
+    double frictionTorque(int i, double dq) const noexcept
+    {
+      double sg = dq * inv_band_;
+      if (sg > 1.0)
+        sg = 1.0;
+      else if (sg < -1.0)
+        sg = -1.0;
+      return coulomb_[i] * sg + viscous_[i] * dq;
+    }
 
     bool configured_ = false;
     int n_ = 0;
@@ -135,7 +166,7 @@ namespace reflexarm
     // buffers
     Eigen::VectorXd zeros_, g_, p_, ff_, tau_new_, last_q_, tau_prev_, tau_safe_, q_buf_;
     Eigen::Matrix<double, 6, Eigen::Dynamic> J_;
-    Eigen::MatrixXd C_, M_, D_, D_new_;
+    Eigen::MatrixXd M_, D_, D_new_;
     ModalDampingWorkspace modal_;
     Eigen::Matrix<std::uint8_t, Eigen::Dynamic, 1> over_, sat_, first_joints_;
     // state
@@ -144,6 +175,7 @@ namespace reflexarm
     bool gravity_staged_ = false;
     bool started_ = false, has_t_ = false, has_last_q_ = false, obs_invalid_ = false, has_prev_tau_ = false;
     double last_t_ = 0.0;
+    double elapsed_ = 0.0; // sum of the `period`s given since the last accepted tick [s]
     TimingStats timing_;
     int kappa_f_ = 0, kappa_eps_ = 0, kappa_ext_ = 0, kappa_eps_before_reaction_ = 0;
     double eps_weight_ = 0.0;

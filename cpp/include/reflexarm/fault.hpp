@@ -1,7 +1,7 @@
 // reflexarm: fault codes of the input contract and their texts.
 //
-// Codes, signal ids and texts are those of reflexarm.control._kernels / reflexarm.control.contract, so a
-// fault reads the same from C++ and from Python.
+// Codes and signal ids are those of reflexarm.control.contract (FAULT_CODES, SIG_*); the Python Controller
+// reports the texts written here.
 #pragma once
 
 #include <cstddef>
@@ -35,7 +35,8 @@ namespace reflexarm
     QDesired = 6,
     DqDesired = 7,
     DdqDesired = 8,
-    Model = 9
+    Model = 9,
+    Period = 10 ///< the `period` argument of Controller::update
   };
 
   /// Details of a fault: which signal and component (-1: the whole signal), the value and the bound.
