@@ -15,7 +15,7 @@ import pinocchio as pin
 import pytest
 
 from reflexarm.errors import ModelError
-from reflexarm.robots import RobotModel, builtin_robots, load_robot
+from reflexarm.robots import RobotFileWarning, RobotModel, builtin_robots, load_robot
 
 BUILTINS = sorted(builtin_robots())
 
@@ -434,9 +434,13 @@ def test_unknown_file_format(tmp_path: Path) -> None:
 
 
 def test_user_file_needs_an_ee_frame(tmp_path: Path) -> None:
-    path = tmp_path / "forked.urdf"
-    path.write_text(BRANCHED_URDF)
-    with pytest.raises(ModelError, match=r"name the end-effector frame \(ee_frame=...\)"):
+    path = tmp_path / "serial.urdf"
+    path.write_text(
+        BRANCHED_URDF.replace('<parent link="base"/><child link="b"/>', '<parent link="a"/><child link="b"/>')
+    )
+    with pytest.raises(
+        ModelError, match=r"name the end-effector frame \(ee_frame=..., --ee-frame\); frames on the last "
+    ):
         load_robot(path)
 
 
@@ -452,19 +456,29 @@ def test_missing_frames_are_listed() -> None:
         panda.compute_frame_pose(panda.home, "flange")
 
 
-def test_free_joint_is_rejected(tmp_path: Path) -> None:
+def test_free_joint_is_fixed_with_a_note(tmp_path: Path) -> None:
+    """A floating base (MJCF freejoint) is fixed where the file puts it: one joint left, the base's 1 m height
+    kept in the frame poses, and a note says so."""
     path = tmp_path / "floating.xml"
     path.write_text(FREE_MJCF)
-    with pytest.raises(ModelError, match="nq=8 != nv=7: only fixed-base arms with 1-DoF joints"):
-        load_robot(path, ee_frame="tip")
+    with pytest.warns(RobotFileWarning, match="the floating base joint .* is fixed at the file's pose"):
+        robot = load_robot(path, ee_frame="tip")
+    assert robot.joint_names == ["j"]
+    assert robot.cut is not None and robot.cut.base == "b" and robot.cut.tip == "c"
+    np.testing.assert_allclose(robot.compute_frame_pose([0.0], "tip")[1], [0.0, 0.1, 1.0], atol=1e-12)
 
 
 @pytest.mark.parametrize(("name", "text"), [("forked.urdf", BRANCHED_URDF), ("forked.xml", BRANCHED_MJCF)])
-def test_branched_tree_is_rejected(tmp_path: Path, name: str, text: str) -> None:
+def test_branched_tree_needs_a_tip(tmp_path: Path, name: str, text: str) -> None:
     path = tmp_path / name
     path.write_text(text)
-    with pytest.raises(ModelError, match="not a serial chain: joint 'jb' hangs off 'universe', not off .*'ja'"):
+    with pytest.raises(
+        ModelError, match=r"is not a serial chain: name the arm's tip link \(tip=..., --tip\); leaf links are: a, b"
+    ):
         load_robot(path, ee_frame="a")
+    robot = load_robot(path, tip="b")
+    assert robot.joint_names == ["jb"] and robot.ee_frame == "b"
+    assert robot.cut is not None and dict(robot.cut.locked) == {"ja": 0.0}
 
 
 def test_wrong_shapes_are_named(robot: RobotModel) -> None:

@@ -2,8 +2,9 @@
 
 from reflexarm.robots._mjcf import RobotFileWarning
 from reflexarm.robots.friction import CoulombViscousFriction
+from reflexarm.robots.loader import builtin_robots, load_robot
 from reflexarm.robots.perturbation import ModelPerturbation, perturb_model
-from reflexarm.robots.robot_model import RobotModel, builtin_robots, load_robot
+from reflexarm.robots.robot_model import RobotModel
 
 __all__ = [
     "CoulombViscousFriction",

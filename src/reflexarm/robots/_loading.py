@@ -3,16 +3,21 @@
 - URDF ``continuous`` joints: Pinocchio builds them as unbounded revolute joints (cos/sin, nq=2, nv=1).
   A real arm and MuJoCo report such a joint as one angle, so they are read as revolute joints with the
   same axis and infinite position limits (nq = nv = 1); their effort and velocity limits are kept.
+  Joints leading to links the file does not define are dropped (see ``_urdf.py``).
 - MJCF: the joint facts both sides must share (armature, damping, frictionloss, springs, effort limits,
   gravity) come from MuJoCo's compiled model (see ``_mjcf.py``); a joint-less root body's placement,
   which Pinocchio's parser drops, is restored; then M(q) and g(q) are compared with MuJoCo's, so a
   construct one parser reads differently from the other is refused instead of silently giving two
   different robots.
+- A tree (humanoid, arm + gripper) or a floating base is cut to the base..tip chain, the other joints
+  locked (see ``_cut.py``); for MJCF the agreement check runs on the cut model against MuJoCo's model
+  with the same joints frozen.
 """
 
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -21,7 +26,9 @@ import numpy as np
 import pinocchio as pin
 
 from reflexarm.errors import ModelError
-from reflexarm.robots._mjcf import compile_mjcf, joint_facts
+from reflexarm.robots._cut import ChainCut, cut_chain, freeze_joints, needs_cut
+from reflexarm.robots._mjcf import compile_mjcf, joint_facts, load_mjcf_spec
+from reflexarm.robots._urdf import UrdfFile, mujoco_urdf_text, read_urdf
 
 __all__ = ["LoadedFile", "build_pinocchio_model"]
 
@@ -34,49 +41,65 @@ _UNBOUNDED = 1e300
 #: misread placement, axis, inertia or armature shows up at 1e-3 or more.
 AGREEMENT_RTOL = 1e-8
 
+#: The MJCF keyframe whose joint positions are the default locks of a cut.
+HOME_KEYFRAME = "home"
+
 
 @dataclass
 class LoadedFile:
-    """What a file gives beyond the Pinocchio model: joint springs and notes for the user."""
+    """What a file gives beyond the Pinocchio model: joint springs, notes for the user, the cut."""
 
     spring_stiffness: np.ndarray
     spring_reference: np.ndarray
     notes: list[str] = field(default_factory=list)
+    cut: ChainCut | None = None
 
 
-def build_pinocchio_model(path: Path) -> tuple[pin.Model, LoadedFile]:
-    """The Pinocchio model of a URDF or MJCF file and the file's joint springs and notes."""
+def build_pinocchio_model(
+    path: Path,
+    *,
+    base: str | None = None,
+    tip: str | None = None,
+    locked: Mapping[str, float] | None = None,
+) -> tuple[pin.Model, LoadedFile]:
+    """The Pinocchio model of a URDF or MJCF file (cut to ``base``..``tip`` when given, or when the file
+    has a floating base) and the file's joint springs and notes."""
     if not path.is_file():
         raise ModelError(f"robot file {str(path)!r} does not exist")
     suffix = path.suffix.lower()
     if suffix == ".urdf":
-        model = _build_urdf(path)
-        return model, LoadedFile(np.zeros(model.nv), np.zeros(model.nv))
+        urdf = read_urdf(path)
+        model = _build_urdf(urdf)
+        notes = urdf.notes + mujoco_urdf_text(urdf)[1]
+        cut = None
+        if base is not None or tip is not None or locked or needs_cut(model):
+            model, cut, _ = cut_chain(model, base=base, tip=tip, locked=locked, defaults={}, path=path)
+            notes += cut.notes
+        return model, LoadedFile(np.zeros(model.nv), np.zeros(model.nv), notes, cut)
     if suffix in (".xml", ".mjcf"):
-        return _build_mjcf(path)
+        return _build_mjcf(path, base, tip, locked)
     raise ModelError(f"robot file {str(path)!r}: unknown format {suffix!r}; use .urdf or MJCF .xml")
 
 
 # ---------------------------------------------------------------------- URDF
-def _build_urdf(path: Path) -> pin.Model:
-    try:
-        text = path.read_text()
-        root = ET.fromstring(text)
-    except (OSError, UnicodeDecodeError, ET.ParseError) as e:
-        raise ModelError(f"cannot parse robot file {str(path)!r}: {e}") from e
+def _build_urdf(urdf: UrdfFile) -> pin.Model:
+    path, root = urdf.path, urdf.root
     continuous = [j for j in root.iter("joint") if j.get("type") == "continuous"]
     try:
         if not continuous:
-            return pin.buildModelFromUrdf(str(path))
-        original = pin.buildModelFromXML(text)
-        for joint in continuous:
+            return pin.buildModelFromXML(urdf.text)
+        original = pin.buildModelFromXML(urdf.text)
+        rewritten = UrdfFile(path, ET.fromstring(urdf.text))
+        for joint in rewritten.root.iter("joint"):
+            if joint.get("type") != "continuous":
+                continue
             joint.set("type", "revolute")
             limit = joint.find("limit")
             if limit is None:
                 limit = ET.SubElement(joint, "limit", effort="1", velocity="1")
             limit.set("lower", repr(-_UNBOUNDED))
             limit.set("upper", repr(_UNBOUNDED))
-        model = pin.buildModelFromXML(ET.tostring(root, encoding="unicode"))
+        model = pin.buildModelFromXML(rewritten.text)
     except Exception as e:  # pinocchio raises RuntimeError/ValueError with terse text
         raise ModelError(f"cannot parse robot file {str(path)!r}: {e}") from e
     names = {j.get("name") for j in continuous}
@@ -93,29 +116,70 @@ def _build_urdf(path: Path) -> pin.Model:
 
 
 # ---------------------------------------------------------------------- MJCF
-def _build_mjcf(path: Path) -> tuple[pin.Model, LoadedFile]:
+def _build_mjcf(
+    path: Path, base: str | None, tip: str | None, locked: Mapping[str, float] | None
+) -> tuple[pin.Model, LoadedFile]:
     try:
         model = pin.buildModelFromMJCF(str(path))
     except Exception as e:
         raise ModelError(f"cannot parse robot file {str(path)!r}: {e}") from e
     mj, notes = compile_mjcf(path)
     _align_mjcf_root(model, mj, path)
-    names = list(model.names)[1:]
-    if model.nq != model.nv or any(model.nvs[j] != 1 for j in range(1, model.njoints)):
+    one_dof = [j for j in range(1, model.njoints) if model.nqs[j] == 1 and model.nvs[j] == 1]
+    if any(model.nvs[j] not in (1, 6) for j in range(1, model.njoints)):
         return model, LoadedFile(np.zeros(model.nv), np.zeros(model.nv), notes)  # RobotModel refuses it
+    names = [model.names[j] for j in one_dof]
     facts = joint_facts(mj, names, path)
-    model.armature = facts.armature
-    model.damping = facts.damping
-    model.friction = facts.frictionloss
+    iv = [model.idx_vs[j] for j in one_dof]
+    iq = [model.idx_qs[j] for j in one_dof]
+    passive = (("armature", facts.armature), ("damping", facts.damping), ("friction", facts.frictionloss))
+    for attribute, values in passive:
+        column = np.asarray(getattr(model, attribute), dtype=float).copy()
+        column[iv] = values
+        setattr(model, attribute, column)
     model.gravity.linear = facts.gravity
-    model.lowerPositionLimit = facts.lower_limit
-    model.upperPositionLimit = facts.upper_limit
+    lower, upper = model.lowerPositionLimit.copy(), model.upperPositionLimit.copy()
+    lower[iq], upper[iq] = facts.lower_limit, facts.upper_limit
+    model.lowerPositionLimit, model.upperPositionLimit = lower, upper
     given = np.isfinite(facts.effort_limit)
     limits = np.asarray(model.effortLimit, dtype=float).copy()
-    limits[given] = facts.effort_limit[given]
+    limits[np.asarray(iv)[given]] = facts.effort_limit[given]
     model.effortLimit = limits
-    _check_agreement(model, mj, names, path)
-    return model, LoadedFile(facts.stiffness, facts.springref, notes + facts.notes)
+    notes += facts.notes
+    stiffness = dict(zip(names, facts.stiffness, strict=True))
+    springref = dict(zip(names, facts.springref, strict=True))
+    if base is None and tip is None and not locked and not needs_cut(model):
+        _check_agreement(model, mj, names, path)
+        return model, LoadedFile(facts.stiffness, facts.springref, notes)
+    reduced, cut, chain = cut_chain(model, base=base, tip=tip, locked=locked, defaults=_home(mj), path=path)
+    spec = load_mjcf_spec(path)[0]  # its notes were given with compile_mjcf's
+    freeze_joints(spec, cut.locked, path)
+    try:
+        frozen = spec.compile()
+    except Exception as e:
+        raise ModelError(
+            f"MuJoCo cannot compile robot file {str(path)!r} with the joints off the arm locked: {e}"
+        ) from e
+    chain_names = [model.names[j] for j in chain]
+    _check_agreement(reduced, frozen, chain_names, path)
+    return reduced, LoadedFile(
+        np.array([stiffness[n] for n in chain_names]),
+        np.array([springref[n] for n in chain_names]),
+        notes + list(cut.notes),
+        cut,
+    )
+
+
+def _home(mj: mujoco.MjModel) -> dict[str, float]:
+    """1-DoF joint positions of the file's "home" keyframe (empty without one)."""
+    kid = mujoco.mj_name2id(mj, mujoco.mjtObj.mjOBJ_KEY, HOME_KEYFRAME)
+    if kid < 0:
+        return {}
+    qpos = mj.key_qpos[kid]
+    hinge_slide = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
+    return {
+        mj.joint(j).name: float(qpos[mj.jnt_qposadr[j]]) for j in range(mj.njnt) if int(mj.jnt_type[j]) in hinge_slide
+    }
 
 
 def _align_mjcf_root(model: pin.Model, mj: mujoco.MjModel, path: Path) -> None:

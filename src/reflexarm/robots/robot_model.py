@@ -4,74 +4,25 @@ from __future__ import annotations
 
 import os
 import warnings
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
 from reflexarm.errors import ModelError
-from reflexarm.robots._builtin import _BUILTINS, BuiltinRobot
+from reflexarm.robots._cut import ChainCut
 from reflexarm.robots._loading import build_pinocchio_model
 from reflexarm.robots._mjcf import RobotFileWarning
 from reflexarm.robots.friction import CoulombViscousFriction
 
-__all__ = ["RobotModel", "builtin_robots", "load_robot"]
+__all__ = ["RobotModel"]  # load_robot and builtin_robots: see loader.py (still importable from here)
 
 #: Inertial parameters per link, in Pinocchio's order (about the joint frame origin):
 #: m, m*c_x, m*c_y, m*c_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz.
 INERTIAL_PARAMETER_NAMES = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
-
-
-def builtin_robots() -> dict[str, BuiltinRobot]:
-    """The robots shipped with reflexarm, by name."""
-    return dict(_BUILTINS)
-
-
-def load_robot(
-    name_or_path: str | os.PathLike[str],
-    *,
-    ee_frame: str | None = None,
-    sensor_frame: str | None = None,
-    friction: CoulombViscousFriction | None = None,
-) -> RobotModel:
-    """Load a built-in robot by name, or a user's URDF/MJCF file by path.
-
-    Args:
-        name_or_path: a name from :func:`builtin_robots` or a path to a ``.urdf`` or ``.xml`` (MJCF) file.
-        ee_frame: end-effector frame (required for user files; built-ins default to ``"ee"``).
-        sensor_frame: wrist force/torque sensor frame; defaults to ``ee_frame``.
-        friction: the model's friction; defaults to the file's joint ``frictionloss``/``damping``
-            (MJCF) or ``<dynamics friction damping>`` (URDF).
-
-    Raises:
-        ModelError: unknown robot name, unreadable or malformed file, missing frame, non-serial arm.
-    """
-    key = str(name_or_path)
-    if key in _BUILTINS:
-        b = _BUILTINS[key]
-        robot = RobotModel.from_file(
-            b.path,
-            ee_frame=ee_frame or b.ee_frame,
-            sensor_frame=sensor_frame or b.sensor_frame,
-            friction=friction,
-            name=b.name,
-            home=b.home,
-        )
-        if b.velocity_limit:
-            robot.pin_model.velocityLimit = np.asarray(b.velocity_limit, dtype=float)
-        return robot
-    path = Path(key)
-    if path.suffix.lower() not in (".urdf", ".xml", ".mjcf") and not path.exists():
-        raise ModelError(
-            f"unknown robot {key!r}; built-in robots are: {', '.join(sorted(_BUILTINS))} "
-            "(or give a path to a .urdf or MJCF .xml file)"
-        )
-    if not path.is_file():
-        raise ModelError(f"robot file {key!r} does not exist")
-    if ee_frame is None:
-        raise ModelError(f"loading {key!r}: name the end-effector frame (ee_frame=...)")
-    return RobotModel.from_file(path, ee_frame=ee_frame, sensor_frame=sensor_frame, friction=friction)
 
 
 class RobotModel:
@@ -86,7 +37,8 @@ class RobotModel:
     ``compute_motor_torque`` include ``K_s (q - q_s)`` (see :meth:`compute_spring_torque`); the raw
     Pinocchio functions on :attr:`pin_model` and the inertial regressor do not (Pinocchio has no springs).
     ``notes`` lists what was dropped from the file or is not modelled (each also given as a
-    :class:`RobotFileWarning` when the file is loaded).
+    :class:`RobotFileWarning` when the file is loaded). ``cut`` (a ``ChainCut`` or ``None``) records the
+    base and tip links and the locked joints of an arm cut out of a larger robot file.
     """
 
     def __init__(
@@ -102,6 +54,7 @@ class RobotModel:
         spring_stiffness: npt.ArrayLike | None = None,
         spring_reference: npt.ArrayLike | None = None,
         notes: tuple[str, ...] | list[str] = (),
+        cut: ChainCut | None = None,
     ) -> None:
         where = f" in {str(source)!r}" if source else ""
         if model.nq != model.nv:
@@ -130,7 +83,8 @@ class RobotModel:
             if model.parents[j] != j - 1:
                 raise ModelError(
                     f"robot{where} is not a serial chain: joint {model.names[j]!r} hangs off "
-                    f"{model.names[model.parents[j]]!r}, not off the previous joint {model.names[j - 1]!r}"
+                    f"{model.names[model.parents[j]]!r}, not off the previous joint {model.names[j - 1]!r}; "
+                    "cut the arm out with base=/tip= (--base/--tip)"
                 )
         self._model = model
         self._data = model.createData()
@@ -158,6 +112,7 @@ class RobotModel:
         self._spring_q = _joint_vector(spring_reference, n, "spring_reference", where)
         self._has_springs = bool(np.any(self._spring_k != 0.0))
         self.notes = tuple(notes)
+        self.cut = cut
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -165,18 +120,27 @@ class RobotModel:
         cls,
         path: str | os.PathLike[str],
         *,
-        ee_frame: str,
+        ee_frame: str | None,
         sensor_frame: str | None = None,
         friction: CoulombViscousFriction | None = None,
         name: str = "",
         home: npt.ArrayLike | None = None,
+        base: str | None = None,
+        tip: str | None = None,
+        locked: Mapping[str, float] | None = None,
     ) -> RobotModel:
         """Load a URDF or MJCF file (see :func:`load_robot`); notes are given as :class:`RobotFileWarning`."""
         p = Path(path)
-        model, loaded = build_pinocchio_model(p)
+        model, loaded = build_pinocchio_model(p, base=base, tip=tip, locked=locked)
+        if ee_frame is None and loaded.cut is None:
+            last = [f.name for f in model.frames if f.parentJoint == model.njoints - 1]
+            raise ModelError(
+                f"loading {str(p)!r}: name the end-effector frame (ee_frame=..., --ee-frame); frames on the last "
+                f"joint {model.names[model.njoints - 1]!r}: {', '.join(last)} (`reflexarm robots FILE` lists them all)"
+            )
         robot = cls(
             model,
-            ee_frame=ee_frame,
+            ee_frame=ee_frame or loaded.cut.tip,  # type: ignore[union-attr]  # checked above
             sensor_frame=sensor_frame,
             friction=friction,
             name=name or p.stem,
@@ -185,6 +149,7 @@ class RobotModel:
             spring_stiffness=loaded.spring_stiffness,
             spring_reference=loaded.spring_reference,
             notes=loaded.notes,
+            cut=loaded.cut,
         )
         for note in robot.notes:
             warnings.warn(note, RobotFileWarning, stacklevel=3)
@@ -203,6 +168,7 @@ class RobotModel:
             spring_stiffness=self._spring_k,
             spring_reference=self._spring_q,
             notes=self.notes,
+            cut=self.cut,
         )
 
     def with_friction(self, friction: CoulombViscousFriction) -> RobotModel:
@@ -310,7 +276,8 @@ class RobotModel:
 
     def compute_coriolis_matrix(self, q: npt.ArrayLike, dq: npt.ArrayLike) -> np.ndarray:
         """C(q, dq) with M_dot - 2 C skew-symmetric (n, n)."""
-        return np.array(pin.computeCoriolisMatrix(self._model, self._data, self._check_q(q), self._check_q(dq, "dq")))
+        C = pin.computeCoriolisMatrix(self._model, self._data, self._check_q(q), self._check_q(dq, "dq"))
+        return np.array(C).reshape(self.n, self.n)
 
     def compute_spring_torque(self, q: npt.ArrayLike, out: np.ndarray | None = None) -> np.ndarray:
         """Joint spring torque K_s (q - q_s) (n,) [Nm], the torque the motors need to hold the springs.
@@ -355,7 +322,8 @@ class RobotModel:
         """
         fid = self.sensor_frame_id if frame is None else self.frame_id(frame)
         ref = pin.LOCAL_WORLD_ALIGNED if world_aligned else pin.LOCAL
-        return np.array(pin.computeFrameJacobian(self._model, self._data, self._check_q(q), fid, ref))
+        J = pin.computeFrameJacobian(self._model, self._data, self._check_q(q), fid, ref)
+        return np.array(J).reshape(6, self.n)  # eigenpy returns a one-column matrix as a vector
 
     def compute_frame_pose(self, q: npt.ArrayLike, frame: str | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(R, p) of ``frame`` (default: the end effector) in the base frame."""
@@ -383,10 +351,20 @@ class RobotModel:
             pin.computeJointTorqueRegressor(
                 self._model, self._data, self._check_q(q), self._check_q(dq, "dq"), self._check_q(ddq, "ddq")
             )
-        )
+        ).reshape(self.n, 10 * self.n)
+
+    def load_arguments(self) -> dict[str, Any]:
+        """Keyword arguments of :func:`load_robot` that rebuild this robot from :attr:`source` (frames, and
+        ``base``/``tip``/``locked`` when it was cut): JSON-ready, for model files and reports."""
+        out: dict[str, Any] = {"ee_frame": self.ee_frame, "sensor_frame": self.sensor_frame}
+        if self.cut is not None:
+            out.update(self.cut.as_dict())
+        return out
 
     def __repr__(self) -> str:
-        return f"RobotModel({self.name!r}, n={self.n}, ee_frame={self.ee_frame!r}, sensor_frame={self.sensor_frame!r})"
+        cut = f", base={self.cut.base!r}, tip={self.cut.tip!r}" if self.cut is not None else ""
+        frames = f"ee_frame={self.ee_frame!r}, sensor_frame={self.sensor_frame!r}"
+        return f"RobotModel({self.name!r}, n={self.n}, {frames}{cut})"
 
 
 def _joint_vector(
@@ -400,3 +378,12 @@ def _joint_vector(
             f"{name}{where} must be a finite{' non-negative' if nonnegative else ''} ({n},) array; got {value!r}"
         )
     return arr
+
+
+def __getattr__(name: str) -> Any:
+    """``load_robot`` and ``builtin_robots`` live in ``loader.py``; still importable from here."""
+    if name in ("load_robot", "builtin_robots"):
+        from reflexarm.robots import loader
+
+        return getattr(loader, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -2,7 +2,9 @@
 
 The MuJoCo model is compiled from the same URDF/MJCF file as the controller's Pinocchio model, then
 completed with what the simulation needs: sites for the end-effector and sensor frames when the file
-has none, the wrist force/torque sensors, the true joint friction and the scene's bodies.
+has none, the wrist force/torque sensors, the true joint friction and the scene's bodies. An arm cut
+out of a larger robot (``robot.cut``) has the other joints frozen exactly as in the controller's model
+(deleted, their bodies moved to the locked positions; see ``reflexarm.robots._cut``).
 
 Motors are ideal torque sources: the file's own actuators (position servos and the like, e.g. the
 Menagerie arms' ``<general>`` servos) are removed, with the sensors that read them and the keyframes'
@@ -14,7 +16,6 @@ absent are dropped with their geoms, as for URDF (see ``reflexarm.robots._mjcf``
 from __future__ import annotations
 
 import warnings
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -23,7 +24,9 @@ import numpy as np
 import pinocchio as pin
 
 from reflexarm.errors import ModelError
+from reflexarm.robots._cut import freeze_joints
 from reflexarm.robots._mjcf import RobotFileWarning, load_mjcf_spec
+from reflexarm.robots._urdf import mujoco_urdf_text, read_urdf
 from reflexarm.robots.friction import CoulombViscousFriction
 from reflexarm.robots.robot_model import RobotModel
 
@@ -62,46 +65,20 @@ class BuildInfo:
 
 
 def load_spec(path: Path) -> tuple[mujoco.MjSpec, bool]:
-    """Parse a robot file into an MjSpec; URDF files are rewritten first (see :func:`urdf_for_mujoco`)."""
+    """Parse a robot file into an MjSpec; URDF files are rewritten first (see ``robots/_urdf.py``: joints
+    to undefined links dropped, ``package://`` meshes resolved or dropped, visuals discarded, fixed links
+    kept as bodies, no inertia from geometry). The notes were given when the RobotModel was loaded."""
     if not path.is_file():
         raise ModelError(f"robot file {str(path)!r} does not exist")
     is_urdf = path.suffix.lower() == ".urdf"
     if not is_urdf:
-        return load_mjcf_spec(path)[0], False  # the mesh note was given when the RobotModel was loaded
+        return load_mjcf_spec(path)[0], False
+    text, _ = mujoco_urdf_text(read_urdf(path))
     try:
-        spec = mujoco.MjSpec.from_string(urdf_for_mujoco(path.read_text(), path))
-    except ModelError:
-        raise
+        spec = mujoco.MjSpec.from_string(text)
     except Exception as e:  # MuJoCo raises ValueError with the parser's text
         raise ModelError(f"MuJoCo cannot parse robot file {str(path)!r}: {e}") from e
     return spec, is_urdf
-
-
-def urdf_for_mujoco(text: str, path: Path) -> str:
-    """URDF text MuJoCo can compile without the robot's ROS package.
-
-    MuJoCo cannot resolve ``package://`` mesh URIs (and from a string, no relative path either). Meshes
-    only shape collision and visual geometry; the dynamics come from ``<inertial>``. So every
-    ``<visual>``/``<collision>`` whose geometry is a ``<mesh>`` is dropped, and a ``<mujoco>`` block asks
-    MuJoCo to discard visuals, to keep fixed-joint links as bodies (so tool and sensor links stay
-    addressable) and never to derive inertia from geometry (as Pinocchio does not).
-    """
-    try:
-        root = ET.fromstring(text)
-    except ET.ParseError as e:
-        raise ModelError(f"malformed URDF file {str(path)!r}: {e}") from e
-    if root.tag != "robot":
-        raise ModelError(f"malformed URDF file {str(path)!r}: root element is <{root.tag}>, expected <robot>")
-    for link in root.iter("link"):
-        for tag in ("visual", "collision"):
-            for element in link.findall(tag):
-                if element.find("geometry/mesh") is not None:
-                    link.remove(element)
-    for old in root.findall("mujoco"):
-        root.remove(old)
-    block = ET.SubElement(root, "mujoco")
-    ET.SubElement(block, "compiler", discardvisual="true", fusestatic="false", inertiafromgeom="false")
-    return ET.tostring(root, encoding="unicode")
 
 
 def _frame_pose(robot: RobotModel, frame: str, q: np.ndarray) -> pin.SE3:
@@ -284,6 +261,8 @@ def build_robot_spec(
     spec, is_urdf = load_spec(path)
     joint_names = _joint_names(spec, robot)
     notes = _remove_actuation(spec, path)
+    if robot.cut is not None:
+        freeze_joints(spec, robot.cut.locked, path)  # the same joints at the same positions as the model
     for note in notes:
         warnings.warn(note, RobotFileWarning, stacklevel=4)
     if is_urdf:

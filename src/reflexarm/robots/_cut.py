@@ -1,0 +1,274 @@
+"""Cutting a serial arm out of a robot tree (private): base and tip links, every other joint locked.
+
+The controller's model is Pinocchio's reduced model (``pin.buildReducedModel``): the joints off the
+base..tip chain are locked at given positions and the bodies they carried stay, rigidly attached at that
+configuration, with their mass (a gripper beyond the tip adds to the last link; links before the base
+and other limbs become part of the fixed world). A floating base (a free joint) is fixed where the file
+puts it. The plant does the same to its MjSpec (:func:`freeze_joints`): each locked joint is deleted and
+its body's frame moved by the joint's motion at the locked position, so both models are one robot.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pinocchio as pin
+
+from reflexarm.errors import ModelError
+
+__all__ = ["ChainCut", "cut_chain", "freeze_joints", "link_names", "needs_cut"]
+
+
+@dataclass(frozen=True)
+class ChainCut:
+    """Where an arm was cut out of its robot file.
+
+    Attributes:
+        base: link the arm starts from (fixed in the world).
+        tip: last link of the arm.
+        locked: joint name -> position [rad or m] at which each joint off the chain is held (a free
+            joint is held at the file's pose and listed with ``nan``).
+        notes: what the cut changed that a user should know (clipped locks, a fixed floating base).
+    """
+
+    base: str
+    tip: str
+    locked: Mapping[str, float]
+    notes: tuple[str, ...] = field(default=())
+
+    def as_dict(self) -> dict[str, object]:
+        """``{"base", "tip", "locked"}``, JSON-ready (free joints omitted from ``locked``)."""
+        return {
+            "base": self.base,
+            "tip": self.tip,
+            "locked": {k: float(v) for k, v in self.locked.items() if np.isfinite(v)},
+        }
+
+
+def link_names(model: pin.Model) -> list[str]:
+    """Names of the body (link) frames, in the model's order."""
+    return [f.name for f in model.frames if f.type == pin.FrameType.BODY]
+
+
+def needs_cut(model: pin.Model) -> bool:
+    """Whether the model is something other than a fixed-base serial chain of 1-DoF joints."""
+    return any(model.nvs[j] != 1 or model.parents[j] != j - 1 for j in range(1, model.njoints))
+
+
+def _body_frame(model: pin.Model, link: str, role: str, where: str) -> int:
+    if not model.existFrame(link, pin.FrameType.BODY):
+        raise ModelError(f"unknown {role} link {link!r}{where}; links are: {', '.join(link_names(model))}")
+    return int(model.getFrameId(link, pin.FrameType.BODY))
+
+
+def _frame_ancestors(model: pin.Model, fid: int) -> list[int]:
+    """Frame ids from ``fid`` up to the universe frame (inclusive)."""
+    out = [fid]
+    while out[-1] != 0 and len(out) <= len(model.frames):
+        out.append(int(model.frames[out[-1]].parentFrame))
+    return out
+
+
+def _root_link(model: pin.Model, tip_fid: int) -> str:
+    bodies = [f for f in _frame_ancestors(model, tip_fid) if model.frames[f].type == pin.FrameType.BODY]
+    return str(model.frames[bodies[-1]].name)
+
+
+def _leaves(model: pin.Model, below_joint: int) -> list[str]:
+    """Links of the subtree of ``below_joint`` that no other link hangs from."""
+    bodies = [i for i, f in enumerate(model.frames) if f.type == pin.FrameType.BODY]
+    inner = {a for i in bodies for a in _frame_ancestors(model, i)[1:]}
+    return [
+        model.frames[i].name
+        for i in bodies
+        if i not in inner and below_joint in model.supports[model.frames[i].parentJoint]
+    ]
+
+
+def _chain_joints(model: pin.Model, base: str, tip: str, where: str) -> list[int]:
+    base_fid = _body_frame(model, base, "base", where)
+    tip_fid = _body_frame(model, tip, "tip", where)
+    if base_fid not in _frame_ancestors(model, tip_fid):
+        raise ModelError(
+            f"tip link {tip!r}{where} does not hang below base link {base!r}: the path from the root to {tip!r} "
+            f"is {' -> '.join(reversed([model.frames[f].name for f in _frame_ancestors(model, tip_fid)[:-1]]))}"
+        )
+    above = set(model.supports[model.frames[base_fid].parentJoint])
+    chain = [int(j) for j in model.supports[model.frames[tip_fid].parentJoint] if j not in above]
+    if not chain:
+        raise ModelError(f"no joint moves between base link {base!r} and tip link {tip!r}{where}")
+    for j in chain:
+        if model.nvs[j] != 1:
+            raise ModelError(
+                f"joint {model.names[j]!r} between {base!r} and {tip!r}{where} has {model.nvs[j]} DoF; the arm's "
+                "joints must be 1-DoF (revolute or prismatic)"
+            )
+    return chain
+
+
+def cut_chain(
+    model: pin.Model,
+    *,
+    base: str | None,
+    tip: str | None,
+    locked: Mapping[str, float] | None,
+    defaults: Mapping[str, float],
+    path: Path,
+) -> tuple[pin.Model, ChainCut, list[int]]:
+    """The reduced model of the base..tip chain, the cut's description and the chain's joint ids in
+    ``model`` (in order).
+
+    ``locked`` positions override ``defaults`` (e.g. the file's "home" keyframe), which override 0; each
+    is clipped to the joint's limits with a note. With ``tip=None`` the model must be serial apart from a
+    floating base (which is then fixed); ``base=None`` starts the arm at the root link.
+
+    Raises:
+        ModelError: unknown link or joint, a tip not below the base, a lock on a chain joint, a tree
+            without ``tip``.
+    """
+    where = f" in {str(path)!r}"
+    if tip is None:
+        free = [j for j in range(1, model.njoints) if model.nvs[j] != 1]
+        serial = all(model.parents[j] == j - 1 for j in range(1, model.njoints))
+        if base is not None or not serial or len(free) != 1 or free[0] != 1:
+            first = 0 if base is None else model.frames[_body_frame(model, base, "base", where)].parentJoint
+            raise ModelError(
+                f"robot{where} is not a serial chain{'' if base is None else f' below {base!r}'}: name the arm's "
+                f"tip link (tip=..., --tip); leaf links are: {', '.join(_leaves(model, int(first)))}"
+            )
+        tip = max(link_names(model), key=lambda name: int(model.frames[model.getFrameId(name)].parentJoint))
+    if base is None:
+        base = _root_link(model, _body_frame(model, tip, "tip", where))
+    chain = _chain_joints(model, base, tip, where)
+    names = list(model.names)
+    unknown = sorted(set(locked or {}) - set(names[1:]))
+    if unknown:
+        raise ModelError(f"cannot lock unknown joint(s) {unknown}{where}; joints are: {', '.join(names[1:])}")
+    on_chain = sorted({names[j] for j in chain} & set(locked or {}))
+    if on_chain:
+        raise ModelError(
+            f"joint(s) {on_chain} are on the arm from {base!r} to {tip!r}{where}; only joints off the chain can be "
+            "locked"
+        )
+    q_ref = pin.neutral(model)
+    values: dict[str, float] = {}
+    notes: list[str] = []
+    for j in range(1, model.njoints):
+        if j in chain:
+            continue
+        name = names[j]
+        if model.nqs[j] != 1:
+            if locked and name in locked:
+                raise ModelError(
+                    f"joint {name!r}{where} has {model.nqs[j]} coordinates; it cannot be locked at a value"
+                )
+            values[name] = float("nan")
+            notes.append(
+                f"robot{where}: the floating base joint {name!r} is fixed at the file's pose (the arm's base does "
+                "not move)"
+                if model.nvs[j] == 6
+                else f"robot{where}: joint {name!r} ({model.nvs[j]} DoF) is locked at its neutral position"
+            )
+            continue
+        iq = model.idx_qs[j]
+        wanted = float((locked or {}).get(name, defaults.get(name, 0.0)))
+        lo, hi = float(model.lowerPositionLimit[iq]), float(model.upperPositionLimit[iq])
+        value = float(np.clip(wanted, lo, hi))
+        if value != wanted:
+            notes.append(
+                f"robot{where}: joint {name!r} locked at {value:g} (its limit) instead of {wanted:g}; limits "
+                f"[{lo:g}, {hi:g}]"
+            )
+        q_ref[iq] = value
+        values[name] = value
+    lock_ids = [j for j in range(1, model.njoints) if j not in chain]
+    reduced = pin.buildReducedModel(model, lock_ids, q_ref) if lock_ids else model.copy()
+    reduced.name = model.name
+    return reduced, ChainCut(base, tip, values, tuple(notes)), chain
+
+
+# ---------------------------------------------------------------------- the plant's side
+def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    return np.asarray(pin.AngleAxis(angle, axis / np.linalg.norm(axis)).matrix())
+
+
+def freeze_joints(spec: mujoco.MjSpec, values: Mapping[str, float], path: Path) -> None:
+    """Delete the joints ``values`` names from ``spec``, moving each body by its joints' motion at the
+    locked positions (``nan``: a free/ball joint, left at the file's pose); keyframes, joint sensors and
+    joint equalities follow.
+
+    Raises:
+        ModelError: MuJoCo has no such joint, or a body mixes locked and moving joints.
+    """
+    if not values:
+        return
+    where = f"robot file {str(path)!r}"
+    try:
+        mj = spec.compile()
+    except Exception as e:
+        raise ModelError(f"MuJoCo cannot compile {where}: {e}") from e
+    named = {name: float(v) for name, v in values.items() if np.isfinite(v)}
+    missing = [name for name in named if spec.joint(name) is None]
+    if missing:
+        joints = [j.name for j in spec.joints]
+        raise ModelError(f"{where}: MuJoCo has no joint(s) {missing} to lock; its joints are {joints}")
+    # free and ball joints (Pinocchio names them itself; MuJoCo's may be unnamed) are never on the arm
+    multi = (int(mujoco.mjtJoint.mjJNT_FREE), int(mujoco.mjtJoint.mjJNT_BALL))
+    frozen = {j for j in range(mj.njnt) if mj.joint(j).name in named or int(mj.jnt_type[j]) in multi}
+    _remap_keys(spec, mj, [j for j in range(mj.njnt) if j not in frozen])
+    by_body: dict[str, list[int]] = {}
+    for j in sorted(frozen):
+        by_body.setdefault(mj.body(int(mj.jnt_bodyid[j])).name, []).append(j)
+    for body_name, jids in by_body.items():
+        body = spec.body(body_name)
+        joints = list(body.joints)
+        if len(joints) != len(jids):
+            moving = [j.name for j in joints if j.name not in named]
+            raise ModelError(
+                f"{where}: body {body_name!r} has locked joints and moving joint(s) {moving}; lock all or none of them"
+            )
+        bid = mj.body(body_name).id
+        R = np.asarray(pin.Quaternion(*mj.body_quat[bid]).matrix())  # (w, x, y, z)
+        p = np.array(mj.body_pos[bid], dtype=float)
+        for joint, jid in zip(joints, jids, strict=True):  # the spec's order is the compiled order
+            kind = int(mj.jnt_type[jid])
+            motion = named.get(joint.name, 0.0) - float(mj.qpos0[mj.jnt_qposadr[jid]])
+            anchor, axis = np.array(mj.jnt_pos[jid]), np.array(mj.jnt_axis[jid])
+            if kind == int(mujoco.mjtJoint.mjJNT_HINGE):
+                Rj = _rotation(axis, motion)
+                p, R = p + R @ (anchor - Rj @ anchor), R @ Rj
+            elif kind == int(mujoco.mjtJoint.mjJNT_SLIDE):
+                p = p + R @ axis * motion
+            spec.delete(joint)
+        if body.frame is not None:
+            raise ModelError(f"{where}: body {body_name!r} sits in a <frame>; locking its joints is not supported")
+        quat = pin.Quaternion(R)
+        body.pos = p
+        body.alt.type = mujoco.mjtOrientation.mjORIENTATION_QUAT
+        body.quat = np.array([quat.w, quat.x, quat.y, quat.z])
+    for sensor in list(spec.sensors):
+        if sensor.objtype == mujoco.mjtObj.mjOBJ_JOINT and sensor.objname in named:
+            spec.delete(sensor)
+    for eq in list(spec.equalities):
+        if eq.objtype == mujoco.mjtObj.mjOBJ_JOINT and (eq.name1 in named or eq.name2 in named):
+            spec.delete(eq)
+
+
+def _remap_keys(spec: mujoco.MjSpec, mj: mujoco.MjModel, kept: list[int]) -> None:
+    """Keep, in each keyframe, the qpos/qvel entries of the joints that stay."""
+    sizes = {int(mujoco.mjtJoint.mjJNT_FREE): (7, 6), int(mujoco.mjtJoint.mjJNT_BALL): (4, 3)}
+    qidx: list[int] = []
+    vidx: list[int] = []
+    for j in kept:
+        nq, nv = sizes.get(int(mj.jnt_type[j]), (1, 1))
+        qidx += range(int(mj.jnt_qposadr[j]), int(mj.jnt_qposadr[j]) + nq)
+        vidx += range(int(mj.jnt_dofadr[j]), int(mj.jnt_dofadr[j]) + nv)
+    for key in spec.keys:
+        if len(key.qpos) == mj.nq:
+            key.qpos = np.asarray(key.qpos)[qidx]
+        if len(key.qvel) == mj.nv:
+            key.qvel = np.asarray(key.qvel)[vidx]
