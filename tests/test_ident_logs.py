@@ -59,20 +59,15 @@ def test_missing_column_is_named(tmp_path):
         load_log(p)
 
 
-def test_extra_column_is_named(tmp_path):
+def test_extra_columns_are_ignored_with_a_note_naming_them(tmp_path):
     df = _frame()
     df["temperature"] = 20.0
+    df["seq"] = np.arange(len(df))
+    df["ddq_4"] = 0.0  # beyond the 3 joints: nothing needs it
     p = _write(tmp_path, df)
-    with pytest.raises(DataError, match=r"log\.csv: unexpected column\(s\) 'temperature'; the schema has t, q_i"):
-        load_log(p)
-
-
-def test_joint_column_beyond_the_joints(tmp_path):
-    df = _frame()
-    df["ddq_4"] = 0.0
-    p = _write(tmp_path, df)
-    with pytest.raises(DataError, match=r"log\.csv: column\(s\) ddq_4 beyond the 3 joints of q_1\.\.q_3"):
-        load_log(p)
+    log = load_log(p, n_joints=N_JOINTS)
+    assert "log.csv: ignored 3 column(s) no signal needs: temperature, seq, ddq_4" in log.notes
+    np.testing.assert_array_equal(log.q[:, 2], df["q_3"].to_numpy())
 
 
 def test_joint_count_must_match_the_robot(tmp_path):
@@ -122,7 +117,9 @@ def test_unknown_format_and_missing_file(tmp_path):
         load_log(tmp_path / "nope.csv")
     p = tmp_path / "log.txt"
     p.write_text("1 2 3")
-    with pytest.raises(DataError, match=r"log\.txt: unknown log format '\.txt'; use \.csv, \.parquet or \.npz"):
+    with pytest.raises(
+        DataError, match=r"log\.txt: unknown log format '\.txt'; use \.csv, \.parquet, \.npz, or a ROS 2 bag"
+    ):
         load_log(p)
 
 

@@ -24,145 +24,94 @@ Loading validates and repairs as :class:`~reflexarm.ident.robot_log.RobotLog` do
 from __future__ import annotations
 
 import os
-import re
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from reflexarm.errors import DataError
-from reflexarm.ident.robot_log import (
-    _NUMERIC_KINDS,
-    WRENCH_COLUMNS,
-    RobotLog,
-    _describe,
-    _finish,
-    _numeric,
-    _refuse_dtype,
-)
+from reflexarm.ident._timestamps import relative_seconds
+from reflexarm.ident.log_bags import BAG_SUFFIXES, read_bag
+from reflexarm.ident.log_tables import read_table
+from reflexarm.ident.robot_log import RobotLog, _finish, _numeric
 
 __all__ = ["load_log", "save_log"]
-
-_JOINT_GROUPS = ("q", "dq", "tau", "ddq")
-_COL_RE = re.compile(r"^(q|dq|ddq|tau)_(\d+)$")
 
 
 def load_log(
     path: str | os.PathLike[str],
     *,
     n_joints: int | None = None,
+    joint_names: Sequence[str] | None = None,
+    columns: Mapping[str, str] | None = None,
+    time_unit: str | None = None,
+    joint_topic: str | None = None,
+    wrench_topic: str | None = None,
     repair: bool = True,
     period: float | None = None,
 ) -> RobotLog:
-    """Load a log from ``.csv``, ``.parquet`` or ``.npz`` (schema in the module docstring).
+    """Load a log: ``.csv``, ``.parquet``, ``.npz`` (schema in the module docstring) or a ROS 2 bag.
+
+    Tables may also name their columns after the joints or hold the ROS 2 JointState layout (see
+    :mod:`reflexarm.ident.log_columns`); bags (a rosbag2 folder, a ``.db3`` or ``.mcap`` file) are read
+    by :mod:`reflexarm.ident.log_bags`. Times are made relative to the first sample and converted to
+    seconds (:mod:`reflexarm.ident._timestamps`). What was recognized, converted, left out or repaired
+    is listed in the returned log's ``notes``.
 
     Args:
-        path: the file.
+        path: the file (or the bag's folder).
         n_joints: the robot's joint count (e.g. ``robot.n``); a log with another count is rejected.
+        joint_names: the robot's joint names in the model's order (e.g. ``robot.joint_names``): maps
+            joint-named columns and bag messages by name; implies ``n_joints``.
+        columns: explicit column mapping, e.g. ``{"q": "position_{joint}", "t": "stamp_ns"}`` (see
+            :mod:`reflexarm.ident.log_columns`); tables only.
+        time_unit: ``"s"``, ``"ms"``, ``"us"`` or ``"ns"`` (default: from the column name, else inferred).
+        joint_topic: the bag's ``sensor_msgs/msg/JointState`` topic (default: the only one).
+        wrench_topic: the bag's ``geometry_msgs/msg/WrenchStamped`` topic of the wrist sensor, if any.
         repair: drop exact repeats and re-time jittery time stamps (with a warning); if False such
             logs raise :class:`DataError`.
         period: nominal sample period [s] for re-timing (default: the median step).
 
     Raises:
-        DataError: unreadable file, missing or unknown columns, wrong joint count, NaN/inf, time going
+        DataError: unreadable file, missing columns, wrong joint count, NaN/inf, time going
             backwards; the message names the file, the column or row and the problem.
     """
     p = Path(path)
     where = p.name
-    if not p.is_file():
-        raise DataError(f"log file {str(p)!r} does not exist")
+    names = None if joint_names is None else tuple(joint_names)
+    if names is not None:
+        if n_joints is not None and n_joints != len(names):
+            raise DataError(f"{where}: n_joints {n_joints} but {len(names)} joint names given")
+        n_joints = len(names)
     suffix = p.suffix.lower()
-    if suffix == ".npz":
+    bag = p.is_dir() or suffix in BAG_SUFFIXES
+    if not p.exists() or (not bag and not p.is_file()):
+        raise DataError(f"log file {str(p)!r} does not exist")
+    if not bag and (joint_topic is not None or wrench_topic is not None):
+        raise DataError(f"{where}: joint_topic / wrench_topic apply to bags (.db3, .mcap, a rosbag2 folder) only")
+    if columns and (bag or suffix == ".npz"):
+        raise DataError(f"{where}: a column mapping applies to CSV and Parquet logs only")
+    notes: list[str] = []
+    if bag:
+        data, notes = read_bag(
+            p, joint_names=names, n_joints=n_joints, joint_topic=joint_topic, wrench_topic=wrench_topic,
+            time_unit=time_unit,
+        )  # fmt: skip
+    elif suffix == ".npz":
         data = _read_npz(p)
+        data["t"], note = relative_seconds(data["t"], where=where, unit=time_unit)
+        notes = [note] if note else []
     elif suffix in (".csv", ".parquet", ".pq"):
-        data = _read_table(p, suffix)
+        data, notes = read_table(
+            p, n_joints=n_joints, joint_names=names, columns=None if columns is None else dict(columns),
+            time_unit=time_unit,
+        )  # fmt: skip
     else:
-        raise DataError(f"{where}: unknown log format {suffix!r}; use .csv, .parquet or .npz")
-    return _finish(data, where, n_joints, repair, period)
-
-
-def _read_table(p: Path, suffix: str) -> dict[str, np.ndarray]:
-    import pandas as pd
-
-    where = p.name
-    try:
-        df = pd.read_csv(p) if suffix == ".csv" else pd.read_parquet(p)
-    except Exception as e:  # pandas/pyarrow raise many types; explain and chain
-        raise DataError(f"{where}: cannot read the file as {suffix[1:]}: {e}") from e
-    columns = [str(c).strip() for c in df.columns]
-    df.columns = columns
-    dup = sorted({c for c in columns if columns.count(c) > 1})
-    if dup:
-        raise DataError(f"{where}: duplicated column(s) {', '.join(map(repr, dup))}")
-    joint_cols: dict[str, dict[int, str]] = {g: {} for g in _JOINT_GROUPS}
-    unknown = []
-    for c in columns:
-        m = _COL_RE.match(c)
-        if m:
-            joint_cols[m.group(1)][int(m.group(2))] = c
-        elif c not in ("t", *WRENCH_COLUMNS):
-            unknown.append(c)
-    if unknown:
         raise DataError(
-            f"{where}: unexpected column(s) {', '.join(map(repr, unknown))}; the schema has t, q_i, dq_i, tau_i, "
-            f"optional ddq_i and {', '.join(WRENCH_COLUMNS)} (i = 1..n)"
+            f"{where}: unknown log format {suffix!r}; use .csv, .parquet, .npz, or a ROS 2 bag (.db3, .mcap, folder)"
         )
-    if "t" not in columns:
-        raise DataError(f"{where}: column 't' missing; found: {', '.join(columns)}")
-    idx = sorted(joint_cols["q"]) or sorted(joint_cols["tau"]) or sorted(joint_cols["dq"])
-    if not idx:
-        raise DataError(f"{where}: no joint columns (q_1, dq_1, tau_1, ...); found: {', '.join(columns)}")
-    n = max(idx)
-    for g in ("q", "dq", "tau"):
-        for j in range(1, n + 1):
-            if j not in joint_cols[g]:
-                raise DataError(f"{where}: column '{g}_{j}' missing; found: {', '.join(columns)}")
-    for g in _JOINT_GROUPS:
-        extra = sorted(j for j in joint_cols[g] if j < 1 or j > n)
-        if extra:
-            raise DataError(
-                f"{where}: column(s) {', '.join(f'{g}_{j}' for j in extra)} beyond the {n} joints of q_1..q_{n}"
-            )
-    if joint_cols["ddq"] and len(joint_cols["ddq"]) != n:
-        missing = [f"ddq_{j}" for j in range(1, n + 1) if j not in joint_cols["ddq"]]
-        raise DataError(f"{where}: column(s) {', '.join(missing)} missing (give all ddq_i or none)")
-    have_w = [c for c in WRENCH_COLUMNS if c in columns]
-    if have_w and len(have_w) != 6:
-        missing = [c for c in WRENCH_COLUMNS if c not in columns]
-        raise DataError(f"{where}: wrench column(s) {', '.join(missing)} missing (give all six or none)")
-    out: dict[str, np.ndarray] = {}
-    for c in columns:
-        col = df[c]
-        kind = str(getattr(col.dtype, "kind", "O"))
-        if kind not in _NUMERIC_KINDS:
-            bad = next((i for i, v in enumerate(col.tolist()) if not _is_number(v)), None)
-            if kind in "OUS" and bad is not None:
-                raise DataError(f"{where}: column {c!r} row {bad}: {col.iloc[bad]!r} is not a number")
-            raise _refuse_dtype(where, f"column {c!r}", col.dtype, kind)
-        try:
-            values = np.asarray(col.to_numpy(dtype=float, na_value=np.nan), dtype=float)
-        except (TypeError, ValueError) as e:  # pragma: no cover - numeric kinds convert
-            raise _refuse_dtype(where, f"column {c!r}", col.dtype, kind) from e
-        bad = ~np.isfinite(values)
-        if bad.any():
-            r = int(np.argmax(bad))
-            raise DataError(f"{where}: column {c!r} row {r} is {_describe(values[r])}")
-        out[c] = values
-    data = {"t": out["t"]}
-    for g in _JOINT_GROUPS:
-        if joint_cols[g]:
-            data[g] = np.column_stack([out[f"{g}_{j}"] for j in range(1, n + 1)])
-    if have_w:
-        data["wrench"] = np.column_stack([out[c] for c in WRENCH_COLUMNS])
-    return data
-
-
-def _is_number(v: object) -> bool:
-    try:
-        float(v)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        return False
-    return True
+    return _finish(data, where, n_joints, repair, period, notes=tuple(notes))
 
 
 def _read_npz(p: Path) -> dict[str, np.ndarray]:

@@ -1,6 +1,11 @@
-"""Robot logs in: load CSV / Parquet / npz, validate, repair, resample, filter and differentiate.
+"""Robot logs in: load CSV / Parquet / npz / ROS 2 bags, validate, repair, resample, filter and differentiate.
 
 The log schema (columns, units, the npz layout) is documented once, in :mod:`reflexarm.ident.log_files`.
+Logs as robots export them are read too: joint-named columns, the ROS 2 JointState layout and an
+explicit column mapping (:mod:`reflexarm.ident.log_columns`), time stamps in s/ms/us/ns and from the
+Unix epoch, made relative to the log's first sample (:mod:`reflexarm.ident._timestamps`), and rosbag2
+(sqlite3) and MCAP bags (:mod:`reflexarm.ident.log_bags`). :func:`load_log` reports in the log's
+``notes`` what it recognized, converted and left out.
 
 Validation is strict and every error names the file, the column or row and the problem; exact repeats
 and jittery host time stamps are repaired with a :class:`LogRepairWarning` (unless ``repair=False``).
@@ -22,8 +27,11 @@ filtering); the raw torques stay available for validation.
 from __future__ import annotations
 
 # The pipeline's pieces live in their own modules (robot_log: the validated log and its repairs;
-# log_files: loading and saving; preprocessing: resampling, filtering, differentiation) and are
-# re-exported here, where they have always been imported from.
+# log_files: loading and saving; log_columns / log_tables: finding the signals in a table; log_bags:
+# ROS 2 bags; _timestamps: time units and epochs; preprocessing: resampling, filtering,
+# differentiation) and are re-exported here, where they have always been imported from.
+from reflexarm.ident._timestamps import TIME_UNITS, TimeUnitWarning
+from reflexarm.ident.log_columns import parse_column_mapping
 from reflexarm.ident.log_files import load_log, save_log
 from reflexarm.ident.preprocessing import DEFAULT_CUTOFF_HZ, DEFAULT_FILTER_ORDER, preprocess_log
 from reflexarm.ident.robot_log import WRENCH_COLUMNS, LogRepairWarning, RobotLog
@@ -31,10 +39,13 @@ from reflexarm.ident.robot_log import WRENCH_COLUMNS, LogRepairWarning, RobotLog
 __all__ = [
     "DEFAULT_CUTOFF_HZ",
     "DEFAULT_FILTER_ORDER",
+    "TIME_UNITS",
     "WRENCH_COLUMNS",
     "LogRepairWarning",
     "RobotLog",
+    "TimeUnitWarning",
     "load_log",
+    "parse_column_mapping",
     "preprocess_log",
     "save_log",
 ]

@@ -256,7 +256,12 @@ def _numeric(x: npt.ArrayLike, where: str, name: str) -> np.ndarray:
 
 
 def _finish(
-    data: dict[str, np.ndarray], where: str, n_joints: int | None, repair: bool, period: float | None
+    data: dict[str, np.ndarray],
+    where: str,
+    n_joints: int | None,
+    repair: bool,
+    period: float | None,
+    notes: tuple[str, ...] = (),
 ) -> RobotLog:
     t = np.asarray(data["t"], dtype=float).reshape(-1)
     N = t.size
@@ -290,7 +295,7 @@ def _finish(
             f"{where}: time goes backwards at row {r}: t = {t[r]:.9g} s after {t[r - 1]:.9g} s "
             f"({back.size} such row(s))"
         )
-    notes: list[str] = []
+    notes_out: list[str] = list(notes)
     # exact repeats: every value but the time equals the previous row
     values = np.column_stack([data[k] for k in ("q", "dq", "tau", "ddq", "wrench") if k in data])
     repeat = np.r_[False, np.all(values[1:] == values[:-1], axis=1)]
@@ -308,7 +313,7 @@ def _finish(
             f"the host read one robot sample twice); {int(keep.sum()):,} of {N:,} rows remain"
         )
         warnings.warn(msg, LogRepairWarning, stacklevel=3)
-        notes.append(msg)
+        notes_out.append(msg)
         t = data["t"]
     steps = np.diff(t)
     if np.any(steps <= 0):
@@ -332,7 +337,7 @@ def _finish(
             )
         new_t, msg = _retime(t, data["q"], data["dq"], T, where)
         warnings.warn(msg, LogRepairWarning, stacklevel=3)
-        notes.append(msg)
+        notes_out.append(msg)
         data["t"] = new_t
     log = RobotLog(
         t=data["t"],
@@ -342,6 +347,6 @@ def _finish(
         ddq=data.get("ddq"),
         wrench=data.get("wrench"),
         source=where,
-        notes=tuple(notes),
+        notes=tuple(notes_out),
     )
     return log
