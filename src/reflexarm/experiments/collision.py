@@ -1,5 +1,7 @@
 """Collision experiments of Sec. III-A/B: end-effector collision with a padded cinderblock (Figs. 7-8)
-and a link collision at the elbow (Figs. 9-10), simulated on the built-in Atlas arm.
+and a link collision at the elbow (Figs. 9-10), simulated on the built-in Atlas arm (the paper's
+setting, kept exactly) or on any serial arm (``robot=``: the motions and scenes are derived from its
+kinematics and limits by :mod:`reflexarm.experiments.any_arm`).
 
 The conditions are those of a real arm by default: the sensors carry the paper's noise
 (:data:`reflexarm.sim.PAPER_NOISE`) and the controller's model is *not* the plant's: it has uniform
@@ -16,6 +18,14 @@ import numpy as np
 
 from reflexarm.control import Controller
 from reflexarm.errors import ConfigError
+from reflexarm.experiments.any_arm import (
+    ee_swing_plan,
+    is_paper_arm,
+    link_push_plan,
+    loaded_waypoints,
+    place_cinderblock,
+    start_posture,
+)
 from reflexarm.experiments.collision_summary import (
     PAPER,
     compare_with_paper,
@@ -153,10 +163,11 @@ def ee_collision_trajectory(start: np.ndarray = EE_START, goal: np.ndarray = EE_
 
 
 #: Free-motion trajectories for the false-alarm check: "demo" swings shz back and forth along the demo's
-#: path (the other joints hold); "hydraulic" cycles through postures that move all four hydraulic joints
-#: at once (shz, shx, ely, elx; hand speeds up to ~0.3 m/s), the friction-dominated motion the paper's
-#: threshold had to tolerate. Each segment lasts EE_MOVE_TIME + 0.5 s.
-FREE_MOTIONS = ("demo", "hydraulic")
+#: path (the other joints hold); "loaded" (alias "hydraulic" on Atlas) cycles through postures that move
+#: the four joints with the largest gravity and friction load at once (on Atlas the hydraulic shz, shx,
+#: ely, elx; hand speeds up to ~0.3 m/s), the friction-dominated motion the paper's threshold had to
+#: tolerate. Each segment lasts EE_MOVE_TIME + 0.5 s. Other arms: :func:`free_motion_trajectory`.
+FREE_MOTIONS = ("demo", "loaded", "hydraulic")
 HYDRAULIC_WAYPOINTS = np.array(
     [
         [0.55, -1.3, 1.57, 1.57, 0.0, 0.0, 0.0],
@@ -167,17 +178,33 @@ HYDRAULIC_WAYPOINTS = np.array(
 )
 
 
-def free_motion_trajectory(duration: float, motion: str = "demo") -> JointTrajectory:
+def free_motion_trajectory(duration: float, motion: str = "demo", robot: RobotModel | None = None) -> JointTrajectory:
     """A trajectory of at least ``duration`` s that cycles through the waypoints of ``motion`` (see
-    :data:`FREE_MOTIONS`), starting and ending each cycle at :data:`EE_START`."""
+    :data:`FREE_MOTIONS`), starting and ending each cycle at :data:`EE_START`.
+
+    On another arm than Atlas (``robot``): "demo" swings the end effector as the demo does
+    (:func:`~reflexarm.experiments.any_arm.ee_swing_plan`), "loaded" moves its four most loaded joints
+    (:func:`~reflexarm.experiments.any_arm.loaded_waypoints`), starting at the swing's start (demo) or
+    the arm's start posture; segments of EE_MOVE_TIME + 0.5 s or the swing's move time.
+    """
     if motion not in FREE_MOTIONS:
         raise ConfigError(f"unknown free motion {motion!r}; choose one of: {', '.join(FREE_MOTIONS)}")
-    cycle = [EE_GOAL] if motion == "demo" else list(HYDRAULIC_WAYPOINTS[1:])
     seg = EE_MOVE_TIME + 0.5
+    if robot is None or is_paper_arm(robot):
+        start = EE_START
+        cycle = [EE_GOAL] if motion == "demo" else list(HYDRAULIC_WAYPOINTS[1:])
+    elif motion == "hydraulic":
+        raise ConfigError(f"free motion 'hydraulic' names Atlas' hydraulic joints; on {robot.name!r} use 'loaded'")
+    elif motion == "demo":
+        plan = ee_swing_plan(robot)
+        start, cycle, seg = plan.start, [plan.goal], max(seg, plan.move_time + 0.5)
+    else:
+        start = start_posture(robot)
+        cycle = list(loaded_waypoints(robot, start))
     k = max(1, int(np.ceil(duration / (seg * (len(cycle) + 1)))))
-    way = [EE_START]
+    way = [start]
     for _ in range(k):
-        way += [*cycle, EE_START]
+        way += [*cycle, start]
     return JointTrajectory(np.array(way), np.full(len(way) - 1, seg))
 
 
@@ -204,8 +231,14 @@ def run_ee_collision(
     noise: SensorNoise = PAPER_NOISE,
     seed: int = 0,
     progress: bool = False,
+    robot: RobotModel | None = None,
+    depth: float = 0.12,
 ) -> Trace:
     """One run of the cinderblock experiment (Figs. 7-8).
+
+    On Atlas (default) the paper's setting; on another ``robot`` the end effector swings as
+    :func:`~reflexarm.experiments.any_arm.ee_swing_plan` derives and the block (variant ``block``) stands
+    across its path, ``depth`` [m] deep (:func:`~reflexarm.experiments.any_arm.place_cinderblock`).
 
     Args:
         setting: one of :data:`EE_SETTINGS` (or your own).
@@ -217,18 +250,37 @@ def run_ee_collision(
         noise: sensor noise (default the paper's).
         seed: seed of the sensor noise.
         progress: show a progress bar.
+        robot: the arm (plant's true model; default the built-in Atlas arm).
+        depth: how deep the unobstructed end effector would run into the block [m] (not on Atlas).
     """
-    robot = load_robot(ROBOT)
+    robot = load_robot(ROBOT) if robot is None else robot
     ctrl_model, model_info = controller_model(robot, model_error, model_seed, model)
-    scene = Cinderblock(**_block(block))  # type: ignore[arg-type]
+    placement: dict[str, object] = {}
+    swing_joint = 0
+    if is_paper_arm(robot):
+        scene = Cinderblock(**_block(block))  # type: ignore[arg-type]
+        traj = ee_collision_trajectory()
+    else:
+        plan = ee_swing_plan(robot)
+        traj = plan.trajectory()
+        variant = dict(_block(block))
+        variant.pop("position"), variant.pop("table_height")
+        size = tuple(variant.pop("size", (0.39, 0.19, 0.19)))  # type: ignore[call-overload]
+        placement = place_cinderblock(robot, traj, depth=depth, size=size)  # type: ignore[arg-type]
+        kwargs = {k: v for k, v in placement.items() if k not in ("contact_time_s", "depth", "ee_height_m")}
+        scene = Cinderblock(**kwargs, **variant)  # type: ignore[arg-type]
+        placement = {**placement, **plan.describe()}
+        swing_joint = plan.joint
     plant = Plant(robot, scene=scene, noise=noise, seed=seed)
-    traj = ee_collision_trajectory()
     plant.reset(traj.sample(0.0).q_d)
     ctrl = setting.controller(ctrl_model)
     trace = run_closed_loop(plant, ctrl, traj, traj.duration, progress=progress)
     trace.meta.update(
         {
             "experiment": "ee_collision",
+            "robot": robot.name,
+            "swing_joint": swing_joint + 1,
+            "placement": placement,
             "setting": asdict(setting),
             "controller_model": model_info,
             "block": block,
@@ -249,18 +301,39 @@ def run_link_collision(
     noise: SensorNoise = PAPER_NOISE,
     seed: int = 0,
     progress: bool = False,
+    robot: RobotModel | None = None,
+    link: int | str | None = None,
 ) -> Trace:
-    """The elbow push of Figs. 9-10 with detection and reaction (13); arguments as :func:`run_ee_collision`."""
-    robot = load_robot(ROBOT)
+    """The elbow push of Figs. 9-10 with detection and reaction (13); arguments as :func:`run_ee_collision`.
+
+    On another ``robot`` than Atlas (or with ``link`` on Atlas) the stick pushes ``link`` (1-based joint
+    number whose link is pushed, or a link name; default mid-chain) while the arm swings it
+    (:func:`~reflexarm.experiments.any_arm.link_push_plan`).
+    """
+    robot = load_robot(ROBOT) if robot is None else robot
     ctrl_model, model_info = controller_model(robot, model_error, model_seed, model)
-    traj = link_collision_trajectory()
-    scene = ElbowStick(body="l_larm", t_start=5.0)
+    placement: dict[str, object] = {}
+    if is_paper_arm(robot) and link is None:
+        traj = link_collision_trajectory()
+        scene = ElbowStick(body="l_larm", t_start=5.0)
+    else:
+        plan = link_push_plan(robot, link)
+        traj = plan.trajectory
+        scene = ElbowStick(body=plan.body, t_start=plan.t_start)
+        placement = dict(plan.info)
     plant = Plant(robot, scene=scene, noise=noise, seed=seed)
     plant.reset(traj.sample(0.0).q_d)
     ctrl = setting.controller(ctrl_model)
     trace = run_closed_loop(plant, ctrl, traj, traj.duration, progress=progress)
     trace.meta.update(
-        {"experiment": "link_collision", "setting": asdict(setting), "controller_model": model_info, "seed": seed}
+        {
+            "experiment": "link_collision",
+            "robot": robot.name,
+            "placement": placement,
+            "setting": asdict(setting),
+            "controller_model": model_info,
+            "seed": seed,
+        }
     )
     return trace
 
@@ -284,6 +357,7 @@ def free_motion_false_alarms(
     model: RobotModel | None = None,
     motion: str = "demo",
     trace_path: str | None = None,
+    robot: RobotModel | None = None,
 ) -> dict[str, object]:
     """Run the demo trajectory back and forth without obstacle for ``duration`` s with detection on.
 
@@ -294,11 +368,11 @@ def free_motion_false_alarms(
     above fractions of ``threshold`` per joint), in memory independent of ``duration``; ``trace_path``
     (``.parquet``) also streams the whole trace to disk block by block.
     """
-    robot = load_robot(ROBOT)
+    robot = load_robot(ROBOT) if robot is None else robot
     ctrl_model, _model_info = controller_model(robot, model_error, model_seed, model)
-    traj = free_motion_trajectory(duration, motion)
+    traj = free_motion_trajectory(duration, motion, robot)
     plant = Plant(robot, noise=noise, seed=seed)
-    plant.reset(EE_START)
+    plant.reset(traj.sample(0.0).q_d)
     ctrl = Controller(ctrl_model, stiffness=300.0, observer_gain=5.0, threshold=threshold, reaction="none")
     # running statistics only (the trace streamed to ``trace_path`` block by block if given): the memory
     # does not grow with the duration, so hours of free motion fit (the whole trace took ~1.7 MB/s)
@@ -316,4 +390,6 @@ def free_motion_false_alarms(
         # for choosing zeta afterwards: ticks per joint at or above fractions of it (0.1 Nm resolution)
         "ticks_above_Nm": {f"{x:g}": stats.ticks_above(x).tolist() for x in threshold * np.array([0.5, 0.75, 1.0])},
         "trace_file": None if trace_path is None else str(trace_path),
+        "robot": robot.name,
+        "motion": motion,
     }

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from reflexarm.errors import DataError
 from reflexarm.sim import Trace
 
 __all__ = [
@@ -16,6 +17,7 @@ __all__ = [
     "PAPER",
     "QUASI_STATIC_WINDOW_S",
     "compare_with_paper",
+    "run_name",
     "summarize_ee_collision",
     "summarize_link_collision",
     "write_outputs",
@@ -50,8 +52,28 @@ def _first_index(mask: np.ndarray) -> int | None:
     return int(idx[0]) if idx.size else None
 
 
+def run_name(trace: Trace, default: str = "run") -> str:
+    """The run's name: its setting's (``meta["setting"]["name"]``), else ``meta["name"]``, else ``default``.
+
+    A trace recorded outside the experiment functions (a user's own run) has no setting in its meta.
+    """
+    setting = trace.meta.get("setting")
+    if isinstance(setting, dict) and setting.get("name") is not None:
+        return str(setting["name"])
+    name = trace.meta.get("name")
+    return default if name is None else str(name)
+
+
 def summarize_ee_collision(trace: Trace) -> dict[str, object]:
-    """Peak contact force, first contact, detection time and delay, block displacement, tipped."""
+    """Peak contact force, first contact, detection time and delay, block displacement, tipped.
+
+    Works on any :class:`Trace` (e.g. a user's own run): what the experiment's metadata would add is
+    None when absent (block displacement and tipping, the run's name falls back to :func:`run_name`);
+    ``final_swing_error_rad`` is |q_d - q| at the end on the swing joint (``meta["swing_joint"]``,
+    1-based, default 1; ``final_q1_error_rad`` on joint 1).
+    """
+    if trace.t.size < 2:
+        raise DataError(f"summarize_ee_collision needs a trace of at least 2 samples; got {trace.t.size}")
     f = np.linalg.norm(trace.f_ext_ee, axis=1)
     w = max(1, int(round(QUASI_STATIC_WINDOW_S / float(np.median(np.diff(trace.t))))))
     f_quasi_static = np.convolve(f, np.ones(w) / w, mode="valid")
@@ -61,9 +83,12 @@ def summarize_ee_collision(trace: Trace) -> dict[str, object]:
     t_det = None if i_det is None else float(trace.t[i_det])
     i_peak = int(np.argmax(f))
     tail = trace.t >= trace.t[-1] - 1.0
-    disp = np.asarray(trace.meta.get("block_displacement", [np.nan, np.nan, np.nan]), dtype=float)
+    disp = trace.meta.get("block_displacement")
+    swing = int(trace.meta.get("swing_joint", 1))
+    if not 1 <= swing <= trace.q.shape[1]:
+        raise DataError(f"meta swing_joint must be a joint number in 1..{trace.q.shape[1]}; got {swing}")
     return {
-        "run": trace.meta["setting"]["name"],
+        "run": run_name(trace),
         "peak_force_N": float(f[i_peak]),
         "peak_force_s": float(trace.t[i_peak]),
         "force_at_detection_N": None if i_det is None else float(f[i_det]),
@@ -73,9 +98,11 @@ def summarize_ee_collision(trace: Trace) -> dict[str, object]:
         "detection_s": t_det,
         "detection_delay_s": None if (t_det is None or t_contact is None) else t_det - t_contact,
         "detected_joints": list(np.flatnonzero(trace.collided[i_det]).tolist()) if i_det is not None else [],
-        "block_displacement_m": float(np.linalg.norm(disp[:2])),
-        "block_tipped": bool(trace.meta.get("tipped", False)),
+        "block_displacement_m": None if disp is None else float(np.linalg.norm(np.asarray(disp, dtype=float)[:2])),
+        "block_tipped": None if "tipped" not in trace.meta else bool(trace.meta["tipped"]),
         "final_q1_error_rad": float(abs(trace.q_d[-1, 0] - trace.q[-1, 0])),
+        "swing_joint": swing,
+        "final_swing_error_rad": float(abs(trace.q_d[-1, swing - 1] - trace.q[-1, swing - 1])),
     }
 
 
@@ -130,7 +157,9 @@ def compare_with_paper(
 
 
 def summarize_link_collision(trace: Trace) -> dict[str, object]:
-    """Contact start on the elbow, detection time, delay and the joints that crossed first."""
+    """Contact start on the elbow, detection time, delay and the joints that crossed first.
+
+    Works on any :class:`Trace` (no experiment metadata needed)."""
     tau_ext = np.abs(trace.tau_ext).max(axis=1)
     i_contact = _first_index(tau_ext > 1.0)
     i_det = _first_index(trace.collision)
@@ -149,6 +178,6 @@ def summarize_link_collision(trace: Trace) -> dict[str, object]:
 def write_outputs(out: Path, name: str, traces: Sequence[Trace], rows: Sequence[dict[str, object]]) -> None:
     """Save each trace (npz) and the summary table (JSON) into ``out``."""
     out.mkdir(parents=True, exist_ok=True)
-    for tr in traces:
-        tr.save(out / f"{name}_{str(tr.meta['setting']['name']).replace('.', '').lower()}.npz")
+    for i, tr in enumerate(traces):
+        tr.save(out / f"{name}_{run_name(tr, f'run{i + 1}').replace('.', '').replace(' ', '_').lower()}.npz")
     (out / f"{name}_summary.json").write_text(json.dumps(list(rows), indent=2))

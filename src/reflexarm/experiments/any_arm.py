@@ -1,0 +1,397 @@
+"""The experiments' setting on any serial arm: start posture, motions scaled to the arm's limits, and the
+scenes placed from the arm's own kinematics (the cinderblock on the end effector's path, the stick at a link).
+
+On the built-in Atlas arm (:func:`is_paper_arm`) the experiments keep the paper's setting exactly (the
+constants of :mod:`reflexarm.experiments.collision`); on any other arm they derive it here, with the rules
+stated in each function and nothing assumed about the number of joints, their names or their drives:
+
+* start posture (:func:`start_posture`): the robot's home (built-in robots), else the file's keyframe
+  named ``home`` (or its first keyframe, MJCF), else the middle of each joint's range;
+* the end-effector swing (:func:`ee_swing_plan`): the proximal joint that moves the end effector
+  fastest horizontally swings it through ~:data:`SWING_PATH_M` at a peak speed of
+  :data:`EE_PEAK_SPEED` (the paper's "moderate velocity"), inside the joint's range and below half
+  its velocity limit;
+* the cinderblock (:func:`place_cinderblock`): the end effector's path is computed by forward
+  kinematics of that reference, and the block's padded face is put across the path where the rest of
+  the path would still run ``depth`` into the block;
+* the link push (:func:`link_push_plan`): the link of joint ``link`` (1-based; default mid-chain) is
+  swung at ~:data:`LINK_SPEED` m/s by the proximal joint that moves it fastest; the stick approaches
+  against the link's velocity (:class:`~reflexarm.sim.ElbowStick`'s default), i.e. the motion drives
+  the link into it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from reflexarm.errors import ConfigError
+from reflexarm.robots import RobotModel
+from reflexarm.sim import JointTrajectory
+
+__all__ = [
+    "EE_PEAK_SPEED",
+    "LINK_SPEED",
+    "PAPER_ARM",
+    "SWING_PATH_M",
+    "EeSwingPlan",
+    "LinkPushPlan",
+    "default_link",
+    "ee_swing_plan",
+    "is_paper_arm",
+    "link_body",
+    "link_push_plan",
+    "loaded_joints",
+    "place_cinderblock",
+    "start_posture",
+]
+
+#: The built-in arm whose experiments keep the paper's constants.
+PAPER_ARM = "atlas_v5_left_arm"
+_PAPER_JOINTS = ("l_arm_shz", "l_arm_shx", "l_arm_ely", "l_arm_elx", "l_arm_wry", "l_arm_wrx", "l_arm_wry2")
+
+#: Peak end-effector speed of the swing [m/s]: the demo on Atlas peaks at ~0.12 m/s, the paper's
+#: "moderate velocity (100 mm/s)".
+EE_PEAK_SPEED = 0.12
+#: Length of the end effector's swing [m] (Atlas' demo: 1 rad of shz at ~0.5 m, ~0.5 m).
+SWING_PATH_M = 0.5
+#: Peak speed of the pushed link in the link collision [m/s] (the paper's elbow moved at ~50 mm/s).
+LINK_SPEED = 0.05
+#: Length of the link's swing [m] (Atlas' link collision: 0.8 rad of shz, ~0.3 m at the elbow).
+LINK_PATH_M = 0.3
+#: Fraction of each joint's range kept free at both ends by every derived motion [-].
+RANGE_MARGIN = 0.05
+#: A derived motion uses at most this fraction of a joint's velocity limit [-].
+VELOCITY_SHARE = 0.5
+
+
+def is_paper_arm(robot: RobotModel) -> bool:
+    """Whether ``robot`` is the built-in Atlas arm, on which the experiments keep the paper's setting."""
+    return robot.name == PAPER_ARM and tuple(robot.joint_names) == _PAPER_JOINTS
+
+
+def _finite_range(robot: RobotModel) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) with the margin; unbounded joints get +-pi [rad]."""
+    lo, hi = robot.lower_limit, robot.upper_limit
+    bounded = np.isfinite(lo) & np.isfinite(hi) & (hi > lo) & (hi - lo < 1e6)
+    lo = np.where(bounded, lo, -math.pi)
+    hi = np.where(bounded, hi, math.pi)
+    m = RANGE_MARGIN * (hi - lo)
+    return lo + m, hi - m
+
+
+def _keyframe(robot: RobotModel) -> np.ndarray | None:
+    """The MJCF keyframe named ``home`` (else the first one) in the model's joint order, or None."""
+    src = robot.source
+    if src is None or src.suffix.lower() not in (".xml", ".mjcf"):
+        return None
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.parse(src).getroot()
+    except (OSError, ET.ParseError):
+        return None
+    keys = root.findall("./keyframe/key")
+    if not keys:
+        return None
+    key = next((k for k in keys if k.get("name") == "home"), keys[0])
+    if key.get("qpos") is None:
+        return None
+    qpos = np.array([float(x) for x in key.get("qpos", "").split()])
+    # qpos follows the file's joint order; the arm's joints are its 1-DoF joints in document order
+    world = root.find("worldbody")
+    if world is None:
+        return None
+    names = [j.get("name") for j in world.iter("joint") if j.get("type", "hinge") in ("hinge", "slide")]
+    if len(names) != qpos.size:
+        return None
+    index = {name: i for i, name in enumerate(names)}
+    if not all(name in index for name in robot.joint_names):
+        return None
+    return np.array([qpos[index[name]] for name in robot.joint_names])
+
+
+def start_posture(robot: RobotModel) -> np.ndarray:
+    """Where the experiments start on ``robot`` [rad]: its home if set (built-in robots), else the
+    file's ``home`` keyframe (MJCF), else the middle of each joint's range; within the range's margin."""
+    if np.any(robot.home != 0.0):
+        return robot.home.copy()
+    key = _keyframe(robot)
+    lo, hi = _finite_range(robot)
+    q = 0.5 * (lo + hi) if key is None else key
+    return np.clip(q, lo, hi)
+
+
+def _horizontal(v: np.ndarray, up: np.ndarray) -> np.ndarray:
+    return np.asarray(v - (v @ up) * up)
+
+
+def _up(robot: RobotModel) -> np.ndarray:
+    g = robot.gravity
+    n = float(np.linalg.norm(g))
+    return np.array([0.0, 0.0, 1.0]) if n == 0.0 else -g / n
+
+
+def _swing(
+    robot: RobotModel, q0: np.ndarray, joint: int, path: float, radius: float, speed: float, max_travel: float
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """(start, goal, move time): joint ``joint`` travels about ``path / radius`` rad through q0, inside
+    the range; the quintic's peak point speed 1.875 A r / T is ``speed``, its joint speed at most
+    :data:`VELOCITY_SHARE` of the limit."""
+    lo, hi = _finite_range(robot)
+    travel = min(max_travel, path / max(radius, 1e-3), float(hi[joint] - lo[joint]))
+    a = float(np.clip(q0[joint] + 0.5 * travel, lo[joint] + travel, hi[joint]))
+    b = a - travel
+    start, goal = q0.copy(), q0.copy()
+    start[joint], goal[joint] = a, b
+    t_move = 1.875 * travel * radius / speed
+    vlim = robot.velocity_limit[joint]
+    if np.isfinite(vlim) and vlim > 0:
+        t_move = max(t_move, 1.875 * travel / (VELOCITY_SHARE * vlim))
+    return start, goal, float(t_move)
+
+
+def _driving_joint(robot: RobotModel, q: np.ndarray, frame: str, joints: range) -> tuple[int, float]:
+    """(joint, radius [m]): among ``joints`` the one whose rotation moves ``frame`` fastest horizontally."""
+    J = robot.compute_frame_jacobian(q, frame, world_aligned=True)[:3]
+    up = _up(robot)
+    speeds = [float(np.linalg.norm(_horizontal(J[:, j], up))) for j in joints]
+    best = int(np.argmax(speeds))
+    if speeds[best] < 1e-3:
+        raise ConfigError(
+            f"no joint among {[j + 1 for j in joints]} moves frame {frame!r} horizontally at the start posture "
+            f"{np.round(q, 3).tolist()} (1-based joints); give the robot a home posture"
+        )
+    return joints[best], speeds[best]
+
+
+@dataclass(frozen=True)
+class EeSwingPlan:
+    """The end-effector collision's reference on one arm: hold, swing one joint, hold."""
+
+    start: np.ndarray
+    goal: np.ndarray
+    joint: int  # 0-based
+    move_time: float
+    hold_before: float = 0.5
+    hold_after: float = 2.0
+
+    def trajectory(self) -> JointTrajectory:
+        """Hold ``hold_before`` s, move in ``move_time``, hold ``hold_after`` s at the goal."""
+        w = np.array([self.start, self.start, self.goal, self.goal])
+        return JointTrajectory(w, np.array([self.hold_before, self.move_time, self.hold_after]))
+
+    def describe(self) -> dict[str, Any]:
+        return {
+            "swing_joint": self.joint + 1,
+            "start": self.start.tolist(),
+            "goal": self.goal.tolist(),
+            "move_time_s": self.move_time,
+        }
+
+
+def ee_swing_plan(robot: RobotModel, q0: np.ndarray | None = None) -> EeSwingPlan:
+    """The swing of the end effector (module docstring): the joint among the first half of the chain
+    that moves it fastest horizontally, ~:data:`SWING_PATH_M` at :data:`EE_PEAK_SPEED`, at most 1 rad."""
+    q0 = start_posture(robot) if q0 is None else np.asarray(q0, dtype=float)
+    joint, radius = _driving_joint(robot, q0, robot.ee_frame, range(max(1, math.ceil(robot.n / 2))))
+    start, goal, t_move = _swing(robot, q0, joint, SWING_PATH_M, radius, EE_PEAK_SPEED, 1.0)
+    return EeSwingPlan(start, goal, joint, t_move)
+
+
+#: Vertical clearance kept between the block's top and the links before the wrist (they pass above
+#: it), and between the table and every link [m].
+CLEARANCE_M = 0.02
+#: Share of the block's length that lies beyond the end effector's path, away from the arm's base [-].
+OUTSIDE_SHARE = 0.75
+
+
+def _arm_geoms_along(robot: RobotModel, qs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For the arm's collision geoms at each posture of ``qs``: (centres (k, g, 3) and half-extents
+    (k, g, 3) of their world-aligned bounding boxes, distal mask (g,): the geom is on a body beyond the
+    wrist sensor)."""
+    import mujoco
+
+    from reflexarm.sim import Plant
+
+    plant = Plant(robot)
+    m, d = plant.model, plant.data
+    arm = set(int(b) for b in plant._arm_bodies)
+    distal = set(int(b) for b in plant._load_bodies)
+    geoms = [g for g in range(m.ngeom) if int(m.geom_bodyid[g]) in arm and (m.geom_contype[g] or m.geom_conaffinity[g])]
+    centres = np.empty((len(qs), len(geoms), 3))
+    halves = np.empty((len(qs), len(geoms), 3))
+    local_c = np.array(m.geom_aabb[geoms, :3])
+    local_h = np.array(m.geom_aabb[geoms, 3:])
+    for k, q in enumerate(qs):
+        d.qpos[plant._qadr_arr] = q
+        mujoco.mj_kinematics(m, d)
+        R = np.array(d.geom_xmat[geoms]).reshape(-1, 3, 3)
+        centres[k] = d.geom_xpos[geoms] + np.einsum("gij,gj->gi", R, local_c)
+        halves[k] = np.einsum("gij,gj->gi", np.abs(R), local_h)
+    mask = np.array([int(m.geom_bodyid[g]) in distal for g in geoms], dtype=bool)
+    return centres, halves, mask
+
+
+def place_cinderblock(
+    robot: RobotModel,
+    trajectory: JointTrajectory,
+    *,
+    depth: float = 0.12,
+    size: tuple[float, float, float] = (0.39, 0.19, 0.19),
+    padding: float = 0.03,
+    samples: int = 400,
+) -> dict[str, Any]:
+    """Keyword arguments of :class:`~reflexarm.sim.Cinderblock` that put the block on the end effector's path.
+
+    The path is the forward kinematics of ``trajectory`` (the end-effector frame). The block's padded
+    face is put across the path at the point from which the rest of the path is ``depth`` long [m] (so
+    the unobstructed end effector would run ``depth`` into the block), facing the path's horizontal
+    direction there with its long side, :data:`OUTSIDE_SHARE` of which lies beyond the path, away from
+    the base. Heights, from the arm's collision geometry swept along the path
+    (bounding spheres, over the block's footprint): the end effector meets the face at half the block's
+    height unless the links before the wrist sensor pass lower, then the block's top stays
+    :data:`CLEARANCE_M` below them (so the wrist meets the block first, as the hand does on Atlas); the
+    table (the block's support) stays :data:`CLEARANCE_M` below every link; below 5 cm the block stands
+    on the floor. The block's core is ``size``.
+
+    Raises:
+        ConfigError: the path is shorter than ``depth`` or does not move horizontally; the arm passes
+            above the block.
+    """
+    t = np.linspace(0.0, trajectory.duration, samples)
+    qs = np.array([trajectory.sample(float(ti)).q_d for ti in t])
+    P = np.array([robot.compute_frame_pose(q)[1] for q in qs])
+    seg = np.linalg.norm(np.diff(P, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    if s[-1] <= depth:
+        raise ConfigError(f"the end effector's path is {s[-1]:.3f} m long; the block needs more than depth {depth} m")
+    i = int(np.searchsorted(s, s[-1] - depth))
+    i = min(max(i, 1), samples - 2)
+    up = _up(robot)
+    u = _horizontal(P[i + 1] - P[i - 1], up)
+    nu = float(np.linalg.norm(u))
+    if nu < 1e-9:
+        raise ConfigError("the end effector's path does not move horizontally where the block would stand")
+    u /= nu
+    sx, sy, sz = size
+    # the long side (x of the block) faces the path: the block's y axis is the path's direction; the
+    # block reaches OUTSIDE_SHARE of its length away from the base beyond the path point (the links
+    # nearer the base do not stand over it)
+    w = np.cross(up, u)
+    outward = 1.0 if float(w @ _horizontal(P[i], up)) >= 0.0 else -1.0
+    centre = P[i] + u * (padding + sy / 2.0) + w * outward * (OUTSIDE_SHARE - 0.5) * sx
+    # the arm's geoms (bounding boxes) over the block's padded footprint along the path
+    centres, halves, distal = _arm_geoms_along(robot, qs)
+    rel = centres - centre
+    over = (np.abs(rel @ u) < sy / 2 + padding + np.abs(halves) @ np.abs(u)) & (
+        np.abs(rel @ w) < sx / 2 + padding + np.abs(halves) @ np.abs(w)
+    )
+    bottoms = (centres @ up) - np.abs(halves) @ np.abs(up)
+    lowest = float(bottoms[over].min()) if over.any() else math.inf
+    prox = over & ~distal[None, :]
+    lowest_proximal = float(bottoms[prox].min()) if prox.any() else math.inf
+    height = float(P[i] @ up)
+    top = min(height + sz / 2.0 + padding, lowest_proximal - CLEARANCE_M)
+    bottom = min(top - padding - sz, lowest - CLEARANCE_M)
+    table = bottom if bottom >= 0.05 else 0.0
+    block_top = table + sz + padding
+    if over.any() and block_top < float(bottoms[over & distal[None, :]].min(initial=math.inf)):
+        raise ConfigError(
+            f"the arm passes above the block (its top at {block_top:.3f} m, the wrist no lower than "
+            f"{float(bottoms[over & distal[None, :]].min()):.3f} m); choose another start posture"
+        )
+    yaw = math.atan2(u[1], u[0]) - math.pi / 2.0
+    return {
+        "position": (float(centre[0]), float(centre[1])),
+        "size": tuple(size),
+        "padding": padding,
+        "table_height": table,
+        "table_size": (sx + 0.1, sx + 0.1),
+        "yaw": yaw,
+        "contact_time_s": float(t[i]),
+        "depth": depth,
+        "ee_height_m": height,
+    }
+
+
+def _body_frame(robot: RobotModel, joint: int) -> str:
+    m = robot.pin_model
+    for f in m.frames:
+        if f.parentJoint == joint + 1 and f.type == pin.FrameType.BODY:
+            return str(f.name)
+    raise ConfigError(f"joint {joint + 1} ({robot.joint_names[joint]}) has no link frame in {robot.name!r}")
+
+
+def default_link(robot: RobotModel) -> int:
+    """The mid-chain link the link collision pushes: that of joint ceil(n/2) (1-based; Atlas: 4, elx)."""
+    return max(1, math.ceil(robot.n / 2))
+
+
+def link_body(robot: RobotModel, link: int | str) -> tuple[int, str]:
+    """(joint, body name): ``link`` is a 1-based joint number (its child link) or a link/body name.
+
+    Raises:
+        ConfigError: a number outside 1..n or an unknown name (naming the choices).
+    """
+    names = [_body_frame(robot, j) for j in range(robot.n)]
+    if isinstance(link, str) and not link.strip().lstrip("-").isdigit():
+        if link not in names:
+            raise ConfigError(f"unknown link {link!r}; links are: {', '.join(names)} (or a joint number 1..{robot.n})")
+        return names.index(link), link
+    k = int(link)
+    if not 1 <= k <= robot.n:
+        raise ConfigError(f"link must be a joint number in 1..{robot.n} or a link name; got {link}")
+    return k - 1, names[k - 1]
+
+
+@dataclass(frozen=True)
+class LinkPushPlan:
+    """The link collision on one arm: the reference and where and when the stick pushes."""
+
+    trajectory: JointTrajectory
+    body: str
+    joint: int  # 0-based swing joint
+    link_joint: int  # 0-based joint whose link is pushed
+    t_start: float
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+def link_push_plan(robot: RobotModel, link: int | str | None = None) -> LinkPushPlan:
+    """Swing the link of ``link`` (default :func:`default_link`) at ~:data:`LINK_SPEED`; the stick
+    appears 40 % into the move (Atlas: 5 s into the 1 + 10 s)."""
+    link_joint, body = link_body(robot, default_link(robot) if link is None else link)
+    q0 = start_posture(robot)
+    joint, radius = _driving_joint(robot, q0, body, range(link_joint + 1))
+    start, goal, t_move = _swing(robot, q0, joint, LINK_PATH_M, radius, LINK_SPEED, 0.8)
+    w = np.array([start, start, goal, goal])
+    traj = JointTrajectory(w, np.array([1.0, t_move, 2.0]))
+    info = {"link": link_joint + 1, "body": body, "swing_joint": joint + 1, "move_time_s": t_move}
+    return LinkPushPlan(traj, body, joint, link_joint, 1.0 + 0.4 * t_move, info)
+
+
+def loaded_joints(robot: RobotModel, q: np.ndarray, count: int = 4) -> list[int]:
+    """The ``count`` joints (0-based) with the largest load: |gravity torque| at ``q`` plus the friction
+    torque at 0.3 rad/s (on Atlas: the four hydraulic joints)."""
+    load = np.abs(robot.compute_gravity(q)) + np.abs(robot.friction.compute_torque(np.full(robot.n, 0.3)))
+    return sorted(np.argsort(-load, kind="stable")[: min(count, robot.n)].tolist())
+
+
+def loaded_waypoints(robot: RobotModel, q0: np.ndarray) -> np.ndarray:
+    """Waypoints after ``q0`` that move the :func:`loaded_joints` together (pattern of Atlas' hydraulic
+    free motion: each joint +-min(0.5 rad, 20 % of its range), clipped to the range)."""
+    lo, hi = _finite_range(robot)
+    joints = loaded_joints(robot, q0)
+    amp = np.minimum(0.5, 0.2 * (hi - lo))
+    pattern = np.array([[1.0, -1.0, 1.0, -1.0], [-1.0, 1.0, 1.0, -1.0], [0.5, 0.5, -1.0, 1.0]])
+    out = []
+    for row in pattern:
+        q = q0.copy()
+        for c, j in zip(row, joints, strict=False):
+            q[j] += c * amp[j]
+        out.append(np.clip(q, lo, hi))
+    return np.array(out)
