@@ -1,0 +1,228 @@
+// reflexarm._closed_loop.ClosedLoop: the compiled closed loop from Python (nanobind), driven by
+// reflexarm.sim.compiled_loop. A module of its own rather than a part of reflexarm._core: _core (the
+// controller a real robot runs) stays free of MuJoCo. It takes reflexarm._core.ControllerParams (import
+// reflexarm._core first): nanobind shares bound types between modules built with the same nanobind.
+//
+// The MuJoCo model and data cross as the addresses of the Python Plant's MjModel/MjData (mujoco's
+// `_address`): the same libmujoco is mapped once in the process, and the Python objects outlive the loop
+// (the Python wrapper keeps them). Every array is checked for dtype, C order and row count once, when it is
+// handed over; the loop then writes through raw pointers.
+#include <cstdint>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+#include <nanobind/stl/string.h>
+#include <nanobind/stl/tuple.h>
+#include <nanobind/stl/vector.h>
+
+#include "reflexarm/closed_loop.hpp"
+#include "reflexarm/model_io.hpp"
+
+namespace nb = nanobind;
+using namespace nb::literals;
+
+namespace
+{
+  template<typename T>
+  using Arr = nb::ndarray<T, nb::c_contig, nb::device::cpu>;
+  using IntArr = nb::ndarray<const std::int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+
+  std::vector<int> ints(const IntArr & a)
+  {
+    std::vector<int> out(a.shape(0));
+    for (size_t i = 0; i < a.shape(0); ++i)
+      out[i] = static_cast<int>(a.data()[i]);
+    return out;
+  }
+
+  /// Checks an array of `rows` x `cols` (cols 0: one dimension) and returns its data pointer.
+  template<typename T>
+  T * rowsOf(const Arr<T> & a, long rows, long cols, const char * name)
+  {
+    const bool ok = cols == 0 ? (a.ndim() == 1 && static_cast<long>(a.shape(0)) == rows)
+                              : (a.ndim() == 2 && static_cast<long>(a.shape(0)) == rows
+                                 && static_cast<long>(a.shape(1)) == cols);
+    if (!ok)
+    {
+      std::string shape;
+      for (size_t i = 0; i < a.ndim(); ++i)
+        shape += (i ? ", " : "") + std::to_string(a.shape(i));
+      throw reflexarm::ConfigError(std::string("ClosedLoop: ") + name + " must have shape (" + std::to_string(rows)
+                                   + (cols ? ", " + std::to_string(cols) : std::string(",")) + "); got (" + shape + ")");
+    }
+    return a.data();
+  }
+
+  struct PyLoop
+  {
+    reflexarm::ClosedLoop loop;
+    long rows = 0;
+  };
+} // namespace
+
+NB_MODULE(_closed_loop, m)
+{
+  m.doc() = "reflexarm's compiled closed loop: MuJoCo plant, sensors, the C++ controller, recording";
+  using reflexarm::StepStatus;
+  m.attr("STEP_OK") = static_cast<int>(StepStatus::Ok);
+  m.attr("STEP_DIVERGED") = static_cast<int>(StepStatus::Diverged);
+  m.attr("STEP_TIME_MISMATCH") = static_cast<int>(StepStatus::TimeMismatch);
+
+  nb::class_<PyLoop>(m, "ClosedLoop")
+    .def(
+      "__init__",
+      [](PyLoop * self, std::uintptr_t model_address, std::uintptr_t data_address, const std::string & model_text,
+         const reflexarm::ControllerParams & params, const IntArr & qadr, const IntArr & vadr,
+         const IntArr & load_bodies, const IntArr & arm_bodies, int force_adr, int torque_adr, int com_body, int site,
+         bool physical, int substeps, double max_speed, std::tuple<double, double, double> gravity) {
+        new (self) PyLoop();
+        reflexarm::PlantLayout lay;
+        lay.qadr = ints(qadr);
+        lay.vadr = ints(vadr);
+        lay.load_bodies = ints(load_bodies);
+        lay.arm_bodies = ints(arm_bodies);
+        lay.force_adr = force_adr;
+        lay.torque_adr = torque_adr;
+        lay.com_body = com_body;
+        lay.site = site;
+        lay.physical = physical;
+        lay.substeps = substeps;
+        lay.max_speed = max_speed;
+        lay.gravity[0] = std::get<0>(gravity);
+        lay.gravity[1] = std::get<1>(gravity);
+        lay.gravity[2] = std::get<2>(gravity);
+        self->loop.configure(reinterpret_cast<const mjModel *>(model_address),
+                             reinterpret_cast<mjData *>(data_address), lay, reflexarm::modelFromString(model_text),
+                             params);
+      },
+      "model_address"_a, "data_address"_a, "model_text"_a, "params"_a, "qadr"_a, "vadr"_a, "load_bodies"_a,
+      "arm_bodies"_a, "force_adr"_a, "torque_adr"_a, "com_body"_a, "site"_a, "physical"_a, "substeps"_a,
+      "max_speed"_a, "gravity"_a,
+      "The plant (MjModel/MjData addresses, kept alive by the caller), its layout and the controller.")
+    .def(
+      "set_buffers",
+      [](PyLoop & self, nb::object noise, const Arr<const double> & q_d, const Arr<const double> & dq_d,
+         const Arr<const double> & ddq_d, const Arr<double> & t, const Arr<double> & q, const Arr<double> & dq,
+         const Arr<double> & q_meas, const Arr<double> & tau, const Arr<double> & tau_m, const Arr<double> & residual,
+         const Arr<double> & wrench, const Arr<double> & tau_ext, const Arr<double> & f_ext_ee,
+         const Arr<std::uint8_t> & collision, const Arr<std::uint8_t> & collided, const Arr<std::int32_t> & mode,
+         const Arr<std::int32_t> & fault_code, const Arr<double> & fault_info) {
+        const long N = static_cast<long>(t.shape(0)), n = self.loop.nv();
+        reflexarm::RunBuffers b;
+        b.rows = N;
+        if (!noise.is_none())
+          b.noise = rowsOf(nb::cast<Arr<const double>>(noise), N, self.loop.measurementSize(), "noise");
+        b.q_d = rowsOf(q_d, N, n, "q_d");
+        b.dq_d = rowsOf(dq_d, N, n, "dq_d");
+        b.ddq_d = rowsOf(ddq_d, N, n, "ddq_d");
+        b.t = rowsOf(t, N, 0, "t");
+        b.q = rowsOf(q, N, n, "q");
+        b.dq = rowsOf(dq, N, n, "dq");
+        b.q_meas = rowsOf(q_meas, N, n, "q_meas");
+        b.tau = rowsOf(tau, N, n, "tau");
+        b.tau_m = rowsOf(tau_m, N, n, "tau_m");
+        b.residual = rowsOf(residual, N, n, "residual");
+        b.wrench = rowsOf(wrench, N, 6, "wrench");
+        b.tau_ext = rowsOf(tau_ext, N, n, "tau_ext");
+        b.f_ext_ee = rowsOf(f_ext_ee, N, 3, "f_ext_ee");
+        b.collision = rowsOf(collision, N, 0, "collision");
+        b.collided = rowsOf(collided, N, n, "collided");
+        b.mode = rowsOf(mode, N, 0, "mode");
+        b.fault_code = rowsOf(fault_code, N, 0, "fault_code");
+        b.fault_info = rowsOf(fault_info, N, 5, "fault_info");
+        self.loop.setBuffers(b);
+        self.rows = N;
+      },
+      "noise"_a.none(), "q_d"_a, "dq_d"_a, "ddq_d"_a, "t"_a, "q"_a, "dq"_a, "q_meas"_a, "tau"_a, "tau_m"_a,
+      "residual"_a, "wrench"_a, "tau_ext"_a, "f_ext_ee"_a, "collision"_a, "collided"_a, "mode"_a, "fault_code"_a,
+      "fault_info"_a, "The run's arrays (N rows each; the caller keeps them alive until the run ends).")
+    .def(
+      "set_forces",
+      [](PyLoop & self, const Arr<const double> & forces) {
+        const long F = forces.ndim() == 2 ? static_cast<long>(forces.shape(0)) : -1;
+        const double * f = rowsOf(forces, F, 7, "forces");
+        std::vector<reflexarm::AppliedForce> out(static_cast<size_t>(F));
+        for (long i = 0; i < F; ++i)
+        {
+          out[i].body = static_cast<int>(f[7 * i]);
+          for (int c = 0; c < 3; ++c)
+          {
+            out[i].force[c] = f[7 * i + 1 + c];
+            out[i].point_local[c] = f[7 * i + 4 + c];
+          }
+        }
+        self.loop.setForces(out);
+      },
+      "forces"_a, "Applied forces, one row (body, force (3) [N, world], point in the body frame (3) [m]) each.")
+    .def(
+      "set_scene_data",
+      [](PyLoop & self, const std::vector<std::tuple<int, Arr<const double>>> & mocap_plans,
+         const std::vector<std::tuple<int, int, Arr<double>>> & qpos_records,
+         const std::vector<std::tuple<int, Arr<double>>> & mocap_records) {
+        const long N = self.rows;
+        std::vector<reflexarm::MocapPlan> plans;
+        for (const auto & [id, arr] : mocap_plans)
+          plans.push_back({id, rowsOf(arr, N, 3, "mocap plan")});
+        std::vector<reflexarm::QposRecord> qrec;
+        for (const auto & [adr, size, arr] : qpos_records)
+          qrec.push_back({adr, size, rowsOf(arr, N, size, "qpos record")});
+        std::vector<reflexarm::MocapRecord> mrec;
+        for (const auto & [id, arr] : mocap_records)
+          mrec.push_back({id, rowsOf(arr, N, 3, "mocap record")});
+        self.loop.setMocapPlans(plans);
+        self.loop.setRecords(qrec, mrec);
+      },
+      "mocap_plans"_a, "qpos_records"_a, "mocap_records"_a,
+      "Scene data (call after set_buffers): (mocap id, N x 3 positions, NaN: unchanged) played before each "
+      "tick's physics; (qpos address, size, N x size) and (mocap id, N x 3) recorded every tick.")
+    .def(
+      "run",
+      [](PyLoop & self, long k0, long k1) {
+        if (k0 < 0 || k1 > self.rows || k0 > k1)
+          throw reflexarm::ConfigError("ClosedLoop.run: need 0 <= k0 <= k1 <= " + std::to_string(self.rows)
+                                       + "; got " + std::to_string(k0) + ", " + std::to_string(k1));
+        StepStatus status;
+        long done;
+        {
+          nb::gil_scoped_release release;
+          done = self.loop.run(k0, k1, status);
+        }
+        return std::make_tuple(done, static_cast<int>(status));
+      },
+      "k0"_a, "k1"_a, "Ticks [k0, k1); returns (ticks done, status); a failed step ends the call after its tick.")
+    .def(
+      "sense",
+      [](PyLoop & self, long k) {
+        if (k < 0 || k >= self.rows)
+          throw reflexarm::ConfigError("ClosedLoop.sense: tick " + std::to_string(k) + " out of range");
+        self.loop.sense(k);
+      },
+      "k"_a)
+    .def(
+      "act",
+      [](PyLoop & self, long k) {
+        if (k < 0 || k >= self.rows)
+          throw reflexarm::ConfigError("ClosedLoop.act: tick " + std::to_string(k) + " out of range");
+        return static_cast<int>(self.loop.act(k));
+      },
+      "k"_a)
+    .def("reset_controller", [](PyLoop & self) { self.loop.controller().reset(); })
+    .def(
+      "set_applied_torque",
+      [](PyLoop & self, const Arr<const double> & tau) {
+        const double * p = rowsOf(tau, self.loop.nv(), 0, "tau");
+        for (int i = 0; i < self.loop.nv(); ++i)
+          self.loop.appliedTorque()[i] = p[i];
+      },
+      "tau"_a)
+    .def_prop_ro("applied_torque", [](PyLoop & self) { return Eigen::VectorXd(self.loop.appliedTorque()); })
+    .def_prop_ro("first_time", [](PyLoop & self) { return self.loop.controller().firstDetectionTime(); })
+    .def_prop_ro("detected", [](PyLoop & self) { return self.loop.controller().detected(); })
+    .def_prop_ro("reacted", [](PyLoop & self) { return self.loop.controller().reacted(); })
+    .def_prop_ro("mode", [](PyLoop & self) {
+      return std::string(reflexarm::modeName(self.loop.controller().mode()));
+    });
+}

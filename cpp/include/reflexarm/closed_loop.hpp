@@ -1,0 +1,153 @@
+// reflexarm::ClosedLoop: the simulated closed loop in C++ (MuJoCo plant + sensors + Controller + recording).
+//
+// The plant is a compiled MuJoCo model and its data, both owned by the caller (in Python: the Plant's
+// MjModel/MjData, passed by address); the scene is defined by the caller too and acts through data this
+// class plays: per-tick mocap positions and forces applied at points fixed on bodies. Sensor noise and the
+// reference are sampled by the caller into arrays (so a run equals the Python loop's, tick by tick).
+//
+// One tick k = sense(k) then act(k):
+//   sense: measurement (q, dq, tau_m, load-compensated wrist wrench, gravity, each plus noise row k),
+//          Controller::update with reference row k, recording of row k;
+//   act:   mocap positions of row k, applied forces refreshed at the bodies' poses, the command as joint
+//          torque, `substeps` physics steps, the divergence check.
+// The arithmetic of the measurement, the true external torque and the contact force follows
+// reflexarm/sim/_kernels.py operation by operation, so that both loops give the same numbers.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include <mujoco/mujoco.h>
+
+#include "reflexarm/controller.hpp"
+
+namespace reflexarm
+{
+
+  /// Where the arm and its sensors are in the MuJoCo model (indices as the Python Plant computes them).
+  struct PlantLayout
+  {
+    std::vector<int> qadr, vadr;  ///< qpos / qvel address of each arm joint (n each, controller's order)
+    std::vector<int> load_bodies; ///< bodies beyond the wrist sensor (its subtree, sorted)
+    std::vector<int> arm_bodies;  ///< subtree of the first arm body (sorted, parents first)
+    int force_adr = 0, torque_adr = 0; ///< sensordata addresses of the wrist force/torque sensors
+    int com_body = 0;  ///< body whose subtree_com is the com-based reference point
+    int site = 0;      ///< wrist sensor site
+    bool physical = true; ///< the sensor body is welded (load compensation) rather than an ideal sensor
+    int substeps = 2;
+    double max_speed = 1e3; ///< a larger velocity norm is a divergence [rad/s or m/s]
+    double gravity[3] = {0.0, 0.0, 0.0}; ///< true gravity in the world (base) frame [m/s^2]
+  };
+
+  /// A force [N] fixed in the world, applied at a point fixed on a body (as Plant.apply_external_force).
+  struct AppliedForce
+  {
+    int body = 0;
+    double force[3] = {0.0, 0.0, 0.0};
+    double point_local[3] = {0.0, 0.0, 0.0};
+  };
+
+  /// The arrays of one run (N rows; row-major, owned by the caller, alive for the run).
+  struct RunBuffers
+  {
+    long rows = 0;
+    // inputs
+    const double * noise = nullptr; ///< N x (3n + 9), or nullptr: no noise
+    const double * q_d = nullptr;   ///< N x n
+    const double * dq_d = nullptr;  ///< N x n
+    const double * ddq_d = nullptr; ///< N x n
+    // outputs
+    double *t = nullptr, *q = nullptr, *dq = nullptr, *q_meas = nullptr, *tau = nullptr, *tau_m = nullptr;
+    double *residual = nullptr, *wrench = nullptr, *tau_ext = nullptr, *f_ext_ee = nullptr;
+    std::uint8_t *collision = nullptr, *collided = nullptr; ///< N, N x n
+    std::int32_t *mode = nullptr, *fault_code = nullptr;    ///< N each
+    double * fault_info = nullptr; ///< N x 5: signal, component, value, lo, hi
+  };
+
+  /// Per-tick positions of one mocap body (N x 3; a NaN row leaves the body where it is).
+  struct MocapPlan
+  {
+    int mocap_id = 0;
+    const double * pos = nullptr;
+  };
+
+  /// A qpos slice recorded every tick (N x size), e.g. a free body's pose.
+  struct QposRecord
+  {
+    int adr = 0, size = 0;
+    double * out = nullptr;
+  };
+
+  /// A mocap position recorded every tick (N x 3).
+  struct MocapRecord
+  {
+    int mocap_id = 0;
+    double * out = nullptr;
+  };
+
+  /// Outcome of ClosedLoop::act / run.
+  enum class StepStatus : int
+  {
+    Ok = 0,
+    Diverged = 1,     ///< non-finite or too fast state after the step
+    TimeMismatch = 2  ///< MuJoCo's clock did not advance by one control period
+  };
+
+  class ClosedLoop
+  {
+  public:
+    /// `model`/`data`: the plant (not owned; they must outlive this object). Configures the controller
+    /// (throws ConfigError) and sizes every buffer.
+    void configure(const mjModel * model, mjData * data, const PlantLayout & layout,
+                   const pinocchio::Model & controller_model, const ControllerParams & params);
+
+    Controller & controller() noexcept { return ctrl_; }
+    const Command & command() const noexcept { return cmd_; }
+    int nv() const noexcept { return n_; }
+    int measurementSize() const noexcept { return 3 * n_ + 9; }
+
+    void setBuffers(const RunBuffers & buffers) { buf_ = buffers; }
+    void setForces(const std::vector<AppliedForce> & forces) { forces_ = forces; }
+    void setMocapPlans(const std::vector<MocapPlan> & plans) { mocap_plans_ = plans; }
+    void setRecords(const std::vector<QposRecord> & qpos, const std::vector<MocapRecord> & mocap)
+    {
+      qpos_records_ = qpos;
+      mocap_records_ = mocap;
+    }
+    /// Motor torque currently applied (the tau_m of the next measurement, before noise).
+    Eigen::VectorXd & appliedTorque() noexcept { return tau_applied_; }
+
+    /// Measure, control and record row k.
+    void sense(long k) noexcept;
+    /// Play the scene data of row k, apply the last command, step the physics.
+    StepStatus act(long k) noexcept;
+    /// Ticks [k0, k1): sense + act each. Returns the number of completed ticks (k1 - k0 unless a step
+    /// failed: then the failing tick is recorded and counted, and `status` says why).
+    long run(long k0, long k1, StepStatus & status) noexcept;
+
+    // the plant's per-tick quantities (exposed for tests)
+    void measurement(const double * noise, double * out) noexcept;
+    void externalTorque(double * out) noexcept;
+    void eeContactForce(double * out) noexcept;
+
+  private:
+    void loadCompensatedWrench(double * out) noexcept;
+    void applyForces() noexcept;
+
+    const mjModel * m_ = nullptr;
+    mjData * d_ = nullptr;
+    PlantLayout lay_;
+    int n_ = 0;
+    Controller ctrl_;
+    Command cmd_;
+    RunBuffers buf_;
+    std::vector<AppliedForce> forces_;
+    std::vector<MocapPlan> mocap_plans_;
+    std::vector<QposRecord> qpos_records_;
+    std::vector<MocapRecord> mocap_records_;
+    std::vector<int> parent_, dof_body_;
+    std::vector<double> acc6_; // nbody x 6
+    Eigen::VectorXd meas_, tau_applied_, zero_noise_;
+  };
+
+} // namespace reflexarm
