@@ -28,7 +28,7 @@ if TYPE_CHECKING:
     from reflexarm.sim import Plant, Trace
     from reflexarm.sim.video import StillCapture, VideoRecorder
 
-__all__ = ["SceneCapture", "add_output_options", "frame_size", "slug", "write_json", "write_traces"]
+__all__ = ["SceneCapture", "add_output_options", "frame_size", "number_joints", "slug", "write_json", "write_traces"]
 
 DEFAULT_FRAME_SIZE = "640x480"
 
@@ -98,6 +98,19 @@ def write_traces(out: Path, prefix: str, traces: Mapping[str, Trace]) -> list[Pa
         tr.save(path)
         paths.append(path)
     return paths
+
+
+def number_joints(row: dict[str, Any], joint_names: Sequence[str], key: str = "detected_joints") -> dict[str, Any]:
+    """``row`` with the 0-based joint indices under ``key`` made 1-based (as joints are numbered in every
+    flag and printed line) and their names beside them (``<key minus 's'>_names``, e.g.
+    ``detected_joint_names``). The Python summaries stay 0-based (array indices); command-line summaries
+    are for people."""
+    out = dict(row)
+    joints = out.get(key)
+    if isinstance(joints, (list, tuple)):
+        out[key] = [int(j) + 1 for j in joints]
+        out[f"{key.removesuffix('s')}_names"] = [joint_names[int(j)] for j in joints]
+    return out
 
 
 class _RunObserver:
@@ -174,7 +187,8 @@ class SceneCapture:
 
     def finish(self, run_names: Sequence[str] | None = None, *, summary: Path | None = None) -> dict[str, Any]:
         """Write the still, name the videos after ``run_names`` (when there is one name per run), and add
-        ``{"still": ..., "videos": [...]}`` under ``"scene"`` to the JSON ``summary`` file if given.
+        ``{"still": ..., "videos": [...]}`` under ``"scene"`` to the JSON ``summary`` file when it holds an
+        object (else write it to ``<name>_scene.json``).
 
         Returns:
             The ``"scene"`` record (``still``: file, moment, t, run; ``videos``: file names, frames).
@@ -198,11 +212,12 @@ class SceneCapture:
             record["videos"].append(
                 {"file": path.name, "run": names[i] if names else i + 1, "frames": run.video.frames}
             )
-        if summary is not None and summary.is_file():
-            doc = json.loads(summary.read_text())
-            if isinstance(doc, dict):
-                doc["scene"] = record
-                write_json(summary, doc)
+        doc = json.loads(summary.read_text()) if summary is not None and summary.is_file() else None
+        if summary is not None and isinstance(doc, dict):
+            doc["scene"] = record
+            write_json(summary, doc)
+        else:  # no summary, or a list of rows (the collision experiments): beside it
+            write_json(self.out / f"{self.name}_scene.json", record)
         return record
 
     @staticmethod

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from reflexarm._cli.common import (
@@ -15,6 +16,7 @@ from reflexarm._cli.common import (
     model_error_line,
     out_dir,
 )
+from reflexarm._cli.run_outputs import SceneCapture, add_output_options, number_joints, write_json
 
 if TYPE_CHECKING:
     from reflexarm.robots import RobotModel
@@ -35,6 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     add_common(p, default_out="results/demo")
     add_model_options(p)
+    add_output_options(p)
     p.add_argument("--block", choices=("paper", "tipping"), default="paper", help=_BLOCK_HELP)
     p.set_defaults(func=_demo)
 
@@ -44,23 +47,27 @@ def register(sub: argparse._SubParsersAction) -> None:
     e = ssub.add_parser("ee-collision", help="the demo's experiment (Figs. 7-8)")
     add_common(e, default_out="results/ee-collision")
     add_model_options(e)
+    add_output_options(e)
     e.add_argument("--block", choices=("paper", "tipping"), default="paper", help=_BLOCK_HELP)
     e.set_defaults(func=_demo)
     lc = ssub.add_parser("link-collision", help="a stick pushes the elbow during a joint motion (Figs. 9-10)")
     add_common(lc, default_out="results/link-collision")
     add_model_options(lc)
+    add_output_options(lc)
     lc.set_defaults(func=_link)
     fm = ssub.add_parser("free-motion", help="false-alarm check: the demo trajectory without obstacle")
     add_common(fm, default_out="results/free-motion")
     add_model_options(fm)
+    add_output_options(fm)
     fm.add_argument("--duration", type=float, default=60.0, help="simulated time [s] (default 60)")
     fm.add_argument("--threshold", type=float, default=11.0, help="zeta [Nm] (default 11)")
     fm.add_argument(
         "--trace",
-        default=None,
-        metavar="FILE.parquet",
-        help="also stream the whole trace to this Parquet file, block by block (default: statistics only; "
-        "memory does not grow with --duration either way)",
+        default="auto",
+        metavar="FILE.parquet|none",
+        help="stream the whole trace to this Parquet file, block by block (default: free_motion_trace.parquet in "
+        "--out, ~1.7 MB per simulated second; 'none': statistics only, e.g. for hours; memory does not grow with "
+        "--duration either way)",
     )
     fm.add_argument(
         "--motion",
@@ -75,6 +82,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     add_common(vt, default_out="results/velocity-tracking")
     add_model_options(vt)
+    add_output_options(vt)
     vt.add_argument("--joint", type=int, default=4, help="moving joint, 1-based (default 4: elx, as in Fig. 5)")
     vt.add_argument("--speed", type=float, default=0.3, help="constant speed [rad/s] (default 0.3)")
     vt.add_argument("--travel", type=float, default=0.9, help="travel of each leg [rad] (default 0.9)")
@@ -113,6 +121,7 @@ def _demo(args: argparse.Namespace) -> int:
     print(f"controller model: {choice.label()}; sensor noise: the paper's; cinderblock: {args.block}", file=sys.stderr)
     print(model_error_line(robot, model), file=sys.stderr)
     traces, rows = [], []
+    scene = SceneCapture(args, out, "ee_collision")
     for setting in EE_SETTINGS:
         detection = (
             "off"
@@ -123,13 +132,15 @@ def _demo(args: argparse.Namespace) -> int:
             f"[{setting.name}] k = {setting.stiffness:g} Nm/rad, detection {detection}",
             file=sys.stderr,
         )
-        tr = run_ee_collision(
-            setting, model=model, model_error=0.0, block=args.block, seed=args.seed, progress=not args.quiet
-        )
+        with scene:
+            tr = run_ee_collision(
+                setting, model=model, model_error=0.0, block=args.block, seed=args.seed, progress=not args.quiet
+            )
         tr.meta["controller_model"] = choice.describe()
         traces.append(tr)
-        rows.append(summarize_ee_collision(tr))
+        rows.append(number_joints(summarize_ee_collision(tr), robot.joint_names))
     write_outputs(out, "ee_collision", traces, rows)
+    pictures = scene.finish([s.name for s in EE_SETTINGS], summary=out / "ee_collision_summary.json")
     fig = plot_fig8(traces, out / "fig8_ee_collision.png")
     print(
         format_table(
@@ -151,6 +162,7 @@ def _demo(args: argparse.Namespace) -> int:
     print("\nthe paper (Sec. III-A, Figs. 7-8) beside this run:")
     print(format_table(compare_with_paper(rows), _PAPER_COLUMNS))
     print(f"\nwrote {out}/ (traces *.npz, ee_collision_summary.json, {fig.name})")
+    print(SceneCapture.describe(pictures))
     return 0
 
 
@@ -172,10 +184,12 @@ def _link(args: argparse.Namespace) -> int:
     print(f"controller model: {choice.label()}; sensor noise: the paper's", file=sys.stderr)
     print(model_error_line(robot, model), file=sys.stderr)
     out = out_dir(args)
-    tr = run_link_collision(model=model, model_error=0.0, seed=args.seed, progress=not args.quiet)
+    with SceneCapture(args, out, "link_collision") as scene:
+        tr = run_link_collision(model=model, model_error=0.0, seed=args.seed, progress=not args.quiet)
     tr.meta["controller_model"] = choice.describe()
-    row = summarize_link_collision(tr)
+    row = number_joints(summarize_link_collision(tr), robot.joint_names)
     write_outputs(out, "link_collision", [tr], [row])
+    pictures = scene.finish(["link collision"], summary=out / "link_collision_summary.json")
     # tau_mdl of Fig. 10 is the controller's model torque
     fig = plot_fig10(tr, model_torque(tr, model), out / "fig10_link_collision.png")
     print(
@@ -185,7 +199,7 @@ def _link(args: argparse.Namespace) -> int:
                 ("contact_start_s", "contact [s]", "{:.3f}"),
                 ("detection_s", "detected [s]", "{:.3f}"),
                 ("detection_delay_s", "delay [s]", "{:.3f}"),
-                ("detected_joints", "joints (0-based)", "{}"),
+                ("detected_joints", "joints", "{}"),
                 ("peak_external_torque_Nm", "peak |tau_ext| [Nm]", "{:.1f}"),
             ],
         )
@@ -193,6 +207,7 @@ def _link(args: argparse.Namespace) -> int:
     print("\nthe paper (Sec. III-B, Figs. 9-10) beside this run:")
     print(format_table(compare_with_paper([], row), _PAPER_COLUMNS))
     print(f"\nwrote {out}/ (trace, link_collision_summary.json, {fig.name})")
+    print(SceneCapture.describe(pictures))
     return 0
 
 
@@ -201,22 +216,31 @@ def _free(args: argparse.Namespace) -> int:
 
     out = out_dir(args)
     choice = model_choice(args)
-    res = free_motion_false_alarms(
-        args.duration,
-        threshold=args.threshold,
-        seed=args.seed,
-        progress=not args.quiet,
-        model_error=choice.level,
-        model_seed=choice.seed,
-        model=None if choice.file is None else choice.build(_robot()),
-        motion=args.motion,
-        trace_path=args.trace,
-    )
+    trace_path = {"auto": str(out / "free_motion_trace.parquet"), "none": None}.get(args.trace, args.trace)
+    scene = SceneCapture(args, out, "free_motion")
+    with scene:
+        res = free_motion_false_alarms(
+            args.duration,
+            threshold=args.threshold,
+            seed=args.seed,
+            progress=not args.quiet,
+            model_error=choice.level,
+            model_seed=choice.seed,
+            model=None if choice.file is None else choice.build(_robot()),
+            motion=args.motion,
+            trace_path=trace_path,
+        )
     res["controller_model"] = choice.describe()  # type: ignore[assignment]
     # the smallest zeta without a false alarm over this run is the largest |residual| of any joint
     res["smallest_alarm_free_threshold_Nm"] = max(res["max_abs_residual_Nm"])  # type: ignore[call-overload]
-    (out / "free_motion.json").write_text(json.dumps(res, indent=2))
+    write_json(out / "free_motion.json", res)
+    from reflexarm.experiments.plots import plot_free_motion
+
+    fig = plot_free_motion(res, _robot().joint_names, args.threshold, out / "free_motion.png", trace_path)
+    pictures = scene.finish(["free motion"], summary=out / "free_motion.json")
     print(json.dumps(res, indent=2))
+    print(f"wrote {out}/ (free_motion.json, {fig.name}{', ' + Path(trace_path).name if trace_path else ''})")
+    print(SceneCapture.describe(pictures))
     return 0
 
 
@@ -260,8 +284,9 @@ def _velocity(args: argparse.Namespace) -> int:
     robot = _robot()
     model = choice.build(robot)
     print(model_error_line(robot, model), file=sys.stderr)
-    res = run_velocity_tracking(setup, model=model, seed=args.seed, progress=not args.quiet)
     out = out_dir(args)
+    with SceneCapture(args, out, "velocity_tracking") as scene:
+        res = run_velocity_tracking(setup, model=model, seed=args.seed, progress=not args.quiet)
     for name, tr in res.traces.items():
         tr.meta["controller_model"] = choice.describe()
         tr.save(out / f"velocity_tracking_{name.lower()}.npz")
@@ -269,6 +294,7 @@ def _velocity(args: argparse.Namespace) -> int:
     doc["controller_model"] = choice.describe()
     (out / "velocity_tracking_summary.json").write_text(json.dumps(doc, indent=2))
     fig = plot_velocity_tracking(res, out / "fig5_velocity_tracking.png")
+    pictures = scene.finish(list(res.traces), summary=out / "velocity_tracking_summary.json")
     print(
         format_table(
             res.rows(),
@@ -281,4 +307,5 @@ def _velocity(args: argparse.Namespace) -> int:
         )
     )
     print(f"\nwrote {out}/ (traces *.npz, velocity_tracking_summary.json, {fig.name})")
+    print(SceneCapture.describe(pictures))
     return 0

@@ -30,11 +30,15 @@ __all__ = [
     "compliance_sweep_figure",
     "crossover_levels",
     "efc_step_figure",
+    "free_motion_figure",
+    "mode_table_figure",
     "plot_compliance_loss",
     "plot_compliance_sweep",
     "plot_efc_step",
     "plot_fig8",
     "plot_fig10",
+    "plot_free_motion",
+    "plot_mode_table",
     "plot_sweep",
     "sweep_figure",
 ]
@@ -302,3 +306,85 @@ def sweep_figure(summary: pd.DataFrame, kind: str, residual_limit: float = 30.0)
 def plot_sweep(summary: pd.DataFrame, kind: str, path: str | Path, residual_limit: float = 30.0) -> Path:
     """:func:`sweep_figure` written to ``path`` (PNG)."""
     return _save(sweep_figure(summary, kind, residual_limit), path)
+
+
+# ------------------------------------------------------------------------------- free motion, mode table
+def free_motion_figure(
+    result: dict[str, Any], joint_names: Sequence[str], threshold: float, trace_path: str | Path | None = None
+) -> Figure:
+    """The false-alarm check: largest |residual| per joint against zeta and, from the streamed trace (if
+    any), the envelope of |residual| per joint over time (max per 0.1 s, read block by block)."""
+    fig = _figure(2 if trace_path else 1, 1, (8.0, 6.0 if trace_path else 3.5), sharex=False)
+    axes = fig.axes
+    peak = np.asarray(result["max_abs_residual_Nm"], dtype=float)
+    labels = [f"{j + 1} {name}" for j, name in enumerate(joint_names)]
+    axes[0].bar(labels, peak, color=["C3" if p >= threshold else "C0" for p in peak])
+    axes[0].axhline(threshold, color="k", ls="--", lw=1, label=f"threshold zeta = {threshold:g} Nm")
+    axes[0].set_ylabel("max |residual| [Nm]")
+    axes[0].set_xlabel("joint")
+    axes[0].legend(fontsize=8)
+    axes[0].set_title(
+        f"Free motion, {float(result['duration_s']):.1f} s: {result['false_alarm_events']} false alarm(s)", fontsize=9
+    )
+    if trace_path:
+        t_env, env = _residual_envelope(trace_path, 0.1)
+        for j, label in enumerate(labels):
+            axes[1].plot(t_env, env[:, j], lw=0.8, label=label)
+        axes[1].axhline(threshold, color="k", ls="--", lw=1)
+        axes[1].set_ylabel("|residual|, max per 0.1 s [Nm]")
+        axes[1].set_xlabel("t [s]")
+        axes[1].legend(fontsize=7, ncol=min(len(labels), 4))
+    return fig
+
+
+def _residual_envelope(trace_path: str | Path, bin_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """(bin start times, max |residual| per bin and joint) of a streamed Parquet trace, block by block."""
+    times: list[np.ndarray] = []
+    peaks: list[np.ndarray] = []
+    for block in Trace.iter_blocks(trace_path):
+        key = np.floor(block.t / bin_s).astype(np.int64)
+        starts = np.flatnonzero(np.r_[True, np.diff(key) != 0])
+        times.append(key[starts] * bin_s)
+        peaks.append(np.maximum.reduceat(np.abs(block.residual), starts, axis=0))
+    if not times:
+        return np.zeros(0), np.zeros((0, 0))
+    return np.concatenate(times), np.vstack(peaks)
+
+
+def plot_free_motion(
+    result: dict[str, Any],
+    joint_names: Sequence[str],
+    threshold: float,
+    path: str | Path,
+    trace_path: str | Path | None = None,
+) -> Path:
+    """Write :func:`free_motion_figure` as PNG."""
+    return _save(free_motion_figure(result, joint_names, threshold, trace_path), path)
+
+
+def mode_table_figure(rows: Sequence[dict[str, Any]], check_ratio: float) -> Figure:
+    """Fig. 3 measured: per mode, the accuracy ratio and the compliance ratios against the check mark's
+    bound (accurate: ratio <= bound; compliant: ratio >= bound)."""
+    fig = _figure(1, 1, (8.0, 3.8))
+    ax = fig.axes[0]
+    keys = [
+        ("accuracy_ratio", "accuracy: RMS error / compliant's"),
+        ("ee_compliance_ratio", "EE compliance"),
+        ("link_compliance_ratio", "link compliance"),
+        ("link_compliance_supervised_ratio", "link, auto-switch"),
+    ]
+    x = np.arange(len(rows))
+    width = 0.8 / len(keys)
+    for i, (key, label) in enumerate(keys):
+        ax.bar(x + (i - (len(keys) - 1) / 2) * width, [float(r[key]) for r in rows], width, label=label)
+    ax.axhline(check_ratio, color="k", ls="--", lw=1, label=f"check-mark bound {check_ratio:g}")
+    ax.set_xticks(x, [str(r["mode"]) for r in rows], fontsize=8)
+    ax.set_ylabel("ratio [-]")
+    ax.legend(fontsize=7)
+    ax.set_title("Fig. 3 measured: accuracy and compliance of each control mode", fontsize=9)
+    return fig
+
+
+def plot_mode_table(rows: Sequence[dict[str, Any]], check_ratio: float, path: str | Path) -> Path:
+    """Write :func:`mode_table_figure` as PNG."""
+    return _save(mode_table_figure(rows, check_ratio), path)
