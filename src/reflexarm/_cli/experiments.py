@@ -9,6 +9,7 @@ import time
 from typing import Any
 
 from reflexarm._cli.common import add_common, add_model_options, format_table, model_error_percent, out_dir
+from reflexarm._cli.run_outputs import SceneCapture, add_output_options, write_traces
 
 
 def _add_setup_options(p: argparse.ArgumentParser, friction: str, kappa_f: int) -> None:
@@ -68,6 +69,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("efc-step", help="50 N step on the end effector: no DC / DC / DC+EFC (Fig. 12)")
     add_common(p, default_out="results/efc-step")
     _add_setup_options(p, "smooth", 1)
+    add_output_options(p)
     p.set_defaults(func=_efc_step)
 
     p = sub.add_parser("compliance-loss", help="push the end effector and hold it, with and without DC (Fig. 11)")
@@ -80,11 +82,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="the pushing hand's stiffness [N/m], one value or a list to sweep (the paper gives none; default "
         "500,1000,2000,3000,5000,10000)",
     )
+    add_output_options(p)
     p.set_defaults(func=_compliance_loss)
 
     p = sub.add_parser("mode-table", help="the table of Fig. 3, measured for each control mode")
     add_common(p, default_out="results/mode-table")
     _add_setup_options(p, "dry", 0)
+    add_output_options(p)
     p.set_defaults(func=_mode_table)
 
     s = sub.add_parser("sweep", help="robustness sweeps: model errors (Fig. 13) or sensor noise (Fig. 14)")
@@ -122,11 +126,13 @@ def _efc_step(args: argparse.Namespace) -> int:
     out = out_dir(args)
     setup = _setup(args)
     t0 = time.perf_counter()
-    res = efc_step(setup, seed=args.seed, model_seed=args.model_seed, progress=not args.quiet)
+    with SceneCapture(args, out, "efc_step") as scene:
+        res = efc_step(setup, seed=args.seed, model_seed=args.model_seed, progress=not args.quiet)
     for name, tr in res.traces.items():
         tr.save(out / f"efc_step_{name.replace(' ', '_').replace(',', '').replace('+', 'plus')}.npz")
     fig = plot_efc_step(res, out / "fig12_efc_step.png")
     write_json(out / "efc_step.json", {"setup": setup.as_dict(), "rows": res.rows, "summary": res.summary})
+    pictures = scene.finish(list(res.traces), summary=out / "efc_step.json")
     _print_rows(
         res.rows,
         [
@@ -152,7 +158,7 @@ def _efc_step(args: argparse.Namespace) -> int:
         f"explains: {100 * s['cutoff_share_of_dc_displacement']:.1f} %\n"
         f"controller: {_model_label(setup, args.model_seed)}, kappa_f = {setup.kappa_f}; plant friction: "
         f"{setup.plant_friction}; wrote {out}/ ({fig.name}, efc_step.json, traces) in "
-        f"{time.perf_counter() - t0:.1f} s"
+        f"{time.perf_counter() - t0:.1f} s\n{SceneCapture.describe(pictures)}"
     )
     return 0
 
@@ -169,9 +175,14 @@ def _compliance_loss(args: argparse.Namespace) -> int:
     stiffness = parse_levels(args.hand_stiffness, name="--hand-stiffness")
     if any(k <= 0 for k in stiffness):
         raise ConfigError(f"--hand-stiffness must be positive [N/m]; got {args.hand_stiffness}")
-    sweep = compliance_loss_sweep(
-        stiffness, setup, depth=args.depth, seed=args.seed, model_seed=args.model_seed, progress=not args.quiet
-    )
+    with SceneCapture(args, out, "compliance_loss") as scene:
+        sweep = compliance_loss_sweep(
+            stiffness, setup, depth=args.depth, seed=args.seed, model_seed=args.model_seed, progress=not args.quiet
+        )
+    traces = {
+        f"k{k:g}/{name}": tr for k, res in zip(stiffness, sweep.results, strict=True) for name, tr in res.traces.items()
+    }
+    write_traces(out, "compliance_loss", traces)
     rows = sweep.rows()
     for k, res in zip(stiffness, sweep.results, strict=True):
         plot_compliance_loss(res, out / f"fig11_compliance_loss_k{k:g}.png")
@@ -186,6 +197,7 @@ def _compliance_loss(args: argparse.Namespace) -> int:
             "paper": PAPER_FIG11,
         },
     )
+    pictures = scene.finish(list(traces), summary=out / "compliance_loss.json")
     _print_rows(
         rows,
         [
@@ -212,7 +224,7 @@ def _compliance_loss(args: argparse.Namespace) -> int:
         "a firmer one passes the cut-off and the arm yields beyond it.\n"
         f"controller: {_model_label(setup, args.model_seed)}, kappa_f = {setup.kappa_f}; "
         f"plant friction: {setup.plant_friction}\nwrote {out}/ ({fig.name}, fig11_compliance_loss_k*.png, "
-        "compliance_loss.json)"
+        f"compliance_loss.json, traces compliance_loss_k*.npz)\n{SceneCapture.describe(pictures)}"
     )
     return 0
 
@@ -224,11 +236,16 @@ def _mark(v: bool) -> str:
 def _mode_table(args: argparse.Namespace) -> int:
     from reflexarm.experiments.compensation import write_json
     from reflexarm.experiments.mode_table import CHECK_RATIO, mode_table
+    from reflexarm.experiments.plots import plot_mode_table
 
     out = out_dir(args)
     setup = _setup(args)
-    rows, _ = mode_table(setup, seed=args.seed, model_seed=args.model_seed, progress=not args.quiet)
+    with SceneCapture(args, out, "mode_table") as scene:
+        rows, traces = mode_table(setup, seed=args.seed, model_seed=args.model_seed, progress=not args.quiet)
     write_json(out / "mode_table.json", {"setup": setup.as_dict(), "check_ratio": CHECK_RATIO, "rows": rows})
+    write_traces(out, "mode_table", traces)
+    fig = plot_mode_table(rows, CHECK_RATIO, out / "fig3_mode_table.png")
+    pictures = scene.finish(list(traces), summary=out / "mode_table.json")
     table = []
     for r in rows:
         table.append(
@@ -262,7 +279,8 @@ def _mode_table(args: argparse.Namespace) -> int:
         f"\naccuracy ratio: RMS tracking error / compliant mode's (check mark if <= {CHECK_RATIO}); compliance "
         f"ratios: measured displacement / J K^-1 J^T f (check mark if >= {CHECK_RATIO}).\n"
         f"'link, auto-switch': the same link push with detection (zeta = 11 Nm) and the supervisor switching to "
-        f"the compliant mode.\nwrote {out}/mode_table.json"
+        f"the compliant mode.\nwrote {out}/ (mode_table.json, {fig.name}, traces mode_table_*.npz)\n"
+        f"{SceneCapture.describe(pictures)}"
     )
     return 0 if all(r["agrees_with_paper"] for r in rows) else 1
 
