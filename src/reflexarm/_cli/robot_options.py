@@ -46,6 +46,11 @@ def load_robot_from_args(args: argparse.Namespace) -> Any:
     """The :class:`~reflexarm.robots.RobotModel` the robot options of ``args`` name."""
     from reflexarm.robots import load_robot
 
+    return load_robot(args.robot, **robot_kwargs(args))
+
+
+def robot_kwargs(args: argparse.Namespace) -> dict[str, Any]:
+    """The keyword arguments of ``load_robot(args.robot, ...)`` that the robot options of ``args`` give."""
     kwargs: dict[str, Any] = {
         "ee_frame": getattr(args, "ee_frame", None),
         "sensor_frame": getattr(args, "sensor_frame", None),
@@ -54,4 +59,4 @@ def load_robot_from_args(args: argparse.Namespace) -> Any:
     locks = parse_locks(getattr(args, "lock", []) or [])
     if base is not None or tip is not None or locks:
         kwargs.update(base=base, tip=tip, locked=locks)
-    return load_robot(args.robot, **kwargs)
+    return kwargs
