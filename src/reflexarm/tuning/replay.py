@@ -1,0 +1,209 @@
+"""Replay the product's observer offline on a recorded log: the residual the controller would have seen.
+
+No second observer is written here: every sample of the log goes through
+:meth:`reflexarm.control.Controller.step` (eqs. (4)-(6) in the compiled tick, the same input contract),
+with the user's model and observer settings. The residual depends on the measurements only (q, dq,
+tau_m, the wrist wrench with EFC, the model's gravity), not on the commanded torque, so the reference
+handed to the controller is a hold at the measured position and kappa_eps (which changes only the command)
+does not change it.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from reflexarm.errors import ConfigError, DataError
+from reflexarm.ident.robot_log import RobotLog
+from reflexarm.robots.robot_model import RobotModel
+from reflexarm.signals import Measurement, Reference
+
+__all__ = ["ObserverSettings", "ResidualReplay", "ThresholdWarning", "load_free_motion_log", "replay_residual"]
+
+
+class ThresholdWarning(UserWarning):
+    """Something the user should know about a threshold study (extrapolation, faults in the replay, a
+    trace whose velocities are not the measured ones)."""
+
+
+@dataclass(frozen=True)
+class ObserverSettings:
+    """The observer settings the user runs (:class:`~reflexarm.control.Controller` arguments).
+
+    Attributes:
+        observer_gain: k_o [1/s] (paper: 5 for detection).
+        detection_observer_gain: k_o of a separate detection observer [1/s], or None (the detector uses
+            the first observer).
+        kappa_f: friction compensation in the observer (6) (0/1): with 0 a sliding joint's residual
+            carries its friction.
+        kappa_ext: wrist-wrench term in the observer (6), "EFC" (0/1); needs a wrench in the log.
+        kappa_eps: disturbance compensation (0/1); recorded for the summary, it changes the command only,
+            not the residual.
+    """
+
+    observer_gain: float = 5.0
+    detection_observer_gain: float | None = None
+    kappa_f: int = 0
+    kappa_ext: int = 0
+    kappa_eps: int = 0
+
+    @property
+    def detection_gain(self) -> float:
+        """k_o of the residual the detector looks at [1/s]."""
+        return float(self.observer_gain if self.detection_observer_gain is None else self.detection_observer_gain)
+
+    def as_dict(self) -> dict[str, object]:
+        """JSON-ready settings."""
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class ResidualReplay:
+    """The detection residual of one log replayed through the controller.
+
+    Attributes:
+        source: the log's name.
+        t: time (N,) [s]; residual: tau_eps_hat (N, n) [Nm] (the detector's residual); dt: the log's
+            median period [s] (the controller's nominal period); fault_ticks: ticks the controller
+            rejected (their residual is the previous one, as on the robot); faults: the first fault texts.
+    """
+
+    source: str
+    t: np.ndarray
+    residual: np.ndarray
+    dt: float
+    fault_ticks: int
+    faults: tuple[str, ...]
+
+    @property
+    def duration(self) -> float:
+        """Span of the log [s] (N samples of dt)."""
+        return float(self.t.size * self.dt)
+
+
+def replay_residual(log: RobotLog, robot: RobotModel, settings: ObserverSettings | None = None) -> ResidualReplay:
+    """Run ``log`` through a :class:`~reflexarm.control.Controller` on ``robot`` and keep its residual.
+
+    Args:
+        log: a free-motion log (q, dq, tau_m; a wrench if ``settings.kappa_ext``), the robot's joint order.
+        robot: the controller's model (the user's identified model, else the robot file's nominal one).
+        settings: the observer settings (default: :class:`ObserverSettings`' defaults, the paper's).
+
+    Raises:
+        ConfigError: the log has another joint count than ``robot``; EFC asked without a wrench in the log;
+            the log's period makes the discrete observer unstable (k_o dt >= 1/2).
+    """
+    from reflexarm.control import Controller
+
+    s = settings or ObserverSettings()
+    if log.n != robot.n:
+        raise ConfigError(f"{log.source} has {log.n} joints; the robot {robot.name!r} has {robot.n}")
+    if s.kappa_ext and log.wrench is None:
+        raise ConfigError(f"kappa_ext = 1 (EFC) needs the wrist wrench; {log.source} has no fx..mz columns")
+    dt = float(np.median(np.diff(log.t)))
+    ctrl = Controller(
+        robot,
+        observer_gain=s.observer_gain,
+        detection_observer_gain=s.detection_observer_gain,
+        threshold=None,
+        reaction="none",
+        kappa_f=s.kappa_f,
+        kappa_ext=s.kappa_ext,
+        kappa_eps=s.kappa_eps,
+        dt=dt,
+        torque_limit=None,
+    )
+    N, n = log.q.shape
+    t = np.ascontiguousarray(log.t, dtype=float)
+    q, dq = np.ascontiguousarray(log.q, dtype=float), np.ascontiguousarray(log.dq, dtype=float)
+    tau_m = np.ascontiguousarray(log.measured_torque, dtype=float)
+    wrench = np.zeros((N, 6)) if log.wrench is None else np.ascontiguousarray(log.wrench, dtype=float)
+    gravity = np.asarray(robot.gravity, dtype=float).copy()
+    zeros = np.zeros(n)
+    out = np.empty((N, n))
+    faults: list[str] = []
+    n_fault = 0
+    step = ctrl.step
+    for k in range(N):
+        qk = q[k]
+        cmd = step(Measurement(float(t[k]), qk, dq[k], tau_m[k], wrench[k], gravity), Reference(qk, zeros, zeros))
+        out[k] = cmd.residual
+        if cmd.fault:
+            n_fault += 1
+            if len(faults) < 5:
+                faults.append(f"t = {t[k]:.4f} s: {cmd.fault}")
+    if n_fault:
+        warnings.warn(
+            f"{log.source}: the controller rejected {n_fault} of {N} samples (their residual holds the last "
+            f"value); first: {faults[0]}",
+            ThresholdWarning,
+            stacklevel=2,
+        )
+    return ResidualReplay(log.source, t, out, dt, n_fault, tuple(faults))
+
+
+#: Columns of a reflexarm trace (:class:`~reflexarm.sim.Trace` Parquet layout) a replay reads.
+_TRACE_FIELDS = ("q_meas", "dq", "tau_m", "wrench")
+
+
+def load_free_motion_log(path: str | os.PathLike[str], robot: RobotModel) -> RobotLog:
+    """A free-motion log from a file: a robot log in the schema of :mod:`reflexarm.ident.log_files`
+    (``.csv``, ``.parquet``, ``.npz``), or a reflexarm trace (``.parquet`` written by a closed-loop run).
+
+    A trace holds the measured positions (``q_meas``) and torques but the plant's *true* velocities: the
+    replayed residual then lacks the velocity noise (``k_o M_hat(q) dq`` enters the residual (4)
+    unfiltered), so its thresholds come out low; a :class:`ThresholdWarning` says so. Logs written by
+    :func:`reflexarm.tuning.record_free_motion_log` hold exactly what the controller measured.
+    """
+    from reflexarm.ident.logs import load_log
+
+    p = Path(path)
+    if p.suffix.lower() == ".parquet" and p.is_file() and _is_trace(p):
+        return _trace_log(p, robot)
+    return load_log(p, n_joints=robot.n)
+
+
+def _is_trace(p: Path) -> bool:
+    import pyarrow.parquet as pq
+
+    try:
+        md = pq.read_schema(p).metadata or {}
+    except Exception as e:  # pyarrow raises several types for a broken file
+        raise DataError(f"cannot read {str(p)!r} as Parquet: {e}") from e
+    return b"reflexarm.layout" in md
+
+
+def _trace_log(p: Path, robot: RobotModel) -> RobotLog:
+    import pyarrow.parquet as pq
+
+    n = robot.n
+    cols = ["t"] + [f"{f}_{j}" for f in _TRACE_FIELDS[:3] for j in range(n)] + [f"wrench_{j}" for j in range(6)]
+    try:
+        table = pq.read_table(p, columns=cols)
+    except Exception as e:
+        raise DataError(f"{p.name}: not a trace of a {n}-joint robot (columns {cols[1]}..): {e}") from e
+    c = {name: table.column(name).to_numpy() for name in cols}
+
+    def block(field: str, width: int) -> np.ndarray:
+        return np.column_stack([c[f"{field}_{j}"] for j in range(width)])
+
+    warnings.warn(
+        f"{p.name} is a reflexarm trace: it holds the plant's true joint velocities, not the measured ones, so "
+        "the replayed residual lacks the velocity noise and the thresholds come out low; record free motion "
+        "with reflexarm.tuning.record_free_motion_log (or log the measured dq) for thresholds to use",
+        ThresholdWarning,
+        stacklevel=3,
+    )
+    return RobotLog(
+        t=c["t"],
+        q=block("q_meas", n),
+        dq=block("dq", n),
+        tau=block("tau_m", n),
+        wrench=block("wrench", 6),
+        source=p.name,
+        notes=("read from a reflexarm trace (true velocities)",),
+    )

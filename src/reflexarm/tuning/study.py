@@ -1,0 +1,362 @@
+"""Collision thresholds from the user's own free-motion logs: two levels per joint and what they imply.
+
+:func:`tune_thresholds` replays the observer on the logs (:func:`~reflexarm.tuning.replay_residual`),
+fits the tail of each joint's |residual| (:mod:`reflexarm.tuning.tail`) and proposes, as libfranka
+does, two levels per joint:
+
+* **collision** zeta_j: false alarms at the user's rate R [1/h] for the whole arm;
+* **contact** level: a lower one at the rate R_c [1/h] (default 60, one per minute), for logging or a soft
+  reaction.
+
+Detection (12) fires when *any* joint crosses, so the arm's rate is the sum of the joints' rates; each
+joint gets R / n (Bonferroni's split; the arm's rate is then at most R). A level at a rate whose return
+period n / R exceeds :data:`MAX_EXTRAPOLATION` times the logs' span is an extrapolation the tail cannot
+carry: refused (:class:`LogTooShortError`, with the minimum duration) unless ``allow_extrapolation``.
+
+For each level the detection delay of a step of external torque s [Nm] at the joint follows from the
+observer's first-order response (8), r(t) = b + s (1 - exp(-t / T_o)) with T_o = -dt / ln(1 - k_o dt)
+(the discrete observer's time constant, 1/k_o to 0.3 %): the residual crosses zeta at
+
+    t_d = -T_o ln(1 - (zeta - b) / s)     (never if s <= zeta - b),
+
+given for b = 0 ("nominal") and b = -q95 ("unfavourable": the residual's 95th percentile of |r| in the
+logs, e.g. friction, pointing against the step).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from reflexarm.errors import ConfigError, DataError
+from reflexarm.ident.robot_log import RobotLog
+from reflexarm.robots.robot_model import RobotModel
+from reflexarm.tuning.replay import (
+    ObserverSettings,
+    ResidualReplay,
+    ThresholdWarning,
+    load_free_motion_log,
+    replay_residual,
+)
+from reflexarm.tuning.tail import TailFit, fit_tail
+
+__all__ = [
+    "DEFAULT_CONTACT_RATE",
+    "DEFAULT_RATE",
+    "MAX_EXTRAPOLATION",
+    "JointThresholds",
+    "LogTooShortError",
+    "ThresholdProposal",
+    "detection_delay",
+    "tune_thresholds",
+]
+
+#: Default false-alarm rate of the collision level for the whole arm [1/h].
+DEFAULT_RATE = 1.0
+#: Default rate of the contact level [1/h] (one a minute, as a lower libfranka-style level).
+DEFAULT_CONTACT_RATE = 60.0
+#: Largest return period of a level, in multiples of the logs' span: a tail fit is trusted to about an
+#: order of magnitude beyond the data (Coles 2001, Sec. 4.4: return-level intervals widen quickly past it).
+MAX_EXTRAPOLATION = 10.0
+#: Declustering gap in observer time constants: excursions closer than 5 / k_o (1 s at k_o = 5 1/s, where
+#: the observer's step response has settled to 99.3 %) are one alarm, as a latched detector sees them.
+GAP_TIME_CONSTANTS = 5.0
+
+
+class LogTooShortError(DataError):
+    """The logs are too short for the asked rate.
+
+    Attributes:
+        duration_s: the logs' span [s]; minimum_s: the span the rate needs [s]; rate_per_hour: the asked
+        rate for the arm [1/h]; level: "collision" or "contact".
+    """
+
+    def __init__(self, duration_s: float, minimum_s: float, rate_per_hour: float, level: str) -> None:
+        self.duration_s, self.minimum_s, self.rate_per_hour, self.level = duration_s, minimum_s, rate_per_hour, level
+        super().__init__(
+            f"the {level} level at {rate_per_hour:g} false alarms per hour needs at least {minimum_s / 60:.1f} min of "
+            f"free-motion log ({MAX_EXTRAPOLATION:g}x shorter than its per-joint return period); got "
+            f"{duration_s / 60:.1f} min (record more, ask for a higher rate, or allow the extrapolation)"
+        )
+
+
+def detection_delay(zeta: float, step: float, time_constant: float, baseline: float = 0.0) -> float | None:
+    """Time [s] for the residual r = b + s (1 - exp(-t / T_o)) to reach ``zeta``; None if it never does
+    (s <= zeta - b). ``baseline`` b [Nm], ``time_constant`` T_o [s], ``step`` s > 0 [Nm]."""
+    need = zeta - baseline
+    if need <= 0.0:
+        return 0.0
+    if step <= need:
+        return None
+    return float(-time_constant * math.log1p(-need / step))
+
+
+@dataclass(frozen=True)
+class JointThresholds:
+    """The proposal for one joint (0-based ``joint`` in Python; printed 1-based)."""
+
+    joint: int
+    name: str
+    collision: float
+    collision_interval: tuple[float, float]
+    contact: float
+    contact_interval: tuple[float, float]
+    fit: TailFit
+    q95: float
+    delays: dict[str, float | None] = field(default_factory=dict)
+
+    def row(self) -> dict[str, object]:
+        """A flat row for tables and CSV (joint 1-based)."""
+        row: dict[str, object] = {
+            "joint": self.joint + 1,
+            "name": self.name,
+            "collision_Nm": self.collision,
+            "collision_lo_Nm": self.collision_interval[0],
+            "collision_hi_Nm": self.collision_interval[1],
+            "contact_Nm": self.contact,
+            "contact_lo_Nm": self.contact_interval[0],
+            "contact_hi_Nm": self.contact_interval[1],
+            "max_abs_residual_Nm": self.fit.x_max,
+            "q95_abs_residual_Nm": self.q95,
+            "u_Nm": self.fit.u,
+            "xi": self.fit.xi,
+            "sigma_Nm": self.fit.sigma,
+            "clusters_above_u": self.fit.n_clusters,
+        }
+        row.update(self.delays)
+        return row
+
+
+@dataclass
+class ThresholdProposal:
+    """What :func:`tune_thresholds` returns: per-joint levels, the settings and logs they came from."""
+
+    joints: list[JointThresholds]
+    rate_per_hour: float
+    contact_rate_per_hour: float
+    step_torque: float
+    settings: ObserverSettings
+    time_constant: float
+    duration_s: float
+    sources: list[str]
+    fault_ticks: int
+    method: str
+    replays: list[ResidualReplay] = field(default_factory=list, repr=False)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def collision(self) -> np.ndarray:
+        """zeta per joint [Nm] (model order) for :class:`~reflexarm.control.Controller`'s ``threshold``."""
+        return np.array([j.collision for j in self.joints])
+
+    @property
+    def contact(self) -> np.ndarray:
+        """Contact level per joint [Nm]."""
+        return np.array([j.contact for j in self.joints])
+
+    def rows(self) -> list[dict[str, object]]:
+        """One row per joint (1-based)."""
+        return [j.row() for j in self.joints]
+
+    def as_dict(self) -> dict[str, object]:
+        """JSON-ready summary (joints 1-based), with the method and the formulas stated."""
+        return {
+            "method": {
+                "tail": f"{self.method}: peaks over threshold of the declustered |residual| per joint "
+                "(clusters closer than the gap are one alarm), generalized Pareto tail by probability-weighted "
+                "moments (exponential: shape 0), levels at the per-joint rate; 90 % bootstrap interval",
+                "per_joint_rate": "the arm's rate split evenly over the joints (rate / n)",
+                "delay": "t_d = -T_o ln(1 - (zeta - b) / s), T_o = -dt / ln(1 - k_o dt); b = 0 (nominal) or "
+                "-q95 of |r| (unfavourable)",
+            },
+            "rate_per_hour": self.rate_per_hour,
+            "contact_rate_per_hour": self.contact_rate_per_hour,
+            "per_joint_rate_per_hour": self.rate_per_hour / len(self.joints),
+            "step_torque_Nm": self.step_torque,
+            "observer": self.settings.as_dict(),
+            "time_constant_s": self.time_constant,
+            "logs": self.sources,
+            "duration_s": self.duration_s,
+            "fault_ticks": self.fault_ticks,
+            "collision_Nm": [float(v) for v in self.collision],
+            "contact_Nm": [float(v) for v in self.contact],
+            "joints": self.rows(),
+            "fits": {str(j.joint + 1): j.fit.as_dict() for j in self.joints},
+            "notes": list(self.notes),
+        }
+
+    def report(self) -> str:
+        """Plain-text report: the method, then one line per joint (1-based) with both levels and delays."""
+
+        def sec(v: object) -> str:
+            return "never" if v is None else f"{v:.3f}"
+
+        st, n = self.settings, len(self.joints)
+        head = (
+            f"{len(self.sources)} log(s), {self.duration_s / 60:.1f} min; observer k_o = {st.detection_gain:g} 1/s, "
+            f"kappa_f = {st.kappa_f}, EFC = {st.kappa_ext}; {self.fault_ticks} rejected samples\n"
+            f"collision level: {self.rate_per_hour:g} false alarms/h for the arm "
+            f"({self.rate_per_hour / n:.3g}/h per joint); contact level: {self.contact_rate_per_hour:g}/h\n"
+            f"tail: {self.method} fit of the declustered |residual| above u (90 % bootstrap interval in brackets); "
+            f"delay of a {self.step_torque:g} Nm step: t_d = -T_o ln(1 - (zeta - b)/s), "
+            f"T_o = {self.time_constant:.4f} s, b = 0 / b = -q95 (unfavourable)\n"
+        )
+        lines = [
+            f"{'joint':>5} {'name':>12} {'max|r|':>7} {'collision [Nm]':>23} {'contact [Nm]':>23} "
+            f"{'delay coll. [s]':>15} {'delay cont. [s]':>15}"
+        ]
+        for jt in self.joints:
+            d = jt.delays
+            lines.append(
+                f"{jt.joint + 1:>5} {jt.name[-12:]:>12} {jt.fit.x_max:7.3f} "
+                f"{jt.collision:8.3f} [{jt.collision_interval[0]:6.3f}, {jt.collision_interval[1]:6.3f}] "
+                f"{jt.contact:8.3f} [{jt.contact_interval[0]:6.3f}, {jt.contact_interval[1]:6.3f}] "
+                f"{sec(d['collision_delay_s']):>7}/{sec(d['collision_delay_unfavourable_s']):>7} "
+                f"{sec(d['contact_delay_s']):>7}/{sec(d['contact_delay_unfavourable_s']):>7}"
+            )
+        tail = "".join(f"\nnote: {x}" for x in self.notes)
+        return head + "\n".join(lines) + tail
+
+    def write(self, out: str | Path, *, figure: bool = True) -> dict[str, Path]:
+        """Write ``thresholds.json``, ``thresholds.csv`` and (``figure``) ``thresholds.png`` (residuals
+        with both levels) and ``threshold_tails.png`` (rate against level per joint) into ``out``."""
+        import pandas as pd
+
+        folder = Path(out)
+        folder.mkdir(parents=True, exist_ok=True)
+        files = {"json": folder / "thresholds.json", "csv": folder / "thresholds.csv"}
+        files["json"].write_text(json.dumps(self.as_dict(), indent=2))
+        pd.DataFrame(self.rows()).to_csv(files["csv"], index=False, float_format="%.6g")
+        if figure:
+            from reflexarm.tuning.plots import plot_residual_levels, plot_tails
+
+            files["figure"] = plot_residual_levels(self, folder / "thresholds.png")
+            files["tails"] = plot_tails(self, folder / "threshold_tails.png")
+        return files
+
+
+def _check_rate(value: float, name: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+        raise ConfigError(f"{name} must be a positive number of false alarms per hour; got {value!r}")
+    return float(value)
+
+
+def tune_thresholds(
+    logs: RobotLog | str | os.PathLike[str] | Sequence[RobotLog | str | os.PathLike[str]],
+    robot: RobotModel,
+    *,
+    settings: ObserverSettings | None = None,
+    rate_per_hour: float = DEFAULT_RATE,
+    contact_rate_per_hour: float = DEFAULT_CONTACT_RATE,
+    step_torque: float = 30.0,
+    method: str = "gpd",
+    gap_s: float | None = None,
+    allow_extrapolation: bool = False,
+    n_boot: int = 200,
+    seed: int = 0,
+) -> ThresholdProposal:
+    """Propose collision and contact levels per joint from free-motion logs (module docstring).
+
+    Args:
+        logs: one or more free-motion logs of the arm (no contact), pooled: :class:`RobotLog` objects or
+            files (read one at a time by :func:`~reflexarm.tuning.load_free_motion_log`, so only their
+            residuals stay in memory).
+        robot: the controller's model (identified, else the nominal one).
+        settings: the observer settings the user runs.
+        rate_per_hour: false alarms per hour of the collision level, for the whole arm.
+        contact_rate_per_hour: the same for the contact level (must be higher).
+        step_torque: size of the external torque step [Nm] whose detection delay is reported.
+        method: tail model, "gpd" or "exponential" (:data:`reflexarm.tuning.tail.METHODS`).
+        gap_s: declustering gap [s] (default :data:`GAP_TIME_CONSTANTS` / k_o).
+        allow_extrapolation: warn instead of raising when the logs are too short for a rate.
+        n_boot, seed: bootstrap draws and their seed for the intervals.
+
+    Raises:
+        ConfigError: bad rates (contact not above collision), step, or settings.
+        LogTooShortError: the logs are too short for a rate (unless ``allow_extrapolation``).
+        DataError: logs with different periods, or too few excursions to fit a tail.
+    """
+    s = settings or ObserverSettings()
+    rate = _check_rate(rate_per_hour, "rate_per_hour")
+    contact_rate = _check_rate(contact_rate_per_hour, "contact_rate_per_hour")
+    if contact_rate <= rate:
+        raise ConfigError(
+            f"the contact level needs a higher false-alarm rate than the collision level ({rate:g}/h); "
+            f"got contact_rate_per_hour={contact_rate:g}"
+        )
+    if not (isinstance(step_torque, (int, float)) and math.isfinite(step_torque) and step_torque > 0):
+        raise ConfigError(f"step_torque must be a positive torque [Nm]; got {step_torque!r}")
+    log_list = [logs] if isinstance(logs, (RobotLog, str, os.PathLike)) else list(logs)
+    if not log_list:
+        raise ConfigError("no free-motion log given")
+    replays = [
+        replay_residual(log if isinstance(log, RobotLog) else load_free_motion_log(log, robot), robot, s)
+        for log in log_list
+    ]
+    dt = replays[0].dt
+    for r in replays[1:]:
+        if abs(r.dt - dt) > 1e-3 * dt:
+            raise DataError(
+                f"logs of different periods cannot be pooled: {replays[0].source} {dt:g} s, {r.source} {r.dt:g} s"
+            )
+    k_o = s.detection_gain
+    time_constant = -dt / math.log1p(-k_o * dt)
+    gap = GAP_TIME_CONSTANTS / k_o if gap_s is None else float(gap_s)
+    duration = sum(r.duration for r in replays)
+    n = robot.n
+    notes: list[str] = []
+    for level, r_arm in (("collision", rate), ("contact", contact_rate)):
+        minimum = n / r_arm * 3600.0 / MAX_EXTRAPOLATION
+        if duration < minimum:
+            err = LogTooShortError(duration, minimum, r_arm, level)
+            if not allow_extrapolation:
+                raise err
+            warnings.warn(f"{err} -- extrapolating as asked", ThresholdWarning, stacklevel=2)
+            notes.append(f"{level} level extrapolated: {err}")
+    joints = []
+    for j in range(n):
+        parts = [np.abs(r.residual[:, j]) for r in replays]
+        try:
+            fit = fit_tail(parts, dt, gap_s=gap, method=method)
+        except DataError as e:
+            raise DataError(f"joint {j + 1} ({robot.joint_names[j]}): {e}") from e
+        q95 = float(np.quantile(np.concatenate(parts), 0.95))
+        coll, cont = fit.level(rate / n), fit.level(contact_rate / n)
+        delays = {}
+        for name, zeta in (("collision", coll), ("contact", cont)):
+            delays[f"{name}_delay_s"] = detection_delay(zeta, step_torque, time_constant)
+            delays[f"{name}_delay_unfavourable_s"] = detection_delay(zeta, step_torque, time_constant, -q95)
+        joints.append(
+            JointThresholds(
+                joint=j,
+                name=robot.joint_names[j],
+                collision=coll,
+                collision_interval=fit.level_interval(rate / n, n_boot=n_boot, seed=seed + j),
+                contact=cont,
+                contact_interval=fit.level_interval(contact_rate / n, n_boot=n_boot, seed=seed + j),
+                fit=fit,
+                q95=q95,
+                delays=delays,
+            )
+        )
+    return ThresholdProposal(
+        joints=joints,
+        rate_per_hour=rate,
+        contact_rate_per_hour=contact_rate,
+        step_torque=float(step_torque),
+        settings=s,
+        time_constant=time_constant,
+        duration_s=duration,
+        sources=[r.source for r in replays],
+        fault_ticks=sum(r.fault_ticks for r in replays),
+        method=method,
+        replays=replays,
+        notes=notes,
+    )
