@@ -43,6 +43,10 @@ DEFAULT_ELEVATION = -20.0
 FRAME_MARGIN = 1.1
 #: Length of a contact force arrow per newton [m/N]: 100 N draws 0.3 m, the size of a forearm.
 FORCE_ARROW_SCALE = 0.003
+#: Lower bounds of the headlight's ambient and diffuse intensity [-] (MuJoCo's default 0.1 / 0.4 leaves
+#: an arm without scene lights nearly black).
+HEADLIGHT_AMBIENT = 0.35
+HEADLIGHT_DIFFUSE = 0.6
 
 
 class CameraView(NamedTuple):
@@ -160,13 +164,17 @@ class _Painter:
         cam.type = mujoco.mjtCamera.mjCAMERA_FREE
         cam.lookat[:] = view.lookat
         cam.distance, cam.azimuth, cam.elevation = view.distance, view.azimuth, view.elevation
-        saved = float(m.vis.map.force)
-        # MuJoCo draws F * map.force / meanmass; set for FORCE_ARROW_SCALE [m/N], restored at once (drawing only)
+        light = m.vis.headlight
+        saved = (float(m.vis.map.force), light.ambient.copy(), light.diffuse.copy())
+        # drawing settings only, restored at once (the physics never reads them): MuJoCo draws a contact
+        # force F as an arrow F * map.force / meanmass long; the headlight lights a scene without lights
         m.vis.map.force = FORCE_ARROW_SCALE * float(m.stat.meanmass)
+        light.ambient = np.maximum(light.ambient, HEADLIGHT_AMBIENT)
+        light.diffuse = np.maximum(light.diffuse, HEADLIGHT_DIFFUSE)
         try:
             self.renderer.update_scene(data, camera=cam, scene_option=self.option)
         finally:
-            m.vis.map.force = saved
+            m.vis.map.force, light.ambient, light.diffuse = saved
         image = np.asarray(self.renderer.render())
         return _draw_text(image, text) if text else image
 
