@@ -81,6 +81,19 @@ def build_pinocchio_model(
     raise ModelError(f"robot file {str(path)!r}: unknown format {suffix!r}; use .urdf or MJCF .xml")
 
 
+def build_tree_model(path: Path) -> tuple[pin.Model, list[str]]:
+    """The whole file's Pinocchio model, uncut and unchecked (to list its links), and the file's notes."""
+    if not path.is_file():
+        raise ModelError(f"robot file {str(path)!r} does not exist")
+    if path.suffix.lower() == ".urdf":
+        urdf = read_urdf(path)
+        return _build_urdf(urdf), urdf.notes
+    try:
+        return pin.buildModelFromMJCF(str(path)), []
+    except Exception as e:
+        raise ModelError(f"cannot parse robot file {str(path)!r}: {e}") from e
+
+
 # ---------------------------------------------------------------------- URDF
 def _build_urdf(urdf: UrdfFile) -> pin.Model:
     path, root = urdf.path, urdf.root
