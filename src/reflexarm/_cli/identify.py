@@ -26,6 +26,7 @@ from reflexarm._cli.ident_common import (
     write_json,
 )
 from reflexarm._cli.identify_dynamics import identify_dynamics_command, validate_command
+from reflexarm._cli.log_options import add_log_options, load_log_from_args
 from reflexarm.errors import ConfigError
 
 
@@ -89,6 +90,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "level (default 0.1: +-10 %%, the paper's)",
     )
     f.add_argument("--jobs", type=int, default=1, help="joints simulated in parallel (default 1)")
+    add_log_options(f)
     add_common(f, default_out="results/friction")
     f.set_defaults(func=_identify_friction)
 
@@ -104,7 +106,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--split",
         type=float,
         default=None,
-        help="identify on this first fraction of the (repaired) samples of --log, validate on the rest",
+        help="identify on this first fraction of the (repaired) samples of --log, validate on the rest (times are "
+        "relative to the log's first sample)",
     )
     d.add_argument("--method", choices=("sequential", "combined", "both"), default="both")
     d.add_argument("--friction", default=None, help="friction.json from 'identify friction' (needed for sequential)")
@@ -135,6 +138,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     d.add_argument("--maxiter", type=int, default=100, help="excitation optimizer iterations (simulation)")
     d.add_argument("--jobs", type=int, default=1, help="single-joint runs in parallel (simulation)")
+    add_log_options(d)
     add_common(d, default_out="results/identify")
     d.set_defaults(func=identify_dynamics_command)
 
@@ -150,6 +154,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     v.add_argument("--closed-loop", action="store_true", help="compare tracking on the simulated plant")
     v.add_argument("--kappa-f", type=int, choices=(0, 1), default=1, help="friction compensation in (2) (closed loop)")
     v.add_argument("--duration", type=float, default=20.0, help="closed-loop run length [s] (default 20)")
+    add_log_options(v)
     add_common(v, default_out="results/validate")
     v.set_defaults(func=validate_command)
 
@@ -224,7 +229,6 @@ def _record(args: argparse.Namespace, robot: object, trajectory: object) -> Path
 
 # ---------------------------------------------------------------------------------------------- friction
 def _identify_friction(args: argparse.Namespace) -> int:
-    from reflexarm.ident import load_log
     from reflexarm.ident.joint_friction import (
         fit_friction,
         friction_from_fits,
@@ -243,7 +247,7 @@ def _identify_friction(args: argparse.Namespace) -> int:
                 raise ConfigError(f"--run expects JOINT=LOG (e.g. 3=runs_j3.csv); got {spec!r}")
             js, path = spec.split("=", 1)
             j = parse_joints(js, robot.n)[0]
-            log = load_log(path, n_joints=robot.n)
+            log = load_log_from_args(args, path, robot)
             from reflexarm.ident import preprocess_log
 
             proc = preprocess_log(log)

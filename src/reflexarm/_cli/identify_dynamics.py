@@ -25,6 +25,7 @@ from reflexarm._cli.ident_common import (
     write_csv,
     write_json,
 )
+from reflexarm._cli.log_options import load_log_from_args
 from reflexarm.errors import ConfigError
 
 #: Columns of the printed Table I analogue.
@@ -60,7 +61,6 @@ def identify_dynamics_command(args: argparse.Namespace) -> int:
     from reflexarm.ident import (
         compute_base_parameters,
         identify_dynamics,
-        load_log,
         preprocess_log,
         validate_model,
     )
@@ -71,7 +71,7 @@ def identify_dynamics_command(args: argparse.Namespace) -> int:
     robot = load_robot_arg(args)
     base = compute_base_parameters(robot)
     print(f"{robot.name}: {base.n_base} base parameters of {base.n_standard}")
-    logs = [load_log(p, n_joints=robot.n) for p in args.log]
+    logs = [load_log_from_args(args, p, robot) for p in args.log]
     val_raw = None
     if args.split is not None:
         if len(logs) != 1:
@@ -85,7 +85,7 @@ def identify_dynamics_command(args: argparse.Namespace) -> int:
         ident = [preprocess_log(lg, cutoff_hz=args.cutoff) for lg in logs]
         states = None
     if args.validation_log is not None:
-        val_raw = load_log(args.validation_log, n_joints=robot.n)
+        val_raw = load_log_from_args(args, args.validation_log, robot)
         states = preprocess_log(val_raw, cutoff_hz=args.cutoff)
     friction = load_friction(args.friction)
     methods = ["combined", "sequential"] if args.method == "both" else [args.method]
@@ -108,7 +108,10 @@ def identify_dynamics_command(args: argparse.Namespace) -> int:
             progress=not args.quiet,
         )
         results[m] = for_controller(estimate, robot, robot, args)
-        save_identified_model(results[m], robot, out / f"model_{m}.json")
+    # what can still fail on the logs (validation times against the states) runs before anything is written
+    vals = {} if val_raw is None else {m: validate_model(r, robot, val_raw, states=states) for m, r in results.items()}
+    for m, r in results.items():
+        save_identified_model(r, robot, out / f"model_{m}.json")
     summary: dict[str, Any] = {"robot": robot.name, "n_base": base.n_base, "methods": {}}
     for m, r in results.items():
         summary["methods"][m] = {
@@ -119,7 +122,6 @@ def identify_dynamics_command(args: argparse.Namespace) -> int:
             "timings": r.timings,
         }
     if val_raw is not None:
-        vals = {m: validate_model(r, robot, val_raw, states=states) for m, r in results.items()}
         rows = []
         for j in range(robot.n):
             row: dict[str, object] = {"joint": f"{j + 1} ({robot.joint_names[j]})"}
@@ -284,7 +286,7 @@ def dynamics_study_command(args: argparse.Namespace) -> int:
 
 def validate_command(args: argparse.Namespace) -> int:
     """Score a saved model on ``--log``; ``--closed-loop``: tracking on the plant against the nominal model."""
-    from reflexarm.ident import load_log, preprocess_log, validate_model
+    from reflexarm.ident import preprocess_log, validate_model
     from reflexarm.ident.model_file import load_identified_model, read_identified_model
     from reflexarm.ident.plots import plot_torque_validation
 
@@ -296,7 +298,7 @@ def validate_command(args: argparse.Namespace) -> int:
         raise ConfigError("give --log FILE to validate on, or --closed-loop to compare tracking in simulation")
     summary: dict[str, Any] = {"model": str(args.model), "robot": robot.name}
     if args.log is not None:
-        raw = load_log(args.log, n_joints=robot.n)
+        raw = load_log_from_args(args, args.log, robot)
         states = preprocess_log(raw, cutoff_hz=args.cutoff)
         v = validate_model(result, robot, raw, states=states, label=result.method)
         rows = v.table(robot.joint_names)

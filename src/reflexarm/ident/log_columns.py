@@ -194,6 +194,10 @@ def plan_columns(
     n = n_joints if n_joints is not None else _infer_n(columns, layout, where)
     count = _schema_count(columns)
     if count is not None and count != n and "q" not in mapping:
+        for s in _REQUIRED:  # a column missing among the log's own joints is named first
+            for j in range(1, count + 1):
+                if idx.full.get(f"{s}_{j}") is None and idx.full.get(f"{s}_{j - 1}") is None:
+                    raise DataError(f"{where}: column '{s}_{j}' missing; found: {', '.join(columns)}")
         raise DataError(f"{where}: the log has {count} joints (q_1..q_{count}); the robot has {n}")
     joints: dict[str, tuple[str, ...]] = {}
     from_layout: list[str] = []
