@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from reflexarm import __version__
 from reflexarm.errors import ReflexArmError
 
-_COMMAND_MODULES = ("simulate", "identify", "experiments", "tools")
+_COMMAND_MODULES = ("simulate", "identify", "experiments", "tools", "thresholds")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -11,6 +11,7 @@ from reflexarm.tuning.replay import (
     ObserverSettings,
     ResidualReplay,
     ThresholdWarning,
+    is_trace_file,
     load_free_motion_log,
     replay_residual,
 )
@@ -42,6 +43,7 @@ __all__ = [
     "cluster_maxima",
     "detection_delay",
     "fit_tail",
+    "is_trace_file",
     "load_free_motion_log",
     "record_free_motion_log",
     "replay_residual",

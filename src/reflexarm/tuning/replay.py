@@ -22,7 +22,14 @@ from reflexarm.ident.robot_log import RobotLog
 from reflexarm.robots.robot_model import RobotModel
 from reflexarm.signals import Measurement, Reference
 
-__all__ = ["ObserverSettings", "ResidualReplay", "ThresholdWarning", "load_free_motion_log", "replay_residual"]
+__all__ = [
+    "ObserverSettings",
+    "ResidualReplay",
+    "ThresholdWarning",
+    "is_trace_file",
+    "load_free_motion_log",
+    "replay_residual",
+]
 
 
 class ThresholdWarning(UserWarning):
@@ -162,14 +169,18 @@ def load_free_motion_log(path: str | os.PathLike[str], robot: RobotModel) -> Rob
     from reflexarm.ident.logs import load_log
 
     p = Path(path)
-    if p.suffix.lower() == ".parquet" and p.is_file() and _is_trace(p):
+    if is_trace_file(p):
         return _trace_log(p, robot)
     return load_log(p, n_joints=robot.n)
 
 
-def _is_trace(p: Path) -> bool:
+def is_trace_file(path: str | os.PathLike[str]) -> bool:
+    """True for a ``.parquet`` file written by :class:`~reflexarm.sim.Trace` (a closed-loop run's trace)."""
     import pyarrow.parquet as pq
 
+    p = Path(path)
+    if p.suffix.lower() != ".parquet" or not p.is_file():
+        return False
     try:
         md = pq.read_schema(p).metadata or {}
     except Exception as e:  # pyarrow raises several types for a broken file

@@ -29,7 +29,7 @@ import json
 import math
 import os
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -261,6 +261,7 @@ def tune_thresholds(
     allow_extrapolation: bool = False,
     n_boot: int = 200,
     seed: int = 0,
+    load: Callable[[str | os.PathLike[str]], RobotLog] | None = None,
 ) -> ThresholdProposal:
     """Propose collision and contact levels per joint from free-motion logs (module docstring).
 
@@ -277,6 +278,7 @@ def tune_thresholds(
         gap_s: declustering gap [s] (default :data:`GAP_TIME_CONSTANTS` / k_o).
         allow_extrapolation: warn instead of raising when the logs are too short for a rate.
         n_boot, seed: bootstrap draws and their seed for the intervals.
+        load: reads a log file given by path (default :func:`~reflexarm.tuning.load_free_motion_log`).
 
     Raises:
         ConfigError: bad rates (contact not above collision), step, or settings.
@@ -296,10 +298,8 @@ def tune_thresholds(
     log_list = [logs] if isinstance(logs, (RobotLog, str, os.PathLike)) else list(logs)
     if not log_list:
         raise ConfigError("no free-motion log given")
-    replays = [
-        replay_residual(log if isinstance(log, RobotLog) else load_free_motion_log(log, robot), robot, s)
-        for log in log_list
-    ]
+    read = load or (lambda path: load_free_motion_log(path, robot))
+    replays = [replay_residual(log if isinstance(log, RobotLog) else read(log), robot, s) for log in log_list]
     dt = replays[0].dt
     for r in replays[1:]:
         if abs(r.dt - dt) > 1e-3 * dt:

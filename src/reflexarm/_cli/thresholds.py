@@ -1,0 +1,125 @@
+"""``reflexarm tune-thresholds``: collision and contact thresholds per joint from the user's free-motion logs.
+
+Thin: the study, its report, its figures and files live in :mod:`reflexarm.tuning`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+from pathlib import Path
+from typing import Any
+
+from reflexarm._cli.common import add_model_options, model_choice, model_error_line
+from reflexarm._cli.robot_options import add_robot_options, load_robot_from_args
+
+_SWITCH = (0, 1)
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``tune-thresholds`` to the top-level parser."""
+    from reflexarm.tuning import DEFAULT_CONTACT_RATE, DEFAULT_RATE, METHODS
+
+    p = sub.add_parser(
+        "tune-thresholds",
+        help="per-joint collision and contact thresholds (zeta) for false-alarm rates you give, from free-motion logs",
+        description="Replay the observer (4)-(6) on free-motion logs (no contact) with your model and observer "
+        "settings, fit the tail of each joint's |residual| and propose a collision level (--rate false alarms per "
+        "hour for the arm) and a lower contact level (--contact-rate), with the detection delay of a torque step.",
+    )
+    p.add_argument("logs", nargs="+", metavar="LOG", help="free-motion log(s): CSV / Parquet / npz / ROS 2 bag, or a "
+                   "reflexarm trace (.parquet); several logs are pooled")  # fmt: skip
+    add_robot_options(p)
+    add_model_options(
+        p, default_error=0.0, seed_help="seed of --model-error (to replay a simulated arm's perturbed model)"
+    )
+    _add_log_options(p)
+    g = p.add_argument_group("observer (the settings you run)")
+    g.add_argument("--observer-gain", type=float, default=5.0, help="k_o [1/s] (default 5, the paper's)")
+    g.add_argument(
+        "--detection-observer-gain", type=float, default=None, help="k_o of a separate detection observer [1/s]"
+    )
+    g.add_argument("--kappa-f", type=int, choices=_SWITCH, default=0, help="friction term in the observer (default 0)")
+    g.add_argument("--kappa-ext", type=int, choices=_SWITCH, default=0, help="EFC: wrist wrench in the observer")
+    g.add_argument("--kappa-eps", type=int, choices=_SWITCH, default=0, help="disturbance compensation (recorded only)")
+    t = p.add_argument_group("levels")
+    t.add_argument(
+        "--rate", type=float, default=DEFAULT_RATE, metavar="PER_HOUR",
+        help=f"false alarms per hour of the collision level, whole arm (default {DEFAULT_RATE:g})",
+    )  # fmt: skip
+    t.add_argument(
+        "--contact-rate", type=float, default=DEFAULT_CONTACT_RATE, metavar="PER_HOUR",
+        help=f"false alarms per hour of the contact level (default {DEFAULT_CONTACT_RATE:g}, one a minute)",
+    )  # fmt: skip
+    t.add_argument(
+        "--step-torque", type=float, default=30.0, metavar="NM",
+        help="external torque step at a joint whose detection delay is reported [Nm] (default 30)",
+    )  # fmt: skip
+    t.add_argument("--method", choices=METHODS, default="gpd", help="tail model (default gpd; exponential: xi = 0)")
+    t.add_argument("--gap", type=float, default=None, metavar="S", help="declustering gap [s] (default 5 / k_o)")
+    t.add_argument(
+        "--allow-extrapolation", action="store_true", help="warn instead of refusing when the logs are too short"
+    )
+    p.add_argument("--out", type=Path, default=Path("results/thresholds"), help="output folder")
+    p.add_argument("--no-figure", action="store_true", help="skip the figures")
+    p.set_defaults(func=_tune)
+
+
+def _add_log_options(p: argparse.ArgumentParser) -> None:
+    try:
+        from reflexarm._cli.log_options import add_log_options
+    except ImportError:  # pragma: no cover - the log options arrived with the log reader's column mapping
+        return
+    add_log_options(p)
+
+
+def _load(args: argparse.Namespace, path: str, robot: Any) -> Any:
+    from reflexarm.tuning.replay import is_trace_file, load_free_motion_log
+
+    if is_trace_file(path):
+        return load_free_motion_log(path, robot)
+    try:
+        from reflexarm._cli.log_options import load_log_from_args
+    except ImportError:  # pragma: no cover
+        return load_free_motion_log(path, robot)
+    return load_log_from_args(args, path, robot)
+
+
+def _tune(args: argparse.Namespace) -> int:
+    from reflexarm.tuning import ObserverSettings, ThresholdWarning, tune_thresholds
+
+    robot = load_robot_from_args(args)
+    choice = model_choice(args)
+    model = choice.build(robot)
+    print(f"robot {robot.name} ({robot.n} joints); controller model: {choice.label()}", file=sys.stderr)
+    if model is not robot:
+        print(model_error_line(robot, model), file=sys.stderr)
+    settings = ObserverSettings(
+        observer_gain=args.observer_gain,
+        detection_observer_gain=args.detection_observer_gain,
+        kappa_f=args.kappa_f,
+        kappa_ext=args.kappa_ext,
+        kappa_eps=args.kappa_eps,
+    )
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ThresholdWarning)
+        proposal = tune_thresholds(
+            list(args.logs),
+            model,
+            settings=settings,
+            rate_per_hour=args.rate,
+            contact_rate_per_hour=args.contact_rate,
+            step_torque=args.step_torque,
+            method=args.method,
+            gap_s=args.gap,
+            allow_extrapolation=args.allow_extrapolation,
+            load=lambda path: _load(args, str(path), model),
+        )
+    for w in caught:
+        print(f"warning: {w.message}", file=sys.stderr)
+    proposal.notes.extend(str(w.message) for w in caught if str(w.message) not in proposal.notes)
+    files = proposal.write(args.out, figure=not args.no_figure)
+    print(proposal.report())
+    print(f"\nwrote {', '.join(str(f) for f in files.values())}")
+    return 0
