@@ -116,6 +116,8 @@ def test_an_identified_model_file_drives_the_link_collision(tmp_path, capsys, at
     err = capsys.readouterr().err
     assert f"controller model: identified model {model_file}" in err
     row = json.loads((out / "link_collision_summary.json").read_text())[0]
-    assert row["detection_s"] is not None and row["detected_joints"] == [0]
+    # command-line summaries number joints from 1, with the names beside them (the Python summary: 0-based)
+    assert row["detection_s"] is not None and row["detected_joints"] == [1]
+    assert row["detected_joint_names"] == ["l_arm_shz"]
     tr = Trace.load(next(out.glob("*.npz")))
     assert tr.meta["controller_model"] == {"source": "identified", "file": str(model_file)}

@@ -68,7 +68,7 @@ def slug(name: str) -> str:
     """A file-name-safe form of a run name: ``"DC+EFC"`` -> ``"dc_plus_efc"``, ``"stiff/ee_force"`` ->
     ``"stiff_ee_force"``."""
     s = name.strip().lower().replace("+", "_plus_")
-    s = re.sub(r"[^a-z0-9.]+", "_", s)
+    s = re.sub(r"[^a-z0-9]+", "_", s)
     return re.sub(r"_+", "_", s).strip("_") or "run"
 
 
