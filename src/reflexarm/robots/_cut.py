@@ -198,8 +198,8 @@ def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
 
 def freeze_joints(spec: mujoco.MjSpec, values: Mapping[str, float], path: Path) -> None:
     """Delete the joints ``values`` names from ``spec``, moving each body by its joints' motion at the
-    locked positions (``nan``: a free/ball joint, left at the file's pose); keyframes, joint sensors and
-    joint equalities follow.
+    locked positions (``nan``: a free/ball joint, left at the file's pose); keyframes, the actuators and
+    sensors of those joints and joint equalities follow.
 
     Raises:
         ModelError: MuJoCo has no such joint, or a body mixes locked and moving joints.
@@ -219,7 +219,6 @@ def freeze_joints(spec: mujoco.MjSpec, values: Mapping[str, float], path: Path) 
     # free and ball joints (Pinocchio names them itself; MuJoCo's may be unnamed) are never on the arm
     multi = (int(mujoco.mjtJoint.mjJNT_FREE), int(mujoco.mjtJoint.mjJNT_BALL))
     frozen = {j for j in range(mj.njnt) if mj.joint(j).name in named or int(mj.jnt_type[j]) in multi}
-    _remap_keys(spec, mj, [j for j in range(mj.njnt) if j not in frozen])
     by_body: dict[str, list[int]] = {}
     for j in sorted(frozen):
         by_body.setdefault(mj.body(int(mj.jnt_bodyid[j])).name, []).append(j)
@@ -250,6 +249,11 @@ def freeze_joints(spec: mujoco.MjSpec, values: Mapping[str, float], path: Path) 
         body.pos = p
         body.alt.type = mujoco.mjtOrientation.mjORIENTATION_QUAT
         body.quat = np.array([quat.w, quat.x, quat.y, quat.z])
+    joint_trn = (int(mujoco.mjtTrn.mjTRN_JOINT), int(mujoco.mjtTrn.mjTRN_JOINTINPARENT))
+    driven = [a for a in range(mj.nu) if int(mj.actuator_trntype[a]) in joint_trn and mj.actuator_trnid[a, 0] in frozen]
+    for actuator in [spec.actuators[a] for a in driven]:  # motors of locked joints go with them
+        spec.delete(actuator)
+    _remap_keys(spec, mj, [j for j in range(mj.njnt) if j not in frozen], [a for a in range(mj.nu) if a not in driven])
     for sensor in list(spec.sensors):
         if sensor.objtype == mujoco.mjtObj.mjOBJ_JOINT and sensor.objname in named:
             spec.delete(sensor)
@@ -258,8 +262,8 @@ def freeze_joints(spec: mujoco.MjSpec, values: Mapping[str, float], path: Path) 
             spec.delete(eq)
 
 
-def _remap_keys(spec: mujoco.MjSpec, mj: mujoco.MjModel, kept: list[int]) -> None:
-    """Keep, in each keyframe, the qpos/qvel entries of the joints that stay."""
+def _remap_keys(spec: mujoco.MjSpec, mj: mujoco.MjModel, kept: list[int], kept_actuators: list[int]) -> None:
+    """Keep, in each keyframe, the qpos/qvel entries of the joints and the ctrl of the actuators that stay."""
     sizes = {int(mujoco.mjtJoint.mjJNT_FREE): (7, 6), int(mujoco.mjtJoint.mjJNT_BALL): (4, 3)}
     qidx: list[int] = []
     vidx: list[int] = []
@@ -272,3 +276,5 @@ def _remap_keys(spec: mujoco.MjSpec, mj: mujoco.MjModel, kept: list[int]) -> Non
             key.qpos = np.asarray(key.qpos)[qidx]
         if len(key.qvel) == mj.nv:
             key.qvel = np.asarray(key.qvel)[vidx]
+        if len(key.ctrl) == mj.nu:
+            key.ctrl = np.asarray(key.ctrl)[kept_actuators]

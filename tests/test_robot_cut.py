@@ -1,0 +1,293 @@
+"""Cutting a serial arm out of a robot tree: base/tip links, locked joints, the plant frozen the same way.
+
+References: the cut (reduced) Pinocchio model against (a) the whole file's Pinocchio model at the locked
+configuration (rows/columns of the chain) and (b) the MuJoCo plant built from the same file with the
+same joints frozen; the Atlas arm cut from the drcsim URDFs against the built-in ``atlas_v5_left_arm``;
+the written UR5-like arm opened by plain Pinocchio and plain MuJoCo.
+"""
+
+from __future__ import annotations
+
+import shutil
+import warnings
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from reflexarm.cli import main
+from reflexarm.errors import ModelError
+from reflexarm.robots import RobotFileWarning, RobotModel, load_robot
+from reflexarm.robots.example_arms import UR_LIKE_FINGERS, UR_LIKE_JOINTS, UR_LIKE_TIP, write_ur_like_arm
+from reflexarm.sim import Plant, SensorNoise
+from test_model_agreement import ATOL, check_agreement
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "reference"
+ATLAS_V5 = SHARED / "atlas" / "atlas_v5.urdf"  # Dec-2014 BDI mass properties (table C of left_arm_parameters.md)
+ATLAS_FINAL = SHARED / "atlas" / "drcsim_456dd5d0" / "atlas_v5_simple_shapes.urdf"  # final masses (table A)
+MENAGERIE = SHARED / "menagerie"
+needs_shared = pytest.mark.skipif(not ATLAS_V5.is_file(), reason=f"reference files not available at {SHARED}")
+
+#: Two double-precision evaluations of the same rigid-body expressions (reduced vs full Pinocchio model,
+#: Pinocchio vs MuJoCo) differ by round-off, ~1e-13 for Atlas-size torques (tens of Nm); a misplaced
+#: locked body or a lost mass shows up at 1e-3 or more.
+EXACT = 1e-10
+
+#: The built-in arm carries a 0.25 kg tool (body ``l_tool``, 0.06 m beyond ``l_hand``) that the drcsim
+#: files do not have; its spatial inertia in the ``l_hand`` frame, as written in atlas_v5_left_arm.xml.
+BUILTIN_TOOL = pin.Inertia(0.25, np.array([0.0, 0.09, 0.0]), np.diag([2e-4, 2e-4, 2e-4]))
+
+
+def _quiet_load(path: Path | str, **kwargs: object) -> RobotModel:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RobotFileWarning)
+        return load_robot(path, **kwargs)  # type: ignore[arg-type]
+
+
+@pytest.fixture(scope="module")
+def ur_arm(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return write_ur_like_arm(tmp_path_factory.mktemp("arms"))
+
+
+def _random_q(robot: RobotModel, rng: np.random.Generator) -> np.ndarray:
+    lo = np.maximum(robot.lower_limit, -np.pi)
+    hi = np.minimum(robot.upper_limit, np.pi)
+    return rng.uniform(lo, hi)
+
+
+# ---------------------------------------------------------------------- the written 6-DoF arm
+def test_ur_like_arm_opens_in_plain_pinocchio_and_mujoco(ur_arm: Path) -> None:
+    """The file is a valid ROS description: Pinocchio's own parser and MuJoCo's (through the file's
+    <mujoco> meshdir block) read the whole tree, 6 arm + 2 finger joints, and MuJoCo loads the 8 STL meshes."""
+    assert pin.buildModelFromUrdf(str(ur_arm)).nq == 8
+    mj = mujoco.MjModel.from_xml_path(str(ur_arm))
+    assert (mj.njnt, mj.nmesh) == (8, 8)
+    text = ur_arm.read_text()
+    for tag in ("<ros2_control", "<gazebo", "package://ur_like_description/meshes/", "<dynamics"):
+        assert tag in text
+
+
+def test_ur_like_arm_needs_its_gripper_cut_off(ur_arm: Path) -> None:
+    with pytest.raises(
+        ModelError, match="is not a serial chain: name the arm's tip link .* gripper_left_finger, gripper_right_finger"
+    ):
+        _quiet_load(ur_arm)
+    with pytest.warns(
+        RobotFileWarning, match=r"mesh package resolved: package://ur_like_description -> .*ur_like_desc"
+    ):
+        robot = load_robot(ur_arm, tip=UR_LIKE_TIP)
+    assert tuple(robot.joint_names) == UR_LIKE_JOINTS
+    assert robot.ee_frame == robot.sensor_frame == UR_LIKE_TIP
+    assert robot.cut is not None and robot.cut.base == "base_link"
+    assert dict(robot.cut.locked) == dict.fromkeys(UR_LIKE_FINGERS, 0.0)
+    # the moving links carry the gripper: 6 UR5 link masses + gripper body 0.45 kg + fingers 2 x 0.06 kg
+    np.testing.assert_allclose(robot.inertial_parameters()[0::10].sum(), 16.9939 + 0.45 + 0.12, rtol=1e-12)
+    np.testing.assert_array_equal(robot.effort_limit, [150, 150, 150, 28, 28, 28])
+    assert np.all(robot.friction.coulomb > 0) and np.all(robot.friction.viscous > 0)
+
+
+def test_package_uri_found_through_ros_package_path(ur_arm: Path, tmp_path: Path, monkeypatch) -> None:
+    """A URDF moved away from its package finds the meshes through ROS_PACKAGE_PATH, and says so; without
+    it the mesh geoms are dropped with a note (the dynamics do not change)."""
+    moved = tmp_path / "elsewhere" / "arm.urdf"
+    moved.parent.mkdir()
+    shutil.copy(ur_arm, moved)
+    monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
+    with pytest.warns(RobotFileWarning, match=r"8 mesh file\(s\) not found .*the 8 collision geom\(s\) using them"):
+        lost = load_robot(moved, tip=UR_LIKE_TIP)
+    assert Plant(lost, noise=SensorNoise.none()).model.nmesh == 0  # the plant resolves when it is built
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(ur_arm.parents[2]))
+    with pytest.warns(RobotFileWarning, match=r"package://ur_like_description -> .* \(ROS_PACKAGE_PATH\)"):
+        found = load_robot(moved, tip=UR_LIKE_TIP)
+    assert Plant(found, noise=SensorNoise.none()).model.nmesh == 8
+    np.testing.assert_array_equal(found.inertial_parameters(), lost.inertial_parameters())
+
+
+# ---------------------------------------------------------------------- reduced model == whole model
+CUTS = [
+    ("ur", {"tip": UR_LIKE_TIP}),
+    ("ur", {"tip": UR_LIKE_TIP, "locked": {UR_LIKE_FINGERS[0]: 0.03}}),  # one finger open: asymmetric load
+    ("ur", {"base": "upper_arm_link", "tip": "wrist_3_link"}),  # a sub-chain: the shoulder pan joint locked
+    ("atlas", {"base": "utorso", "tip": "l_hand"}),
+    ("atlas", {"base": "utorso", "tip": "l_hand", "locked": {"back_bky": 0.3, "back_bkx": -0.2, "r_arm_shx": 1.0}}),
+    ("atlas", {"base": "pelvis", "tip": "l_hand", "locked": {"l_leg_kny": 1.2}}),  # the back joints on the arm
+]
+
+
+def _file(kind: str, ur_arm: Path) -> Path:
+    if kind == "atlas" and not ATLAS_V5.is_file():
+        pytest.skip(f"reference files not available at {SHARED}")
+    return ur_arm if kind == "ur" else ATLAS_V5
+
+
+@pytest.mark.parametrize(("kind", "cut"), CUTS)
+def test_cut_model_is_the_whole_model_at_the_locks(ur_arm: Path, kind: str, cut: dict) -> None:
+    """M(q) and g(q) of the cut model are the chain's rows and columns of the whole file's model with the
+    other joints at their locked positions: every carried body kept its mass at the right place."""
+    path = _file(kind, ur_arm)
+    robot = _quiet_load(path, **cut)
+    whole = pin.buildModelFromUrdf(str(path)) if kind == "ur" else _whole_atlas()
+    data = whole.createData()
+    chain = [whole.idx_vs[whole.getJointId(name)] for name in robot.joint_names]
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        q = _random_q(robot, rng)
+        q_full = pin.neutral(whole)
+        for name, value in robot.cut.locked.items():  # type: ignore[union-attr]
+            q_full[whole.idx_qs[whole.getJointId(name)]] = value
+        q_full[chain] = q
+        M_full = pin.crba(whole, data, q_full)
+        M_full = np.triu(M_full) + np.triu(M_full, 1).T
+        g_full = pin.computeGeneralizedGravity(whole, data, q_full)
+        np.testing.assert_allclose(robot.compute_mass_matrix(q), M_full[np.ix_(chain, chain)], rtol=0, atol=EXACT)
+        np.testing.assert_allclose(robot.compute_gravity(q), g_full[chain], rtol=0, atol=EXACT)
+
+
+def _whole_atlas() -> pin.Model:
+    text = ATLAS_V5.read_text()  # drop the joint to the undefined 'head' link, as the loader does
+    start = text.index('<joint name="neck_ry"')
+    return pin.buildModelFromXML(text[:start] + text[text.index("</joint>", start) + len("</joint>") :])
+
+
+@pytest.mark.parametrize(("kind", "cut"), CUTS)
+def test_plant_freezes_the_same_joints(ur_arm: Path, kind: str, cut: dict) -> None:
+    """The MuJoCo plant (locked joints deleted, bodies moved) and the cut Pinocchio model are one robot:
+    M, g, C dq and the sensor Jacobian agree at 30 random states (tolerance of test_model_agreement)."""
+    robot = _quiet_load(_file(kind, ur_arm), **cut)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RobotFileWarning)
+        plant = Plant(robot, noise=SensorNoise.none())
+    assert plant.model.njnt == robot.n
+    worst = check_agreement(robot, plant, n_states=30)
+    assert max(worst.values()) <= ATOL, worst
+
+
+# ---------------------------------------------------------------------- Atlas from the whole-robot files
+@needs_shared
+def test_atlas_cut_from_the_final_file_is_the_builtin_arm() -> None:
+    """Cut from the file with the final masses (table A), the arm is the built-in one up to the built-in's
+    0.25 kg tool beyond l_hand: adding that tool's inertia to the last link, M(q) and g(q) agree to round-off.
+    The torso is upright in both (the back joints locked at 0)."""
+    builtin = load_robot("atlas_v5_left_arm")
+    cut = _quiet_load(ATLAS_FINAL, base="utorso", tip="l_hand")
+    assert cut.joint_names == builtin.joint_names
+    model = cut.pin_model.copy()
+    model.inertias[model.njoints - 1] = model.inertias[model.njoints - 1] + BUILTIN_TOOL
+    with_tool = RobotModel(model, ee_frame="l_hand")
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        q = _random_q(builtin, rng)
+        np.testing.assert_allclose(with_tool.compute_mass_matrix(q), builtin.compute_mass_matrix(q), atol=EXACT)
+        np.testing.assert_allclose(with_tool.compute_gravity(q), builtin.compute_gravity(q), atol=EXACT)
+    np.testing.assert_array_equal(cut.effort_limit, builtin.effort_limit)
+    np.testing.assert_array_equal(cut.lower_limit, builtin.lower_limit)
+
+
+@needs_shared
+def test_atlas_cut_from_atlas_v5_differs_only_by_its_older_masses() -> None:
+    """atlas_v5.urdf carries the Dec-2014 mass properties (arm 17.66 kg vs 19.71 kg final, plus the built-in's
+    tool): M and g differ (measured max 0.36 kg m^2 and 3.6 Nm over 100 states); with the built-in's inertial
+    parameters the cut model's M and g are the built-in's to round-off, so kinematics and locks are the same."""
+    builtin = load_robot("atlas_v5_left_arm")
+    with pytest.warns(RobotFileWarning, match="joint 'neck_ry' leads to link 'head', which the file does not define"):
+        cut = load_robot(ATLAS_V5, base="utorso", tip="l_hand")
+    np.testing.assert_allclose(cut.inertial_parameters()[0::10].sum(), 17.659, rtol=1e-12)
+    same = cut.with_inertial_parameters(builtin.inertial_parameters())
+    rng = np.random.default_rng(1)
+    differs = 0.0
+    for _ in range(50):
+        q = _random_q(builtin, rng)
+        np.testing.assert_allclose(same.compute_mass_matrix(q), builtin.compute_mass_matrix(q), atol=EXACT)
+        np.testing.assert_allclose(same.compute_gravity(q), builtin.compute_gravity(q), atol=EXACT)
+        differs = max(differs, float(np.abs(cut.compute_gravity(q) - builtin.compute_gravity(q)).max()))
+    assert differs > 1.0  # the masses really differ: the comparison above is not vacuous
+
+
+@needs_shared
+def test_tilted_torso_changes_gravity_torques() -> None:
+    upright = _quiet_load(ATLAS_V5, base="utorso", tip="l_hand")
+    bent = _quiet_load(ATLAS_V5, base="utorso", tip="l_hand", locked={"back_bky": 0.4})
+    q = np.array([-0.3, -1.1, 1.6, 1.2, 0.0, 0.2, 0.0])
+    assert np.abs(upright.compute_gravity(q) - bent.compute_gravity(q)).max() > 1.0
+    np.testing.assert_allclose(upright.compute_mass_matrix(q), bent.compute_mass_matrix(q), atol=EXACT)
+
+
+# ---------------------------------------------------------------------- locks and their errors
+@needs_shared
+def test_locks_are_clipped_to_the_limits_with_a_note() -> None:
+    with pytest.warns(RobotFileWarning, match=r"joint 'l_leg_kny' locked at 0 \(its limit\) instead of -1; limits"):
+        robot = load_robot(ATLAS_V5, base="utorso", tip="l_hand", locked={"l_leg_kny": -1.0})
+    assert robot.cut is not None and robot.cut.locked["l_leg_kny"] == 0.0
+
+
+def test_bad_cuts_are_named(ur_arm: Path) -> None:
+    with pytest.raises(ModelError, match="unknown tip link 'hand' in .*; links are: base_link, shoulder_link"):
+        _quiet_load(ur_arm, tip="hand")
+    with pytest.raises(ModelError, match="tip link 'shoulder_link' .* does not hang below base link 'forearm_link'"):
+        _quiet_load(ur_arm, base="forearm_link", tip="shoulder_link")
+    with pytest.raises(ModelError, match=r"joint\(s\) \['elbow_joint'\] are on the arm from 'base_link' to 'tool0'"):
+        _quiet_load(ur_arm, tip=UR_LIKE_TIP, locked={"elbow_joint": 0.1})
+    with pytest.raises(ModelError, match=r"cannot lock unknown joint\(s\) \['finger'\] .*; joints are: shoulder_pan"):
+        _quiet_load(ur_arm, tip=UR_LIKE_TIP, locked={"finger": 0.1})
+    with pytest.raises(ModelError, match="no joint moves between base link 'flange' and tip link 'tool0'"):
+        _quiet_load(ur_arm, base="flange", tip=UR_LIKE_TIP)
+
+
+def test_load_arguments_rebuild_the_same_robot(ur_arm: Path) -> None:
+    robot = _quiet_load(ur_arm, tip=UR_LIKE_TIP, locked={UR_LIKE_FINGERS[1]: 0.02})
+    args = robot.load_arguments()
+    assert args == {
+        "ee_frame": UR_LIKE_TIP,
+        "sensor_frame": UR_LIKE_TIP,
+        "base": "base_link",
+        "tip": UR_LIKE_TIP,
+        "locked": {UR_LIKE_FINGERS[0]: 0.0, UR_LIKE_FINGERS[1]: 0.02},
+    }
+    again = _quiet_load(ur_arm, **args)
+    np.testing.assert_array_equal(again.inertial_parameters(), robot.inertial_parameters())
+    assert "base='base_link', tip='tool0'" in repr(robot)
+
+
+# ---------------------------------------------------------------------- MJCF trees
+@pytest.mark.skipif(not MENAGERIE.is_dir(), reason=f"Menagerie files not available at {MENAGERIE}")
+@pytest.mark.parametrize("name", ["iiwa14.xml", "panda_nohand.xml"])
+def test_menagerie_arms_still_load_whole(name: str) -> None:
+    robot = _quiet_load(MENAGERIE / name, ee_frame="attachment_site" if "panda" in name else "link7")
+    assert robot.n == 7 and robot.cut is None
+
+
+@pytest.mark.skipif(not MENAGERIE.is_dir(), reason=f"Menagerie files not available at {MENAGERIE}")
+def test_mjcf_cut_locks_at_the_home_keyframe() -> None:
+    """Cut below link5 of the Menagerie Panda, joints 6 and 7 are held at the file's "home" keyframe; the
+    loader's own check compares the cut model with MuJoCo's frozen model, and so does the plant."""
+    key = ET.parse(MENAGERIE / "panda_nohand.xml").getroot().find("keyframe/key[@name='home']")
+    assert key is not None
+    home = [float(v) for v in key.get("qpos", "").split()]
+    robot = _quiet_load(MENAGERIE / "panda_nohand.xml", tip="link5")
+    assert robot.n == 5 and robot.cut is not None
+    assert dict(robot.cut.locked) == {"joint6": home[5], "joint7": home[6]}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RobotFileWarning)
+        plant = Plant(robot, noise=SensorNoise.none())
+    assert max(check_agreement(robot, plant, n_states=20).values()) <= ATOL
+
+
+# ---------------------------------------------------------------------- CLI
+def test_robots_command_lists_the_frames_of_a_tree(ur_arm: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["robots", str(ur_arm)]) == 0
+    out = capsys.readouterr().out
+    assert "12 links; choose --ee-frame (and --tip/--base for a tree)" in out
+    lines = {line.split()[0]: line for line in out.splitlines()[2:] if line.startswith("  ")}
+    assert "branch (2 links)" in lines["gripper_base_link"] and "(fixed on tool0)" in lines["gripper_base_link"]
+    assert lines["gripper_left_finger"].split()[1:] == ["gripper_left_finger_joint", "7", "leaf"]
+    assert lines["forearm_link"].split()[1:3] == ["elbow_joint", "3"]
+    assert "cut the arm with --tip LINK [--base LINK]" in out
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RobotFileWarning)
+        assert main(["robots", str(ur_arm), "--tip", "tool0", "--lock", f"{UR_LIKE_FINGERS[0]}=0.01"]) == 0
+    out = capsys.readouterr().out
+    assert "base 'base_link', tip 'tool0'; locked joints: gripper_left_finger_joint=0.01" in out
+    assert "1:shoulder_pan_joint, 2:shoulder_lift_joint" in out
