@@ -152,11 +152,10 @@ def test_relative_file_paths_still_resolve_from_the_copys_folder(tmp_path: Path)
     dst.mkdir(parents=True)
     urdf = read_xml(src / "arm.urdf")
     assert relocate_paths(urdf, "urdf", src, dst) == 1
-    meshes = [m.get("filename") for m in urdf.getroot().iter("mesh")]
+    meshes = [m.get("filename") for m in urdf.iter("mesh")]
     assert meshes == ["../../robot/meshes/a.stl", "package://arm/meshes/a.stl"]  # package:// left to ROS
-    mjcf = read_xml(src / "arm.xml")
-    assert relocate_paths(mjcf, "mjcf", src, dst) == 3
-    root = mjcf.getroot()
+    root = read_xml(src / "arm.xml")
+    assert relocate_paths(root, "mjcf", src, dst) == 3
     assert root.find("compiler").get("meshdir") == "../../robot/assets"  # type: ignore[union-attr]
     assert root.find("include").get("file") == "../../robot/parts/scene.xml"  # type: ignore[union-attr]
     assert root.find("asset/mesh").get("file") == "a.stl"  # type: ignore[union-attr]  # through meshdir

@@ -91,15 +91,41 @@ def load_friction(path: str | None) -> Any:
 
 
 def for_controller(result: Any, robot: Any, nominal: Any, args: argparse.Namespace) -> Any:
-    """The result to write for the controller: projected onto consistent parameters if M(q) is indefinite."""
-    from reflexarm.ident import project_physically_consistent
-    from reflexarm.ident.consistency import is_physically_consistent
+    """The result to write for the controller and into the robot file copy: physically consistent links.
 
-    if getattr(args, "no_projection", False) or is_physically_consistent(result, robot):
+    The link parameters realising beta_b nearest to ``nominal``'s if every link of them is physically
+    consistent, else the projection onto consistent parameters (said so; it moves beta_b). With
+    ``--no-projection`` the least-squares estimate as it is.
+    """
+    from reflexarm.ident.write_back import with_consistent_links
+
+    if getattr(args, "no_projection", False):
         return result
-    projected = project_physically_consistent(result, nominal)
-    print(
-        f"{result.method}: M(q) of the least-squares estimate is not positive definite everywhere; "
-        f"the model file holds the nearest consistent one ({projected.notes[-1]})"
-    )
-    return projected
+    consistent, how = with_consistent_links(result, nominal)
+    if consistent.beta_b is not result.beta_b:
+        print(f"{result.method}: the model file and robot copy hold {how}")
+    return consistent
+
+
+def write_robot_copy(result: Any, robot: Any, out: Path, args: argparse.Namespace) -> str | None:
+    """Write ``robot_<method>.urdf|.xml`` (the identified inertias and friction in a copy of the robot file).
+
+    Returns the file name, or None (with the reason printed) when no copy can be written: an arm cut out
+    of a bigger file, a robot without a file, or ``--no-projection`` (the file needs consistent links).
+    """
+    from reflexarm.errors import ModelError
+    from reflexarm.ident.write_back import write_identified_robot
+
+    if getattr(args, "no_projection", False):
+        print(f"{result.method}: no robot file copy with --no-projection (a robot file needs consistent links)")
+        return None
+    source = getattr(robot, "source", None)
+    suffix = ".urdf" if source is not None and Path(source).suffix.lower() == ".urdf" else ".xml"
+    try:
+        path, notes = write_identified_robot(result, robot, out / f"robot_{result.method}{suffix}")
+    except ModelError as e:
+        print(f"{result.method}: no robot file copy written: {e}")
+        return None
+    for note in notes[1:]:  # the first says how the links were chosen, printed by for_controller if it matters
+        say(args, f"{path.name}: {note}")
+    return path.name

@@ -24,6 +24,7 @@ from reflexarm._cli.ident_common import (
     say,
     write_csv,
     write_json,
+    write_robot_copy,
 )
 from reflexarm._cli.log_options import load_log_from_args
 from reflexarm.errors import ConfigError
@@ -110,8 +111,10 @@ def identify_dynamics_command(args: argparse.Namespace) -> int:
         results[m] = for_controller(estimate, robot, robot, args)
     # what can still fail on the logs (validation times against the states) runs before anything is written
     vals = {} if val_raw is None else {m: validate_model(r, robot, val_raw, states=states) for m, r in results.items()}
+    copies = []
     for m, r in results.items():
         save_identified_model(r, robot, out / f"model_{m}.json")
+        copies.append(write_robot_copy(r, robot, out, args))
     summary: dict[str, Any] = {"robot": robot.name, "n_base": base.n_base, "methods": {}}
     for m, r in results.items():
         summary["methods"][m] = {
@@ -147,8 +150,8 @@ def identify_dynamics_command(args: argparse.Namespace) -> int:
         plot_torque_validation(vals, out / "fig6_torques.png", joint_names=robot.joint_names)
     write_json(out / "identification.json", summary)
     print(
-        f"\nwrote {out}/ ({', '.join(f'model_{m}.json' for m in results)}, identification.json"
-        + (", validation.csv, fig6_torques.png)" if val_raw is not None else ")")
+        f"\nwrote {out}/ ({', '.join([f'model_{m}.json' for m in results] + [c for c in copies if c])}, "
+        "identification.json" + (", validation.csv, fig6_torques.png)" if val_raw is not None else ")")
     )
     return 0
 
@@ -237,10 +240,12 @@ def dynamics_study_command(args: argparse.Namespace) -> int:
     rel = {
         m: float(np.linalg.norm(r.beta_b - st.true_base) / np.linalg.norm(st.true_base)) for m, r in st.results.items()
     }
+    copies = []
     for m, r in st.results.items():
         save_identified_model(
             r, robot, out / f"model_{m}.json", extra={"scenario": args.scenario, "min_speed": st.min_speed}
         )
+        copies.append(write_robot_copy(r, st.nominal, out, args))
     save_log(st.validation_raw, out / "validation_log.npz")
     write_json(out / "excitation.json", {"robot": robot.name, **st.excitation.to_dict()})
     write_json(
@@ -279,7 +284,9 @@ def dynamics_study_command(args: argparse.Namespace) -> int:
     print(
         f"\nwrote {out}/ (model_combined.json, model_sequential.json: the models above; validation_log.npz: "
         "'reflexarm validate --model model_<method>.json --log validation_log.npz' reproduces their columns; "
-        "excitation.json, study.json, table1_mse.csv, fig4_friction.png, fig6_torques.png, excitation.png)"
+        "excitation.json, study.json, table1_mse.csv, fig4_friction.png, fig6_torques.png, excitation.png"
+        + "".join(f", {c}" for c in copies if c)
+        + ": the models above in a copy of the robot file)"
     )
     return 0
 

@@ -52,6 +52,7 @@ from reflexarm.ident import (
     validate_model,
 )
 from reflexarm.ident.consistency import is_physically_consistent
+from reflexarm.ident.write_back import with_consistent_links
 from reflexarm.robots.perturbation import perturb_model
 from reflexarm.robots.robot_model import RobotModel, load_robot
 from reflexarm.sim import PAPER_NOISE, SensorNoise
@@ -232,10 +233,12 @@ def validation_trajectory(robot: RobotModel, seed: int, base_frequency: float) -
 
 
 def consistent_result(result: DynamicsIdentification, robot: RobotModel, nominal: RobotModel) -> DynamicsIdentification:
-    """``result``, or its projection onto physically consistent parameters if M(q) is indefinite."""
-    if is_physically_consistent(result, robot):
-        return result
-    return project_physically_consistent(result, nominal)
+    """``result`` with physically consistent link parameters: those nearest to ``nominal``'s if every link
+    of them is consistent (same beta_b), else the projection onto consistent parameters (see
+    :func:`~reflexarm.ident.write_back.with_consistent_links`; what the model file and robot copy hold)."""
+    if not is_physically_consistent(result, robot):
+        return project_physically_consistent(result, nominal)
+    return with_consistent_links(result, nominal)[0]
 
 
 def run_identification_study(
@@ -325,7 +328,7 @@ def run_identification_study(
         for m in METHODS
     }
     results = {m: consistent_result(r, robot, nominal) if project else r for m, r in estimates.items()}
-    projected = [m for m in METHODS if results[m] is not estimates[m]]
+    projected = [m for m in METHODS if results[m].beta_b is not estimates[m].beta_b]
     validations = {m: validate_model(r, robot, valid, label=m) for m, r in results.items()}
     return IdentificationStudy(
         scenario=scenario,

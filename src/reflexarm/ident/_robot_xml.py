@@ -19,17 +19,17 @@ _MJCF_FILE_DIRS = {"mesh": "meshdir", "skin": "meshdir", "hfield": "meshdir", "t
 _SCHEMES = ("package://", "file://", "http://", "https://", "model://")
 
 
-def read_xml(path: Path) -> ET.ElementTree:
-    """The file as an element tree with its comments kept; ModelError if it is not XML."""
+def read_xml(path: Path) -> ET.Element:
+    """The file's root element, comments kept; ModelError if it is not XML."""
     parser = ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
     try:
-        return ET.parse(path, parser=parser)
+        return ET.parse(path, parser=parser).getroot()
     except (OSError, ET.ParseError) as e:
         raise ModelError(f"cannot read robot file {str(path)!r} as XML: {e}") from e
 
 
-def write_xml(tree: ET.ElementTree, path: Path) -> Path:
-    tree.write(path, encoding="unicode", xml_declaration=False)
+def write_xml(root: ET.Element, path: Path) -> Path:
+    ET.ElementTree(root).write(path, encoding="unicode", xml_declaration=False)
     return path
 
 
@@ -41,11 +41,10 @@ def _moved(value: str, src_dir: Path, dst_dir: Path) -> str | None:
     return Path(os.path.relpath(target, dst_dir.resolve())).as_posix()
 
 
-def relocate_paths(tree: ET.ElementTree, fmt: str, src_dir: Path, dst_dir: Path) -> int:
+def relocate_paths(root: ET.Element, fmt: str, src_dir: Path, dst_dir: Path) -> int:
     """Rewrite the relative file paths of a robot file moved from ``src_dir`` to ``dst_dir``; how many."""
     if src_dir.resolve() == dst_dir.resolve():
         return 0
-    root = tree.getroot()
     count = 0
 
     def move(el: ET.Element, attr: str) -> None:

@@ -2,7 +2,10 @@
 
 File format (``"format": "reflexarm-identified-model"``, version 1), JSON:
 
-* ``robot``: name, ``source`` (a built-in robot's name or the robot file's path), frames, joint names;
+* ``robot``: name, ``source`` (a built-in robot's name, or the robot file's path relative to the model
+  file's folder, so that the folder can move with its robot file; version 1 files hold absolute paths and
+  still load), frames, joint names, and ``base``, ``tip``, ``locked`` when the arm was cut out of a
+  bigger file;
 * ``identification``: the :class:`~reflexarm.ident.DynamicsIdentification` (method, base-parameter map,
   beta_b with names, friction, noise variances, condition number, notes);
 * ``standard_parameters``: 10 n inertial parameters consistent with beta_b, the ones nearest to the
@@ -32,20 +35,45 @@ from reflexarm.ident.estimation import DynamicsIdentification, PhysicalConsisten
 from reflexarm.robots.friction import CoulombViscousFriction
 from reflexarm.robots.robot_model import RobotModel, builtin_robots, load_robot
 
-__all__ = ["FORMAT", "load_identified_model", "read_identified_model", "save_identified_model"]
+__all__ = ["FORMAT", "load_identified_model", "read_identified_model", "resolve_robot_source", "save_identified_model"]
 
 FORMAT = "reflexarm-identified-model"
-VERSION = 1
+#: Version written: 2 stores the robot file relative to the model file (1: absolute); both are read.
+VERSION = 2
+READABLE_VERSIONS = (1, 2)
+#: Description of the arm cut out of its file (set by load_robot's base/tip/locked), stored when set.
+_CUT_KEYS = ("base", "tip", "locked")
 
 #: Relative tolerance on the base parameters re-computed from the stored standard parameters.
 _CONSISTENCY_RTOL = 1e-8
 
 
-def _robot_source(robot: RobotModel) -> str:
+def _robot_source(robot: RobotModel, model_path: Path) -> str:
+    """A built-in robot's name, or the robot file relative to the model file's folder (POSIX separators)."""
     b = builtin_robots().get(robot.name)
     if b is not None and robot.source is not None and Path(robot.source).resolve() == b.path.resolve():
         return robot.name
-    return str(Path(robot.source).resolve()) if robot.source is not None else robot.name
+    if robot.source is None:
+        return robot.name
+    return Path(os.path.relpath(Path(robot.source).resolve(), model_path.parent.resolve())).as_posix()
+
+
+def resolve_robot_source(source: str, model_path: str | os.PathLike[str]) -> str:
+    """The ``load_robot`` argument of a stored source: a built-in name, an absolute path (version 1
+    files) as it is, a relative path against the model file's folder."""
+    if source in builtin_robots() or os.path.isabs(source):
+        return source
+    return str(Path(model_path).parent / source)
+
+
+def _cut_description(robot: RobotModel) -> dict[str, Any]:
+    """``base``, ``tip``, ``locked`` of an arm cut out of its file (only the ones set)."""
+    out = {}
+    for key in _CUT_KEYS:
+        value = getattr(robot, key, None)
+        if value:
+            out[key] = dict(value) if isinstance(value, dict) else value
+    return out
 
 
 def save_identified_model(
@@ -80,15 +108,17 @@ def save_identified_model(
             PhysicalConsistencyWarning,
             stacklevel=2,
         )
+    p = Path(path)
     doc = {
         "format": FORMAT,
         "version": VERSION,
         "robot": {
             "name": robot.name,
-            "source": _robot_source(robot),
+            "source": _robot_source(robot, p),
             "ee_frame": robot.ee_frame,
             "sensor_frame": robot.sensor_frame,
             "joint_names": robot.joint_names,
+            **_cut_description(robot),
         },
         "identification": result.to_dict(),
         "standard_parameter_names": robot.inertial_parameter_names(),
@@ -101,7 +131,6 @@ def save_identified_model(
         },
         "extra": extra or {},
     }
-    p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     p.write_text(json.dumps(doc, indent=1))
     return p
@@ -118,9 +147,10 @@ def read_identified_model(path: str | os.PathLike[str]) -> tuple[DynamicsIdentif
         raise ModelError(f"cannot read identified model file {str(p)!r}: {e}") from e
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise ModelError(f'{p.name}: not a reflexarm identified model (expected "format": "{FORMAT}")')
-    if doc.get("version") != VERSION:
+    if doc.get("version") not in READABLE_VERSIONS:
         raise ModelError(
-            f"{p.name}: unsupported identified-model version {doc.get('version')!r}; this reflexarm reads {VERSION}"
+            f"{p.name}: unsupported identified-model version {doc.get('version')!r}; this reflexarm reads "
+            f"{', '.join(str(v) for v in READABLE_VERSIONS)}"
         )
     try:
         result = DynamicsIdentification.from_dict(doc["identification"])
@@ -136,7 +166,8 @@ def load_identified_model(
 
     Args:
         path: the JSON file written by :func:`save_identified_model`.
-        robot: the robot (default: loaded from the file's ``robot.source``).
+        robot: the robot (default: loaded from the file's ``robot.source``, relative to the model file's
+            folder, with its frames and, if stored, ``base``, ``tip`` and ``locked``).
         allow_inconsistent: load even if M(q) is not positive definite somewhere in the joint range
             (for analysis; a controller cannot use such a model).
 
@@ -152,7 +183,10 @@ def load_identified_model(
         src = info.get("source")
         if not src:
             raise ModelError(f"{name}: no robot source stored; pass robot=")
-        robot = load_robot(src, ee_frame=info.get("ee_frame"), sensor_frame=info.get("sensor_frame"))
+        cut = {k: info[k] for k in _CUT_KEYS if info.get(k)}
+        robot = load_robot(
+            resolve_robot_source(src, path), ee_frame=info.get("ee_frame"), sensor_frame=info.get("sensor_frame"), **cut
+        )
     if tuple(robot.joint_names) != tuple(result.joint_names):
         raise ModelError(
             f"{name}: identified for joints {list(result.joint_names)}; robot {robot.name!r} has {robot.joint_names}"

@@ -177,18 +177,18 @@ def write_identified_robot(
             f"links fixed to a moving link ({', '.join(lumped)}) get zero mass; the moving link carries the whole "
             "identified inertia"
         )
-    tree = read_xml(src)
-    moved = relocate_paths(tree, fmt, src.parent, dst.parent)
+    root = read_xml(src)
+    moved = relocate_paths(root, fmt, src.parent, dst.parent)
     if moved:
         notes.append(f"{moved} file path(s) rewritten to resolve from {dst.parent}")
     coulomb = np.maximum(friction.coulomb, 0.0)
     viscous = np.maximum(friction.viscous, 0.0)
     if fmt == "urdf":
-        _write_urdf(tree.getroot(), robot, inertias, lumped, coulomb, viscous, src)
+        _write_urdf(root, robot, inertias, lumped, coulomb, viscous, src)
     else:
-        notes += _write_mjcf(tree.getroot(), robot, inertias, lumped, coulomb, viscous, src)
+        notes += _write_mjcf(root, robot, inertias, lumped, coulomb, viscous, src)
     dst.parent.mkdir(parents=True, exist_ok=True)
-    write_xml(tree, dst)
+    write_xml(root, dst)
     return dst, notes
 
 
