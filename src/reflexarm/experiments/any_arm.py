@@ -48,6 +48,7 @@ __all__ = [
     "loaded_joints",
     "place_cinderblock",
     "start_posture",
+    "work_posture",
 ]
 
 #: The built-in arm whose experiments keep the paper's constants.
@@ -115,15 +116,64 @@ def _keyframe(robot: RobotModel) -> np.ndarray | None:
     return np.array([qpos[index[name]] for name in robot.joint_names])
 
 
+#: Where :func:`start_posture` puts the end effector of an arm without a home: at this share of the arm's
+#: reach from the first joint's axis, horizontally [-] ...
+WORK_REACH_SHARE = 0.6
+#: ... and this share of the reach above the shoulder (the second joint's origin) [-].
+WORK_HEIGHT_SHARE = 0.0
+
+
 def start_posture(robot: RobotModel) -> np.ndarray:
     """Where the experiments start on ``robot`` [rad]: its home if set (built-in robots), else the
-    file's ``home`` keyframe (MJCF), else the middle of each joint's range; within the range's margin."""
+    file's ``home`` keyframe (MJCF), else a working posture (:func:`work_posture`); within the
+    range's margin."""
+    lo, hi = _finite_range(robot)
     if np.any(robot.home != 0.0):
         return robot.home.copy()
     key = _keyframe(robot)
-    lo, hi = _finite_range(robot)
-    q = 0.5 * (lo + hi) if key is None else key
+    q = work_posture(robot) if key is None else key
     return np.clip(q, lo, hi)
+
+
+def work_posture(robot: RobotModel, iterations: int = 200) -> np.ndarray:
+    """A posture with the end effector in front of the arm: from the middle of each joint's range,
+    damped least squares (0.05 damping) moves it to :data:`WORK_REACH_SHARE` of the reach (the end
+    effector's distance from the shoulder at the range middle) from the first joint's axis, at
+    :data:`WORK_HEIGHT_SHARE` of the reach above the shoulder, in the end effector's horizontal
+    direction at the start, with the tool axis pointing down (:func:`_tool_axis`); inside the ranges'
+    margin."""
+    lo, hi = _finite_range(robot)
+    q = 0.5 * (lo + hi)
+    up = _up(robot)
+    names = robot.frame_names
+    shoulder_frame = robot.joint_names[1] if robot.n > 1 else robot.joint_names[0]
+    shoulder = robot.compute_frame_pose(q, shoulder_frame)[1] if shoulder_frame in names else np.zeros(3)
+    base = robot.compute_frame_pose(q, robot.joint_names[0])[1] if robot.joint_names[0] in names else np.zeros(3)
+    p = robot.compute_frame_pose(q)[1]
+    reach = float(np.linalg.norm(p - shoulder))
+    direction = _horizontal(p - base, up)
+    nd = float(np.linalg.norm(direction))
+    direction = np.array([1.0, 0.0, 0.0]) if nd < 1e-6 else direction / nd
+    target = _horizontal(base, up) + direction * WORK_REACH_SHARE * reach
+    target = target + up * float((shoulder @ up) + WORK_HEIGHT_SHARE * reach)
+    for _ in range(iterations):
+        R, p = robot.compute_frame_pose(q)
+        axis = _tool_axis(robot, q, R, p)
+        e = np.concatenate([target - p, np.cross(axis, -up)])  # position; tool axis down
+        if float(np.linalg.norm(e)) < 1e-4:
+            break
+        J = robot.compute_frame_jacobian(q, robot.ee_frame, world_aligned=True)
+        dq = J.T @ np.linalg.solve(J @ J.T + 0.05**2 * np.eye(6), e)
+        q = np.clip(q + dq, lo, hi)
+    return q
+
+
+def _tool_axis(robot: RobotModel, q: np.ndarray, R: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """The tool axis (unit, world): from the wrist sensor to the end-effector point, else the end
+    effector's z axis (the convention of :class:`~reflexarm.sim.EndEffectorForce`)."""
+    axis = p - robot.compute_frame_pose(q, robot.sensor_frame)[1]
+    n = float(np.linalg.norm(axis))
+    return axis / n if n > 1e-3 else R[:, 2].copy()
 
 
 def _horizontal(v: np.ndarray, up: np.ndarray) -> np.ndarray:
@@ -156,11 +206,14 @@ def _swing(
 
 
 def _driving_joint(robot: RobotModel, q: np.ndarray, frame: str, joints: range) -> tuple[int, float]:
-    """(joint, radius [m]): among ``joints`` the one whose rotation moves ``frame`` fastest horizontally."""
+    """(joint, radius [m]): among ``joints`` the one whose rotation moves ``frame`` fastest horizontally,
+    the horizontal speed weighted by its share of the speed (a swing that also lifts or lowers the frame
+    ranks lower); radius: the horizontal speed per rad."""
     J = robot.compute_frame_jacobian(q, frame, world_aligned=True)[:3]
     up = _up(robot)
     speeds = [float(np.linalg.norm(_horizontal(J[:, j], up))) for j in joints]
-    best = int(np.argmax(speeds))
+    scores = [v * v / max(float(np.linalg.norm(J[:, j])), 1e-9) for v, j in zip(speeds, joints, strict=True)]
+    best = int(np.argmax(scores))
     if speeds[best] < 1e-3:
         raise ConfigError(
             f"no joint among {[j + 1 for j in joints]} moves frame {frame!r} horizontally at the start posture "
@@ -206,14 +259,16 @@ def ee_swing_plan(robot: RobotModel, q0: np.ndarray | None = None) -> EeSwingPla
 #: Vertical clearance kept between the block's top and the links before the wrist (they pass above
 #: it), and between the table and every link [m].
 CLEARANCE_M = 0.02
+#: Spheres per collision geom in the swept check of :func:`place_cinderblock` [-].
+SPHERES_PER_GEOM = 7
 #: Share of the block's length that lies beyond the end effector's path, away from the arm's base [-].
 OUTSIDE_SHARE = 0.75
 
 
 def _arm_geoms_along(robot: RobotModel, qs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For the arm's collision geoms at each posture of ``qs``: (centres (k, g, 3) and half-extents
-    (k, g, 3) of their world-aligned bounding boxes, distal mask (g,): the geom is on a body beyond the
-    wrist sensor)."""
+    (k, g, 3) of their world-aligned bounding boxes, distal mask (g,): the geom is on the wrist, i.e. the
+    last two links or a body beyond the wrist sensor)."""
     import mujoco
 
     from reflexarm.sim import Plant
@@ -222,19 +277,42 @@ def _arm_geoms_along(robot: RobotModel, qs: np.ndarray) -> tuple[np.ndarray, np.
     m, d = plant.model, plant.data
     arm = set(int(b) for b in plant._arm_bodies)
     distal = set(int(b) for b in plant._load_bodies)
+    wrist = int(m.jnt_bodyid[m.joint(robot.joint_names[max(0, robot.n - 2)]).id])
+    distal |= {b for b in range(m.nbody) if _descends(m, b, wrist)}
     geoms = [g for g in range(m.ngeom) if int(m.geom_bodyid[g]) in arm and (m.geom_contype[g] or m.geom_conaffinity[g])]
-    centres = np.empty((len(qs), len(geoms), 3))
-    halves = np.empty((len(qs), len(geoms), 3))
+    # each geom as spheres along the longest axis of its local bounding box (a link is a long cylinder:
+    # its world-aligned box would overstate how low it reaches)
     local_c = np.array(m.geom_aabb[geoms, :3])
     local_h = np.array(m.geom_aabb[geoms, 3:])
+    points, radii, owner = [], [], []
+    for i in range(len(geoms)):
+        a = int(np.argmax(local_h[i]))
+        r = float(np.delete(local_h[i], a).max())
+        half = max(0.0, float(local_h[i, a]) - r)
+        for x in np.linspace(-half, half, SPHERES_PER_GEOM):
+            e = np.zeros(3)
+            e[a] = x
+            points.append(local_c[i] + e)
+            radii.append(r)
+            owner.append(i)
+    pts, own = np.array(points), np.array(owner)
+    centres = np.empty((len(qs), len(pts), 3))
     for k, q in enumerate(qs):
         d.qpos[plant._qadr_arr] = q
         mujoco.mj_kinematics(m, d)
-        R = np.array(d.geom_xmat[geoms]).reshape(-1, 3, 3)
-        centres[k] = d.geom_xpos[geoms] + np.einsum("gij,gj->gi", R, local_c)
-        halves[k] = np.einsum("gij,gj->gi", np.abs(R), local_h)
-    mask = np.array([int(m.geom_bodyid[g]) in distal for g in geoms], dtype=bool)
+        R = np.array(d.geom_xmat[geoms]).reshape(-1, 3, 3)[own]
+        centres[k] = d.geom_xpos[geoms][own] + np.einsum("gij,gj->gi", R, pts)
+    halves = np.broadcast_to(np.array(radii)[None, :, None], centres.shape).copy()
+    mask = np.array([int(m.geom_bodyid[geoms[i]]) in distal for i in own], dtype=bool)
     return centres, halves, mask
+
+
+def _descends(m: Any, body: int, root: int) -> bool:
+    while body > 0:
+        if body == root:
+            return True
+        body = int(m.body_parentid[body])
+    return root == 0
 
 
 def place_cinderblock(
@@ -254,10 +332,11 @@ def place_cinderblock(
     direction there with its long side, :data:`OUTSIDE_SHARE` of which lies beyond the path, away from
     the base. Heights, from the arm's collision geometry swept along the path
     (bounding spheres, over the block's footprint): the end effector meets the face at half the block's
-    height unless the links before the wrist sensor pass lower, then the block's top stays
-    :data:`CLEARANCE_M` below them (so the wrist meets the block first, as the hand does on Atlas); the
-    table (the block's support) stays :data:`CLEARANCE_M` below every link; below 5 cm the block stands
-    on the floor. The block's core is ``size``.
+    height unless the links before the wrist (the last two links) pass lower, then the block's top
+    stays :data:`CLEARANCE_M` below them (so the wrist meets the block first, as the hand does on
+    Atlas); the table (the block's support) stays :data:`CLEARANCE_M` below every link; below 5 cm the
+    block stands on the floor and is as tall as the top requires (its core's height then differs from
+    ``size``). The block's core is ``size`` otherwise.
 
     Raises:
         ConfigError: the path is shorter than ``depth`` or does not move horizontally; the arm passes
@@ -299,8 +378,10 @@ def place_cinderblock(
     top = min(height + sz / 2.0 + padding, lowest_proximal - CLEARANCE_M)
     bottom = min(top - padding - sz, lowest - CLEARANCE_M)
     table = bottom if bottom >= 0.05 else 0.0
+    if table == 0.0:
+        sz = top - padding
     block_top = table + sz + padding
-    if over.any() and block_top < float(bottoms[over & distal[None, :]].min(initial=math.inf)):
+    if sz < 0.05 or (over.any() and block_top < float(bottoms[over & distal[None, :]].min(initial=math.inf))):
         raise ConfigError(
             f"the arm passes above the block (its top at {block_top:.3f} m, the wrist no lower than "
             f"{float(bottoms[over & distal[None, :]].min()):.3f} m); choose another start posture"
@@ -308,7 +389,7 @@ def place_cinderblock(
     yaw = math.atan2(u[1], u[0]) - math.pi / 2.0
     return {
         "position": (float(centre[0]), float(centre[1])),
-        "size": tuple(size),
+        "size": (sx, sy, sz),
         "padding": padding,
         "table_height": table,
         "table_size": (sx + 0.1, sx + 0.1),

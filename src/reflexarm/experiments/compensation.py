@@ -1,6 +1,8 @@
 """Disturbance compensation (DC) and end-effector force compliance (EFC): the simulation of Sec. III-C.
 
-Everything runs on the built-in Atlas v5 left arm in MuJoCo (the *true* arm) with the controller's model
+Everything runs on the built-in Atlas v5 left arm (or the arm ``CompensationSetup.robot`` names, loaded
+with ``robot_options``; it holds its start posture, :func:`~reflexarm.experiments.any_arm.start_posture`)
+in MuJoCo (the *true* arm) with the controller's model
 perturbed by :mod:`reflexarm.robots.perturbation` (or an identified model, ``model_file``) and the
 sensors carrying the paper's noise. This module holds the setup and the single run; Fig. 12 is
 :mod:`reflexarm.experiments.efc_step`, Fig. 11 is :mod:`reflexarm.experiments.compliance_loss`, Fig. 3
@@ -50,6 +52,7 @@ import numpy as np
 
 from reflexarm.control import Controller
 from reflexarm.errors import ConfigError
+from reflexarm.experiments.any_arm import start_posture
 from reflexarm.experiments.metrics import msie
 from reflexarm.robots import CoulombViscousFriction, RobotModel, load_robot, perturb_model
 from reflexarm.signals import Reference
@@ -68,6 +71,7 @@ __all__ = [
     "held_posture",
     "make_controller",
     "msie_against",
+    "robot_options",
     "reference_run",
     "run_case",
     "true_robot",
@@ -90,7 +94,9 @@ class CompensationSetup:
     """The simulation of Fig. 12 (defaults: the paper's values; see the module docstring).
 
     Attributes:
-        robot: built-in robot name.
+        robot: built-in robot name or robot file.
+        robot_options: keyword arguments of :func:`~reflexarm.robots.load_robot` as (name, value) pairs
+            (``ee_frame``, ``sensor_frame``, ``base``, ``tip``, ``locked``; a dict value as pairs too).
         stiffness: k_i [Nm/rad].
         damping_ratio: d_xi [-].
         observer_gain: k_o [1/s].
@@ -110,6 +116,7 @@ class CompensationSetup:
     """
 
     robot: str = "atlas_v5_left_arm"
+    robot_options: tuple[tuple[str, Any], ...] = ()
     stiffness: float = 150.0
     damping_ratio: float = 0.3
     observer_gain: float = 10.0
@@ -191,16 +198,38 @@ class HoldReference:
 _ROBOTS: dict[str, RobotModel] = {}
 
 
-def true_robot(name: str) -> RobotModel:
-    """The true robot model (loaded once per process; callers get copies where they modify)."""
-    if name not in _ROBOTS:
-        _ROBOTS[name] = load_robot(name)
-    return _ROBOTS[name]
+def robot_options(options: dict[str, Any] | None) -> tuple[tuple[str, Any], ...]:
+    """``load_robot`` keyword arguments as the hashable pairs of :attr:`CompensationSetup.robot_options`."""
+    out = []
+    for key, value in sorted((options or {}).items()):
+        if value is None:
+            continue
+        out.append((key, tuple(sorted(value.items())) if isinstance(value, dict) else value))
+    return tuple(out)
+
+
+def _load_kwargs(options: Sequence[Sequence[Any]]) -> dict[str, Any]:
+    kwargs: dict[str, Any] = {}
+    for key, value in options:
+        kwargs[str(key)] = {str(k): float(v) for k, v in value} if key == "locked" else value
+    return kwargs
+
+
+def true_robot(robot: str | CompensationSetup, options: Sequence[Sequence[Any]] = ()) -> RobotModel:
+    """The true robot model of a setup (or of a robot name/file with ``load_robot`` ``options`` pairs),
+    loaded once per process; callers get copies where they modify."""
+    if isinstance(robot, CompensationSetup):
+        robot, options = robot.robot, robot.robot_options
+    key = f"{robot}|{tuple(tuple(o) for o in options)!r}"
+    if key not in _ROBOTS:
+        _ROBOTS[key] = load_robot(robot, **_load_kwargs(options))
+    return _ROBOTS[key]
 
 
 def held_posture(setup: CompensationSetup, robot: RobotModel) -> np.ndarray:
-    """The setup's held joint posture [rad] (the robot's home unless ``setup.posture``)."""
-    q = robot.home if setup.posture is None else np.asarray(setup.posture, dtype=float)
+    """The setup's held joint posture [rad] (the robot's start posture unless ``setup.posture``: its home
+    on the built-in robots, see :func:`~reflexarm.experiments.any_arm.start_posture`)."""
+    q = start_posture(robot) if setup.posture is None else np.asarray(setup.posture, dtype=float)
     if q.shape != (robot.n,):
         raise ConfigError(f"posture must have {robot.n} joint values; got {q.shape}")
     return q.copy()
@@ -210,7 +239,7 @@ def build_plant(
     setup: CompensationSetup, scenes: Sequence[Scene], *, noise_scale: float, seed: int
 ) -> tuple[Plant, RobotModel]:
     """The true arm with the setup's friction variant and scaled paper noise (reset at the posture)."""
-    robot = true_robot(setup.robot)
+    robot = true_robot(setup)
     true_friction = None
     if setup.plant_friction != "dry":
         true_friction = CoulombViscousFriction.zeros(robot.n)
@@ -235,7 +264,7 @@ def controller_model(setup: CompensationSetup, model_error: float | None = None,
         ConfigError: ``model_file`` together with a non-zero explicit ``model_error`` (an identified model
             is used as it is).
     """
-    robot = true_robot(setup.robot)
+    robot = true_robot(setup)
     if setup.model_file is not None:
         if model_error:
             raise ConfigError(
@@ -334,7 +363,9 @@ def reference_run(setup: CompensationSetup) -> Trace:
 
 def ee_positions(trace: Trace, robot: RobotModel | None = None, frame: str | None = None) -> np.ndarray:
     """World positions (N, 3) [m] of the end effector (or ``frame``) along the trace's true joint positions."""
-    robot = robot or true_robot(str(trace.meta.get("setup", {}).get("robot", "atlas_v5_left_arm")))
+    if robot is None:
+        meta = trace.meta.get("setup", {})
+        robot = true_robot(str(meta.get("robot", "atlas_v5_left_arm")), meta.get("robot_options", ()))
     return np.array([robot.compute_frame_pose(q, frame)[1] for q in trace.q])
 
 

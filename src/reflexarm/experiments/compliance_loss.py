@@ -84,7 +84,7 @@ def compliance_loss(
     """
     setup = setup or real_arm_setup()
     setup = replace(setup, duration=max(setup.duration, 5.0))
-    robot = true_robot(setup.robot)
+    robot = true_robot(setup)
     derived_seed, noise_seed = trial_seeds(seed, 0)
     model_seed = derived_seed if model_seed is None else model_seed
     t_release = 4.0

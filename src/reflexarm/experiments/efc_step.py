@@ -77,7 +77,7 @@ def efc_step(
         explains, ``(d_DC - d_DC,no cut-off) / d_DC``; ``peak_dc_residual_Nm`` tells whether it was hit.
     """
     setup = setup or CompensationSetup()
-    robot = true_robot(setup.robot)
+    robot = true_robot(setup)
     derived_seed, noise_seed = trial_seeds(seed, 0)
     model_seed = derived_seed if model_seed is None else model_seed
     runs: dict[str, tuple[int, int, float | None]] = {name: (ke, kx, None) for name, (ke, kx) in CASES.items()}

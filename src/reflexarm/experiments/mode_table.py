@@ -7,6 +7,7 @@ from typing import Any
 import numpy as np
 
 from reflexarm.control import CONTROL_MODES, Controller, ModeSupervisor
+from reflexarm.experiments.any_arm import RANGE_MARGIN, default_link, is_paper_arm, link_body
 from reflexarm.experiments.compensation import (
     CompensationSetup,
     HoldReference,
@@ -32,9 +33,21 @@ __all__ = ["CHECK_RATIO", "mode_table"]
 CHECK_RATIO = 0.5
 
 
-def _tracking_trajectory(q0: np.ndarray) -> JointTrajectory:
-    """Free motion for the accuracy column: 0.3 rad on shz, shx, ely, elx out (2 s), hold, back, hold."""
-    q1 = q0 + np.array([0.3, 0.2, -0.3, 0.3, 0.0, 0.0, 0.0])
+#: The accuracy column's motion of the first four joints [rad] (on Atlas shz, shx, ely, elx).
+TRACKING_OFFSETS = (0.3, 0.2, -0.3, 0.3)
+
+
+def _tracking_trajectory(q0: np.ndarray, robot: RobotModel) -> JointTrajectory:
+    """Free motion for the accuracy column: :data:`TRACKING_OFFSETS` on the first four joints out (2 s),
+    hold, back, hold; on another arm the end point is kept inside its joint ranges' margin."""
+    offsets = np.zeros(q0.size)
+    k = min(len(TRACKING_OFFSETS), q0.size)
+    offsets[:k] = TRACKING_OFFSETS[:k]
+    q1 = q0 + offsets
+    if not is_paper_arm(robot):
+        lo, hi = robot.lower_limit, robot.upper_limit
+        m = RANGE_MARGIN * np.where(np.isfinite(hi - lo), hi - lo, 0.0)
+        q1 = np.clip(q1, lo + m, hi - m)
     return JointTrajectory(np.array([q0, q0, q1, q1, q0, q0]), np.array([0.5, 2.0, 1.0, 2.0, 1.0]))
 
 
@@ -52,8 +65,9 @@ def mode_table(
       setup's model errors and noise; ratio = RMS / RMS of the compliant mode;
     * end-effector compliance: the Fig. 12 step (50 N normal to the end effector); ratio = measured
       end-effector displacement under the load / the displacement K alone prescribes;
-    * link compliance: 50 N on the forearm link at the elbow (:class:`LinkForce`), not seen by the
-      wrist sensor; ratio = measured elbow displacement / prescribed;
+    * link compliance: 50 N on the forearm link at the elbow (:class:`LinkForce`; on another arm the
+      mid-chain link, :func:`~reflexarm.experiments.any_arm.default_link`), not seen by the wrist
+      sensor; ratio = measured displacement of the link / prescribed;
     * link compliance with the supervisor: the same push with detection (zeta = 11 Nm, the paper's
       threshold) and the supervisor's reaction "compliant" (Fig. 3's automatic switch).
 
@@ -61,11 +75,12 @@ def mode_table(
         (rows, traces): one row per mode with the measured values, the derived marks and the paper's.
     """
     setup = setup or CompensationSetup(plant_friction="dry", kappa_f=0)
-    robot = true_robot(setup.robot)
+    robot = true_robot(setup)
     derived_seed, noise_seed = trial_seeds(seed, 0)
     model_seed = derived_seed if model_seed is None else model_seed
     q0 = held_posture(setup, robot)
     k = setup.stiffness
+    link = link_body(robot, default_link(robot))[1]  # Atlas: l_larm
     traces: dict[str, Trace] = {}
     rows: list[dict[str, Any]] = []
     acc: dict[str, float] = {}
@@ -73,7 +88,7 @@ def mode_table(
         # accuracy: free motion
         plant, _ = build_plant(setup, [], noise_scale=setup.noise_scale, seed=noise_seed)
         ctrl = make_controller(setup, mode.kappa_eps, mode.kappa_ext, model_seed=model_seed)
-        traj = _tracking_trajectory(q0)
+        traj = _tracking_trajectory(q0, robot)
         tr = run_closed_loop(plant, ctrl, traj, 6.5, progress=progress)
         traces[f"{name}/tracking"] = tr
         acc[name] = rms(tr.q - tr.q_d)
@@ -88,7 +103,7 @@ def mode_table(
         # link compliance, without and with the supervisor's automatic switch
         link_ratio: dict[bool, float] = {}
         for supervised in (False, True):
-            push = LinkForce(magnitude=setup.force, t_on=setup.t_on, t_off=setup.t_off)
+            push = LinkForce(body=link, magnitude=setup.force, t_on=setup.t_on, t_off=setup.t_off)
             plant, _ = build_plant(setup, [push], noise_scale=setup.noise_scale, seed=noise_seed)
             ctrl = make_controller(
                 setup,
@@ -103,10 +118,10 @@ def mode_table(
             if isinstance(runner_ctrl, ModeSupervisor):
                 runner_ctrl.log_to(tr_l)
             traces[f"{name}/link_force{'/supervised' if supervised else ''}"] = tr_l
-            P = ee_positions(tr_l, robot, "l_larm")
+            P = ee_positions(tr_l, robot, link)
             dp = window_mean(tr_l.t, P, *setup.load_window) - window_mean(tr_l.t, P, *setup.pre_window)
             f_l = window_mean(tr_l.t, tr_l.extras["link_force"], *setup.load_window)
-            J_l = robot.compute_frame_jacobian(q0, "l_larm", world_aligned=True)[:3]
+            J_l = robot.compute_frame_jacobian(q0, link, world_aligned=True)[:3]
             link_ratio[supervised] = float(np.linalg.norm(dp)) / _designed_displacement(robot, q0, J_l, f_l, k)
         rows.append(
             {

@@ -23,6 +23,11 @@ impedance 0.0043 rad/s (the paper's ranking); over the whole run PD 0.016, imped
 ranking follows the gains, not the structure of (2): the PD's K_d passes more velocity noise; with
 K_d = 10 Nms/rad, or with the impedance's own gains (K_p = 300, K_d = 14), the PD tracks as well.
 
+On another arm (:meth:`VelocityTrackingSetup.for_robot`) the experiment starts from the arm's start posture
+(:func:`~reflexarm.experiments.any_arm.start_posture`), moves joint ceil(n/2) by default, at most at half its
+velocity limit and inside its range, and the PD gains give every joint the bandwidth of Atlas' elx servo
+(:data:`PD_BANDWIDTH`, :data:`PD_DAMPING_RATIO` on the joint's own inertia M_jj at the start posture).
+
 The metric is the RMS of ``dq - dq_d`` of the moving joint (true velocity, not the noisy measurement)
 over the constant-speed phases, after a settling margin; the RMS over the whole run (breakaway from
 stiction and ramps included) is reported beside it, because the two controllers differ there most: the
@@ -41,6 +46,7 @@ import numpy.typing as npt
 
 from reflexarm.control import Controller
 from reflexarm.errors import ConfigError
+from reflexarm.experiments.any_arm import RANGE_MARGIN, VELOCITY_SHARE, default_link, is_paper_arm, start_posture
 from reflexarm.experiments.collision import controller_model
 from reflexarm.robots import RobotModel, load_robot
 from reflexarm.signals import Command, Measurement, Reference
@@ -61,6 +67,10 @@ POSTURE = (0.0, -1.3, 1.57, 1.0, 0.0, 0.0, 0.0)
 #: PD gains per joint, [Nm/rad] and [Nms/rad] (see the module docstring).
 PD_KP = (1000.0, 1000.0, 1000.0, 1000.0, 100.0, 100.0, 100.0)
 PD_KD = (30.0, 30.0, 30.0, 30.0, 3.0, 3.0, 3.0)
+#: PD bandwidth on other arms [rad/s]: Atlas' elx servo, K_p = 1000 Nm/rad on ~0.32 kg m^2, is ~56 rad/s ...
+PD_BANDWIDTH = 56.0
+#: ... with damping ratio ~0.8 (K_d = 30 Nms/rad).
+PD_DAMPING_RATIO = 0.8
 
 
 class TrapezoidalJointMotion:
@@ -200,6 +210,34 @@ class VelocityTrackingSetup:
     def motion(self) -> TrapezoidalJointMotion:
         return TrapezoidalJointMotion(self.posture, self.joint, self.speed, self.travel, self.ramp, self.hold)
 
+    @classmethod
+    def for_robot(cls, robot: RobotModel, joint: int | None = None) -> VelocityTrackingSetup:
+        """The setup on ``robot``: the paper's on Atlas; elsewhere derived (module docstring). ``joint``
+        is 0-based (default: Atlas' elx, else joint ceil(n/2)).
+
+        Raises:
+            ConfigError: ``joint`` outside 0..n-1.
+        """
+        if joint is not None and not 0 <= joint < robot.n:
+            raise ConfigError(f"joint must be in 1..{robot.n} (1-based); got {joint + 1}")
+        if is_paper_arm(robot):
+            return cls() if joint is None else cls(joint=joint)
+        j = default_link(robot) - 1 if joint is None else joint
+        q0 = start_posture(robot)
+        lo, hi = robot.lower_limit[j], robot.upper_limit[j]
+        bounded = bool(np.isfinite(lo) and np.isfinite(hi) and hi > lo)
+        room = (1.0 - 2.0 * RANGE_MARGIN) * (hi - lo) if bounded else math.inf
+        travel = float(min(0.9, room))
+        vlim = float(robot.velocity_limit[j])
+        speed = min(0.3, VELOCITY_SHARE * vlim) if math.isfinite(vlim) and vlim > 0 else 0.3
+        speed = min(speed, 0.5 * travel / 0.2)  # a constant-speed phase after the 0.2 s ramp
+        if bounded:
+            q0[j] = float(np.clip(q0[j], lo + RANGE_MARGIN * (hi - lo), hi - RANGE_MARGIN * (hi - lo) - travel))
+        inertia = np.maximum(np.diag(robot.compute_mass_matrix(q0)), 1e-3)
+        kp = tuple(float(x) for x in inertia * PD_BANDWIDTH**2)
+        kd = tuple(float(x) for x in 2.0 * PD_DAMPING_RATIO * PD_BANDWIDTH * inertia)
+        return cls(joint=j, speed=speed, travel=travel, posture=tuple(float(x) for x in q0), pd_kp=kp, pd_kd=kd)
+
 
 @dataclass
 class VelocityTrackingResult:
@@ -240,10 +278,22 @@ def run_velocity_tracking(
     noise: SensorNoise = PAPER_NOISE,
     seed: int = 0,
     progress: bool = False,
+    robot: RobotModel | None = None,
 ) -> VelocityTrackingResult:
-    """Run the PD and the impedance controller on the same motion, plant, noise and controller model."""
-    setup = setup or VelocityTrackingSetup()
-    robot = load_robot(ROBOT)
+    """Run the PD and the impedance controller on the same motion, plant, noise and controller model
+    (on ``robot``, default the built-in Atlas arm; :meth:`VelocityTrackingSetup.for_robot` its setup).
+
+    Raises:
+        ConfigError: the setup's posture or gains do not have the robot's number of joints.
+    """
+    robot = load_robot(ROBOT) if robot is None else robot
+    setup = setup or VelocityTrackingSetup.for_robot(robot)
+    for name in ("posture", "pd_kp", "pd_kd"):
+        if len(getattr(setup, name)) != robot.n:
+            raise ConfigError(
+                f"setup.{name} has {len(getattr(setup, name))} values; {robot.name!r} has {robot.n} joints "
+                "(use VelocityTrackingSetup.for_robot)"
+            )
     ctrl_model, info = controller_model(robot, model_error, model_seed, model)
     motion = setup.motion()
     controllers: dict[str, Any] = {
@@ -260,7 +310,9 @@ def run_velocity_tracking(
         plant = Plant(robot, noise=noise, seed=seed)
         plant.reset(np.asarray(setup.posture, dtype=float))
         tr = run_closed_loop(plant, ctrl, motion, motion.duration, progress=progress)
-        tr.meta.update({"experiment": "velocity_tracking", "controller_name": name, "controller_model": info})
+        tr.meta.update(
+            {"experiment": "velocity_tracking", "robot": robot.name, "controller_name": name, "controller_model": info}
+        )
         err = tr.dq[:, setup.joint] - tr.dq_d[:, setup.joint]
         window = motion.constant_speed(tr.t, setup.settle)
         traces[name] = tr
