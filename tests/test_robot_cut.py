@@ -215,6 +215,46 @@ def test_tilted_torso_changes_gravity_torques() -> None:
     np.testing.assert_allclose(upright.compute_mass_matrix(q), bent.compute_mass_matrix(q), atol=EXACT)
 
 
+FLOATING_URDF = """<robot name="floating">
+  <link name="world"/>
+  <link name="base"><inertial><mass value="2"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/>
+    </inertial></link>
+  <link name="arm"><inertial><origin xyz="0 0.02 0.1"/><mass value="1"/>
+    <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link>
+  <joint name="float" type="floating"><parent link="world"/><child link="base"/><origin xyz="0 0 1" rpy="0.3 0 0"/>
+  </joint>
+  <joint name="ja" type="revolute"><parent link="base"/><child link="arm"/><origin xyz="0 0.1 0"/><axis xyz="1 0 0"/>
+    <limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+</robot>"""
+
+
+def test_floating_urdf_base_is_fixed_at_the_files_pose(tmp_path: Path) -> None:
+    """A URDF floating joint from a 'world' link: fixed where its origin puts the base (1 m up, rolled 0.3
+    rad, so gravity acts on the hinge), with a note; the plant agrees."""
+    path = tmp_path / "floating.urdf"
+    path.write_text(FLOATING_URDF)
+    with pytest.warns(RobotFileWarning, match="the floating base joint 'float' is fixed at the file's pose"):
+        robot = load_robot(path, ee_frame="arm")
+    assert robot.joint_names == ["ja"] and robot.cut is not None and robot.cut.base == "base"
+    np.testing.assert_allclose(robot.compute_frame_pose([0.0], "base")[1], [0.0, 0.0, 1.0], atol=EXACT)
+    # gravity in the rolled base frame is 9.81 (0, -sin 0.3, -cos 0.3); the COM sits at y=0.02, z=0.1 from the
+    # hinge (x axis): g = -9.81 (0.1 sin 0.3 - 0.02 cos 0.3) = -0.1025 Nm (it would be +0.196 Nm unrolled)
+    expected = -9.81 * (0.1 * np.sin(0.3) - 0.02 * np.cos(0.3))
+    np.testing.assert_allclose(robot.compute_gravity([0.0]), [expected], rtol=0, atol=EXACT)
+    plant = Plant(robot, noise=SensorNoise.none())
+    assert max(check_agreement(robot, plant, n_states=10).values()) <= ATOL
+
+
+@needs_shared
+def test_humanoid_base_is_said_to_be_fixed() -> None:
+    with pytest.warns(
+        RobotFileWarning,
+        match=r"base link 'utorso' is held fixed in the world \(the world frame is the "
+        r"root link 'pelvis''s\); the joint\(s\) between them \['back_bkz', 'back_bky', 'back_bkx'\]",
+    ):
+        load_robot(ATLAS_V5, base="utorso", tip="l_hand")
+
+
 # ---------------------------------------------------------------------- locks and their errors
 @needs_shared
 def test_locks_are_clipped_to_the_limits_with_a_note() -> None:

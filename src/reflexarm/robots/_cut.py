@@ -74,7 +74,12 @@ def _frame_ancestors(model: pin.Model, fid: int) -> list[int]:
 
 
 def _root_link(model: pin.Model, tip_fid: int) -> str:
+    """The default base: the root link, or the link a floating-base joint carries (the tip's first link
+    below its last free joint)."""
     bodies = [f for f in _frame_ancestors(model, tip_fid) if model.frames[f].type == pin.FrameType.BODY]
+    free = [j for j in model.supports[model.frames[tip_fid].parentJoint] if j > 0 and model.nvs[j] != 1]
+    if free:
+        bodies = [f for f in bodies if model.frames[f].parentJoint == free[-1]] or bodies
     return str(model.frames[bodies[-1]].name)
 
 
@@ -185,6 +190,15 @@ def cut_chain(
             )
         q_ref[iq] = value
         values[name] = value
+    base_joint = model.frames[model.getFrameId(base, pin.FrameType.BODY)].parentJoint
+    below_root = [names[j] for j in model.supports[base_joint] if j > 0 and model.nvs[j] == 1]
+    if below_root:
+        up = _frame_ancestors(model, model.getFrameId(base, pin.FrameType.BODY))
+        root = str(model.frames[[f for f in up if model.frames[f].type == pin.FrameType.BODY][-1]].name)
+        notes.append(
+            f"robot{where}: the arm's base link {base!r} is held fixed in the world (the world frame is the root "
+            f"link {root!r}'s); the joint(s) between them {below_root} are locked like the others"
+        )
     lock_ids = [j for j in range(1, model.njoints) if j not in chain]
     reduced = pin.buildReducedModel(model, lock_ids, q_ref) if lock_ids else model.copy()
     reduced.name = model.name
