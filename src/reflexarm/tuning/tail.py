@@ -238,10 +238,10 @@ def fit_tail(
             best = (qu, u, m)
             break
     if best is None:
-        found = ", ".join(f"{c} above the {100 * q:g} % quantile" for q, c in counts[:3])
+        found = ", ".join(f"{c} above the {100 * q:g} %" for q, c in counts)
         raise DataError(
             f"too few separate excursions of |residual| to fit a tail: need {min_clusters} clusters above the "
-            f"fit threshold; found {found} (a longer log, more varied motion, or a shorter gap_s={gap_s:g} s)"
+            f"fit threshold; found {found} quantile (a longer log, more varied motion, or a shorter gap_s={gap_s:g} s)"
         )
     qu, u, m = best
     excess = m - u
