@@ -6,7 +6,6 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from reflexarm._cli.common import (
     add_common,
@@ -16,12 +15,15 @@ from reflexarm._cli.common import (
     model_error_line,
     out_dir,
 )
+from reflexarm._cli.robot_options import add_robot_options, load_robot_from_args
 from reflexarm._cli.run_outputs import SceneCapture, add_output_options, number_joints, write_json
 
-if TYPE_CHECKING:
-    from reflexarm.robots import RobotModel
-
 _PAPER_COLUMNS = [("quantity", "", "{}"), ("paper", "paper", "{}"), ("ours", "ours", "{}")]
+
+_DEPTH_HELP = (
+    "arms other than Atlas: the block stands across the end effector's path where the rest of the path would "
+    "run this deep into it [m] (default 0.12; Atlas keeps the paper's block position)"
+)
 
 _BLOCK_HELP = (
     "cinderblock variant: paper (0.39 x 0.19 x 0.19 m, 20 kg, table friction 0.6: the Stiff arm slides it) or "
@@ -37,8 +39,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     add_common(p, default_out="results/demo")
     add_model_options(p)
+    add_robot_options(p)
     add_output_options(p)
     p.add_argument("--block", choices=("paper", "tipping"), default="paper", help=_BLOCK_HELP)
+    p.add_argument("--depth", type=float, default=0.12, help=_DEPTH_HELP)
     p.set_defaults(func=_demo)
 
     s = sub.add_parser("simulate", help="run one of the paper's simulated collision experiments")
@@ -47,17 +51,27 @@ def register(sub: argparse._SubParsersAction) -> None:
     e = ssub.add_parser("ee-collision", help="the demo's experiment (Figs. 7-8)")
     add_common(e, default_out="results/ee-collision")
     add_model_options(e)
+    add_robot_options(e)
     add_output_options(e)
     e.add_argument("--block", choices=("paper", "tipping"), default="paper", help=_BLOCK_HELP)
+    e.add_argument("--depth", type=float, default=0.12, help=_DEPTH_HELP)
     e.set_defaults(func=_demo)
     lc = ssub.add_parser("link-collision", help="a stick pushes the elbow during a joint motion (Figs. 9-10)")
     add_common(lc, default_out="results/link-collision")
     add_model_options(lc)
+    add_robot_options(lc)
     add_output_options(lc)
+    lc.add_argument(
+        "--link",
+        default=None,
+        help="the link the stick pushes: a joint number, 1-based (its link), or a link name (default: Atlas' elbow "
+        "l_larm; other arms the link of joint ceil(n/2))",
+    )
     lc.set_defaults(func=_link)
     fm = ssub.add_parser("free-motion", help="false-alarm check: the demo trajectory without obstacle")
     add_common(fm, default_out="results/free-motion")
     add_model_options(fm)
+    add_robot_options(fm)
     add_output_options(fm)
     fm.add_argument("--duration", type=float, default=60.0, help="simulated time [s] (default 60)")
     fm.add_argument("--threshold", type=float, default=11.0, help="zeta [Nm] (default 11)")
@@ -71,9 +85,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     fm.add_argument(
         "--motion",
-        choices=("demo", "hydraulic"),
+        choices=("demo", "loaded", "hydraulic"),
         default="demo",
-        help="demo: shz swings along the demo's path; hydraulic: all four hydraulic joints move (default demo)",
+        help="demo: the demo's swing (shz on Atlas); loaded: the four joints with the largest gravity and friction "
+        "load move together (on Atlas the hydraulic ones; 'hydraulic' is its Atlas-only alias) (default demo)",
     )
     fm.set_defaults(func=_free)
     vt = ssub.add_parser(
@@ -82,21 +97,33 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     add_common(vt, default_out="results/velocity-tracking")
     add_model_options(vt)
+    add_robot_options(vt)
     add_output_options(vt)
-    vt.add_argument("--joint", type=int, default=4, help="moving joint, 1-based (default 4: elx, as in Fig. 5)")
-    vt.add_argument("--speed", type=float, default=0.3, help="constant speed [rad/s] (default 0.3)")
-    vt.add_argument("--travel", type=float, default=0.9, help="travel of each leg [rad] (default 0.9)")
+    vt.add_argument(
+        "--joint",
+        type=int,
+        default=None,
+        help="moving joint, 1-based (default 4 on Atlas: elx, as in Fig. 5; other arms joint ceil(n/2))",
+    )
+    vt.add_argument(
+        "--speed", type=float, default=None, help="constant speed [rad/s] (default 0.3; at most half the joint's limit)"
+    )
+    vt.add_argument(
+        "--travel", type=float, default=None, help="travel of each leg [rad] (default 0.9; within the joint's range)"
+    )
     vt.add_argument(
         "--pd-kp",
         type=float,
         default=None,
-        help="PD: K_p of the moving joint [Nm/rad] (default 1000 hydraulic, 100 wrist)",
+        help="PD: K_p of the moving joint [Nm/rad] (default Atlas 1000 hydraulic, 100 wrist; other arms "
+        "M_jj (56 rad/s)^2)",
     )
     vt.add_argument(
         "--pd-kd",
         type=float,
         default=None,
-        help="PD: K_d of the moving joint [Nms/rad] (default 30 hydraulic, 3 wrist)",
+        help="PD: K_d of the moving joint [Nms/rad] (default Atlas 30 hydraulic, 3 wrist; other arms "
+        "2 0.8 (56 rad/s) M_jj)",
     )
     vt.add_argument("--stiffness", type=float, default=300.0, help="impedance: k_i [Nm/rad] (default 300)")
     vt.set_defaults(func=_velocity)
@@ -105,17 +132,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _demo(args: argparse.Namespace) -> int:
     from reflexarm.experiments.collision import (
         EE_SETTINGS,
-        ROBOT,
         compare_with_paper,
         run_ee_collision,
         summarize_ee_collision,
         write_outputs,
     )
     from reflexarm.experiments.plots import plot_fig8
-    from reflexarm.robots import load_robot
 
     choice = model_choice(args)
-    robot = load_robot(ROBOT)
+    robot = load_robot_from_args(args)
     model = choice.build(robot)
     out = out_dir(args)
     print(f"controller model: {choice.label()}; sensor noise: the paper's; cinderblock: {args.block}", file=sys.stderr)
@@ -134,7 +159,14 @@ def _demo(args: argparse.Namespace) -> int:
         )
         with scene:
             tr = run_ee_collision(
-                setting, model=model, model_error=0.0, block=args.block, seed=args.seed, progress=not args.quiet
+                setting,
+                model=model,
+                model_error=0.0,
+                block=args.block,
+                seed=args.seed,
+                progress=not args.quiet,
+                robot=robot,
+                depth=args.depth,
             )
         tr.meta["controller_model"] = choice.describe()
         traces.append(tr)
@@ -168,7 +200,6 @@ def _demo(args: argparse.Namespace) -> int:
 
 def _link(args: argparse.Namespace) -> int:
     from reflexarm.experiments.collision import (
-        ROBOT,
         compare_with_paper,
         model_torque,
         run_link_collision,
@@ -176,16 +207,17 @@ def _link(args: argparse.Namespace) -> int:
         write_outputs,
     )
     from reflexarm.experiments.plots import plot_fig10
-    from reflexarm.robots import load_robot
 
     choice = model_choice(args)
-    robot = load_robot(ROBOT)
+    robot = load_robot_from_args(args)
     model = choice.build(robot)
     print(f"controller model: {choice.label()}; sensor noise: the paper's", file=sys.stderr)
     print(model_error_line(robot, model), file=sys.stderr)
     out = out_dir(args)
     with SceneCapture(args, out, "link_collision") as scene:
-        tr = run_link_collision(model=model, model_error=0.0, seed=args.seed, progress=not args.quiet)
+        tr = run_link_collision(
+            model=model, model_error=0.0, seed=args.seed, progress=not args.quiet, robot=robot, link=args.link
+        )
     tr.meta["controller_model"] = choice.describe()
     row = number_joints(summarize_link_collision(tr), robot.joint_names)
     write_outputs(out, "link_collision", [tr], [row])
@@ -216,6 +248,7 @@ def _free(args: argparse.Namespace) -> int:
 
     out = out_dir(args)
     choice = model_choice(args)
+    robot = load_robot_from_args(args)
     trace_path = {"auto": str(out / "free_motion_trace.parquet"), "none": None}.get(args.trace, args.trace)
     scene = SceneCapture(args, out, "free_motion")
     with scene:
@@ -226,9 +259,10 @@ def _free(args: argparse.Namespace) -> int:
             progress=not args.quiet,
             model_error=choice.level,
             model_seed=choice.seed,
-            model=None if choice.file is None else choice.build(_robot()),
+            model=None if choice.file is None else choice.build(robot),
             motion=args.motion,
             trace_path=trace_path,
+            robot=robot,
         )
     res["controller_model"] = choice.describe()  # type: ignore[assignment]
     # the smallest zeta without a false alarm over this run is the largest |residual| of any joint
@@ -236,19 +270,12 @@ def _free(args: argparse.Namespace) -> int:
     write_json(out / "free_motion.json", res)
     from reflexarm.experiments.plots import plot_free_motion
 
-    fig = plot_free_motion(res, _robot().joint_names, args.threshold, out / "free_motion.png", trace_path)
+    fig = plot_free_motion(res, robot.joint_names, args.threshold, out / "free_motion.png", trace_path)
     pictures = scene.finish(["free motion"], summary=out / "free_motion.json")
     print(json.dumps(res, indent=2))
     print(f"wrote {out}/ (free_motion.json, {fig.name}{', ' + Path(trace_path).name if trace_path else ''})")
     print(SceneCapture.describe(pictures))
     return 0
-
-
-def _robot() -> RobotModel:
-    from reflexarm.experiments.collision import ROBOT
-    from reflexarm.robots import load_robot
-
-    return load_robot(ROBOT)
 
 
 def _velocity(args: argparse.Namespace) -> int:
@@ -261,32 +288,37 @@ def _velocity(args: argparse.Namespace) -> int:
         run_velocity_tracking,
     )
 
-    base = VelocityTrackingSetup()
-    j = args.joint - 1
-    if not 0 <= j < len(base.posture):
-        raise ConfigError(f"--joint must be in 1..{len(base.posture)}; got {args.joint}")
+    robot = load_robot_from_args(args)
+    if args.joint is not None and not 1 <= args.joint <= robot.n:
+        raise ConfigError(f"--joint must be in 1..{robot.n}; got {args.joint}")
+    base = VelocityTrackingSetup.for_robot(robot, None if args.joint is None else args.joint - 1)
+    j = base.joint
     kp, kd = list(base.pd_kp), list(base.pd_kd)
     if args.pd_kp is not None:
         kp[j] = args.pd_kp
     if args.pd_kd is not None:
         kd[j] = args.pd_kd
     setup = replace(
-        base, joint=j, speed=args.speed, travel=args.travel, pd_kp=tuple(kp), pd_kd=tuple(kd), stiffness=args.stiffness
+        base,
+        speed=base.speed if args.speed is None else args.speed,
+        travel=base.travel if args.travel is None else args.travel,
+        pd_kp=tuple(kp),
+        pd_kd=tuple(kd),
+        stiffness=args.stiffness,
     )
     choice = model_choice(args)
     print(
-        f"joint {args.joint} at {args.speed:g} rad/s on the dry-friction plant (Table I), paper noise; "
+        f"joint {j + 1} at {setup.speed:g} rad/s on the dry-friction plant (the robot file's friction), paper noise; "
         f"controller model: {choice.label()}\n"
         f"PD: K_p = {kp[j]:g} Nm/rad, K_d = {kd[j]:g} Nms/rad, gravity feed-forward; "
         f"impedance (2): k = {args.stiffness:g} Nm/rad, d_xi = {setup.damping_ratio:g}",
         file=sys.stderr,
     )
-    robot = _robot()
     model = choice.build(robot)
     print(model_error_line(robot, model), file=sys.stderr)
     out = out_dir(args)
     with SceneCapture(args, out, "velocity_tracking") as scene:
-        res = run_velocity_tracking(setup, model=model, seed=args.seed, progress=not args.quiet)
+        res = run_velocity_tracking(setup, model=model, seed=args.seed, progress=not args.quiet, robot=robot)
     for name, tr in res.traces.items():
         tr.meta["controller_model"] = choice.describe()
         tr.save(out / f"velocity_tracking_{name.lower()}.npz")
