@@ -6,7 +6,7 @@ import os
 import warnings
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -17,6 +17,9 @@ from reflexarm.robots._cut import ChainCut
 from reflexarm.robots._loading import build_pinocchio_model
 from reflexarm.robots._mjcf import RobotFileWarning
 from reflexarm.robots.friction import CoulombViscousFriction
+
+if TYPE_CHECKING:  # at run time they come through __getattr__ below (loader.py imports this module)
+    from reflexarm.robots.loader import builtin_robots, load_robot  # noqa: F401
 
 __all__ = ["RobotModel"]  # load_robot and builtin_robots: see loader.py (still importable from here)
 
