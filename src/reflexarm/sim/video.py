@@ -41,8 +41,14 @@ CONTACT_TORQUE = 1e-3
 #: Free-camera elevation [deg] (negative: looking down) and the room left around the framed box [-].
 DEFAULT_ELEVATION = -20.0
 FRAME_MARGIN = 1.1
+#: Scene objects whose centre is farther from the arm's bounding-box centre than this many times the
+#: box's half diagonal are out of the way (parked), not part of the picture [-].
+NEAR_FACTOR = 3.0
 #: Length of a contact force arrow per newton [m/N]: 100 N draws 0.3 m, the size of a forearm.
 FORCE_ARROW_SCALE = 0.003
+#: Diameter of a contact force arrow and of a contact point's disc [m].
+FORCE_ARROW_WIDTH = 0.012
+CONTACT_POINT_WIDTH = 0.03
 #: Lower bounds of the headlight's ambient and diffuse intensity [-] (MuJoCo's default 0.1 / 0.4 leaves
 #: an arm without scene lights nearly black).
 HEADLIGHT_AMBIENT = 0.35
@@ -96,6 +102,12 @@ def frame_scene(
     d = plant.data if data is None else data
     arm, other = _scene_geoms(plant)
     arm_pts, other_pts = _corners(m, d, arm), _corners(m, d, other)
+    if arm_pts.shape[0] and other.size:
+        # scene objects parked far from the arm (the elbow stick waits 50 m below) are left out
+        lo_arm, hi_arm = arm_pts.min(axis=0), arm_pts.max(axis=0)
+        reach = NEAR_FACTOR * max(0.5 * float(np.linalg.norm(hi_arm - lo_arm)), 0.1)
+        near = np.linalg.norm(d.geom_xpos[other] - 0.5 * (lo_arm + hi_arm), axis=1) <= reach
+        other_pts = _corners(m, d, other[near])
     pts = np.vstack([arm_pts, other_pts])
     if pts.shape[0] == 0:
         raise SimulationError("the plant has no finite geometry to frame (only planes)")
@@ -151,6 +163,7 @@ class _Painter:
         opt.flags[mujoco.mjtVisFlag.mjVIS_CONTACTFORCE] = True
         opt.flags[mujoco.mjtVisFlag.mjVIS_CONTACTPOINT] = True
         opt.flags[mujoco.mjtVisFlag.mjVIS_TRANSPARENT] = True  # arrows inside a body stay visible
+        opt.flags[mujoco.mjtVisFlag.mjVIS_PERTFORCE] = True  # applied forces (xfrc_applied: force steps)
         self.option = opt
         scn = self.renderer.scene
         scn.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = False  # 4x faster offscreen, see notes/bags-and-video.md
@@ -164,17 +177,29 @@ class _Painter:
         cam.type = mujoco.mjtCamera.mjCAMERA_FREE
         cam.lookat[:] = view.lookat
         cam.distance, cam.azimuth, cam.elevation = view.distance, view.azimuth, view.elevation
-        light = m.vis.headlight
-        saved = (float(m.vis.map.force), light.ambient.copy(), light.diffuse.copy())
-        # drawing settings only, restored at once (the physics never reads them): MuJoCo draws a contact
-        # force F as an arrow F * map.force / meanmass long; the headlight lights a scene without lights
+        light, scale, size = m.vis.headlight, m.vis.scale, float(m.stat.meansize)
+        saved = (
+            float(m.vis.map.force),
+            light.ambient.copy(),
+            light.diffuse.copy(),
+            float(scale.forcewidth),
+            float(scale.contactwidth),
+            float(scale.contactheight),
+        )
+        # drawing settings only, restored at once (the physics never reads them). MuJoCo draws a contact
+        # force F as an arrow F * map.force / meanmass long and sizes arrows and contact points relative to
+        # meansize, which an object parked far away inflates: set them in metres. The headlight lights a
+        # scene without lights of its own.
         m.vis.map.force = FORCE_ARROW_SCALE * float(m.stat.meanmass)
+        scale.forcewidth = FORCE_ARROW_WIDTH / size
+        scale.contactwidth, scale.contactheight = CONTACT_POINT_WIDTH / size, 0.2 * CONTACT_POINT_WIDTH / size
         light.ambient = np.maximum(light.ambient, HEADLIGHT_AMBIENT)
         light.diffuse = np.maximum(light.diffuse, HEADLIGHT_DIFFUSE)
         try:
             self.renderer.update_scene(data, camera=cam, scene_option=self.option)
         finally:
-            m.vis.map.force, light.ambient, light.diffuse = saved
+            m.vis.map.force, light.ambient, light.diffuse = saved[:3]
+            scale.forcewidth, scale.contactwidth, scale.contactheight = saved[3:]
         image = np.asarray(self.renderer.render())
         return _draw_text(image, text) if text else image
 
