@@ -9,6 +9,7 @@ import time
 from typing import Any
 
 from reflexarm._cli.common import add_common, add_model_options, format_table, model_error_percent, out_dir
+from reflexarm._cli.robot_options import add_robot_options, robot_kwargs
 from reflexarm._cli.run_outputs import SceneCapture, add_output_options, write_traces
 
 
@@ -36,11 +37,12 @@ def _add_setup_options(p: argparse.ArgumentParser, friction: str, kappa_f: int) 
         seed_help="seed of the model-error draw (default: derived from --seed, as each trial of a sweep)",
     )
     p.add_argument("--noise-scale", type=float, default=1.0, help="factor on the paper's sensor noise (default 1)")
+    add_robot_options(p)
 
 
 def _setup(args: argparse.Namespace, **overrides: Any) -> Any:
     from reflexarm.errors import ConfigError
-    from reflexarm.experiments.compensation import CompensationSetup
+    from reflexarm.experiments.compensation import CompensationSetup, robot_options
 
     pct = model_error_percent(args)
     if args.noise_scale < 0:
@@ -51,6 +53,8 @@ def _setup(args: argparse.Namespace, **overrides: Any) -> Any:
         plant_friction=args.plant_friction,
         kappa_f=args.kappa_f,
         model_file=None if args.model is None else str(args.model),
+        robot=str(args.robot),
+        robot_options=robot_options(robot_kwargs(args)),
         **overrides,
     )
 

@@ -114,14 +114,14 @@ def predicted_residual_noise(setup: CompensationSetup, noise_scale: float, joint
     is uniform with half-width ``a s`` per component (variance ``(a s)^2 / 3``), independent over joints.
     Evaluated with the true model at the held posture (the model error changes it by ~ the level).
     """
-    robot = true_robot(setup.robot)
+    robot = true_robot(setup)
     dq_level = setup.sensor_noise(noise_scale).dq
     row = robot.compute_mass_matrix(held_posture(setup, robot))[joint]
     return float(setup.observer_gain * np.linalg.norm(row) * dq_level / math.sqrt(3.0))
 
 
 def _achieved_error(setup: CompensationSetup, model_error: float, model_seed: int) -> dict[str, float]:
-    robot = true_robot(setup.robot)
+    robot = true_robot(setup)
     model = controller_model(setup, model_error, model_seed)
     e = measure_model_error(robot, model, n_states=ERROR_STATES, seed=0)
     return {
