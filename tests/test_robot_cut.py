@@ -19,9 +19,11 @@ import pinocchio as pin
 import pytest
 
 from reflexarm.cli import main
+from reflexarm.control import Controller
 from reflexarm.errors import ModelError
 from reflexarm.robots import RobotFileWarning, RobotModel, load_robot
 from reflexarm.robots.example_arms import UR_LIKE_FINGERS, UR_LIKE_JOINTS, UR_LIKE_TIP, write_ur_like_arm
+from reflexarm.signals import Reference
 from reflexarm.sim import Plant, SensorNoise
 from test_model_agreement import ATOL, check_agreement
 
@@ -104,6 +106,44 @@ def test_package_uri_found_through_ros_package_path(ur_arm: Path, tmp_path: Path
         found = load_robot(moved, tip=UR_LIKE_TIP)
     assert Plant(found, noise=SensorNoise.none()).model.nmesh == 8
     np.testing.assert_array_equal(found.inertial_parameters(), lost.inertial_parameters())
+
+
+#: A UR5-like pose with the elbow up and the flange pointing down (every joint inside its limits).
+UR_HOME = np.array([0.0, -1.2, 1.5, -1.87, -1.57, 0.0])
+#: 50 N down on wrist_2_link: about 0.8 m from the shoulder, ~40 Nm on the shoulder lift against zeta = 11 Nm;
+#: the first-order residual (K_o = 5 1/s) crosses after about -ln(1 - 11/40) / 5 = 0.07 s.
+UR_PUSH = np.array([0.0, 0.0, -50.0])
+MAX_DETECTION_TIME = 0.5
+
+
+def test_cut_arm_holds_still_in_closed_loop_and_detects_a_push(ur_arm: Path) -> None:
+    """With the gripper's mass on the last link in both models, the observer's residual of the arm held
+    still stays at round-off (a lost gripper, 0.57 kg, changes g(q) at this pose by 3.5, 2.6 and 0.53 Nm on
+    joints 2-4) until a push on the wrist, which is detected."""
+    robot = _quiet_load(ur_arm, tip=UR_LIKE_TIP)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RobotFileWarning)
+        plant = Plant(robot, noise=SensorNoise.none())
+    plant.reset(UR_HOME)
+    controller = Controller(robot)
+    reference = Reference(UR_HOME, np.zeros(robot.n), np.zeros(robot.n))
+    at_rest = np.zeros(robot.n)
+    delay = None
+    for k in range(2500):
+        if k == 1500:
+            np.testing.assert_allclose(plant.q, UR_HOME, atol=1e-6)  # rad: held by exact gravity compensation
+            plant.apply_external_force(UR_PUSH, body="wrist_2_link")
+        cmd = controller.step(plant.measure(), reference)
+        assert cmd.fault == "", f"tick {k}: {cmd.fault}"
+        plant.step(cmd.tau)
+        if k < 1500:
+            assert not cmd.collision, f"false collision at rest, tick {k}, residual {cmd.residual}"
+            at_rest = np.maximum(at_rest, np.abs(cmd.residual))
+        elif cmd.collision:
+            delay = (k - 1500) * plant.control_period
+            break
+    assert at_rest.max() < 1e-6, at_rest  # Nm: the same model on both sides, only the observer's round-off
+    assert delay is not None and delay < MAX_DETECTION_TIME, delay
 
 
 # ---------------------------------------------------------------------- reduced model == whole model
