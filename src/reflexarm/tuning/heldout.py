@@ -91,13 +91,16 @@ def demo_collision_with(
 
     rows = []
     for name, zeta in thresholds.items():
-        value = float(zeta) if np.ndim(zeta) == 0 else tuple(float(v) for v in np.asarray(zeta).reshape(-1))
+        arr = np.asarray(zeta, dtype=float).reshape(-1)
+        value = float(arr[0]) if np.ndim(zeta) == 0 else tuple(float(v) for v in arr)
         setting = CollisionSetting("Coll.Det", stiffness=300.0, observer_gain=5.0, threshold=value)  # type: ignore[arg-type]
         trace = run_ee_collision(setting, model=model, seed=seed)
         row = summarize_ee_collision(trace)
         joints = np.flatnonzero(trace.collided.any(axis=0))
         first = trace.first_time(trace.collision)
-        at_first = np.flatnonzero(trace.collided[np.flatnonzero(trace.collision)[0]]) if first is not None else []
+        at_first: list[int] = (
+            np.flatnonzero(trace.collided[np.flatnonzero(trace.collision)[0]]).tolist() if first is not None else []
+        )
         row.update(
             {
                 "threshold": name,

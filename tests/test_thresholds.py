@@ -1,0 +1,161 @@
+"""reflexarm.tuning and ``reflexarm tune-thresholds``: the replay is the product's observer, the delay formula
+matches it, the study and the command agree and number joints from 1, short logs are refused."""
+
+from __future__ import annotations
+
+import json
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from reflexarm.cli import main
+from reflexarm.errors import ConfigError
+from reflexarm.experiments.collision import EE_START
+from reflexarm.ident.logs import save_log
+from reflexarm.ident.robot_log import RobotLog
+from reflexarm.sim import Trace
+from reflexarm.tuning import (
+    LogTooShortError,
+    ObserverSettings,
+    ThresholdWarning,
+    detection_delay,
+    load_free_motion_log,
+    record_free_motion_log,
+    replay_residual,
+    tune_thresholds,
+)
+
+DT = 1e-3
+
+
+def _static_log(robot, disturbance: np.ndarray, source: str = "static") -> RobotLog:
+    """The arm held still at EE_START with an external torque ``disturbance`` (N, n): at rest the motor
+    torque is g(q) - tau_ext (eq. (1) with ddq = dq = 0), so the residual must follow tau_ext."""
+    N = disturbance.shape[0]
+    q = np.tile(EE_START, (N, 1))
+    tau = robot.compute_gravity(EE_START)[None, :] - disturbance
+    return RobotLog(t=np.arange(N) * DT, q=q, dq=np.zeros_like(q), tau=tau, source=source)
+
+
+def _random_disturbance(n: int, seconds: float, seed: int) -> np.ndarray:
+    """Per joint, a value held for 0.5 s then redrawn (N(0, 2 Nm)), plus uniform noise of 0.1 Nm."""
+    rng = np.random.default_rng(seed)
+    holds = int(seconds / 0.5)
+    steps = rng.normal(0.0, 2.0, (holds, n))
+    return np.repeat(steps, int(0.5 / DT), axis=0) + rng.uniform(-0.1, 0.1, (holds * int(0.5 / DT), n))
+
+
+def test_detection_delay_formula():
+    T = 0.2
+    assert detection_delay(11.0, 10.0, T) is None  # a step below zeta is never detected
+    assert detection_delay(11.0, 30.0, T) == pytest.approx(-T * math.log(1.0 - 11.0 / 30.0), rel=1e-12)
+    # a residual already at b towards zeta shortens it; against zeta lengthens it
+    assert detection_delay(11.0, 30.0, T, 5.0) < detection_delay(11.0, 30.0, T) < detection_delay(11.0, 30.0, T, -5.0)
+    assert detection_delay(11.0, 30.0, T, 12.0) == 0.0
+
+
+@pytest.mark.parametrize("joint, step", [(2, 30.0), (0, 15.0)])
+def test_the_replayed_observer_crosses_zeta_when_the_formula_says(atlas, joint, step):
+    """A torque step at rest through the Controller: the residual is ~0 before it and crosses zeta at
+    t0 + t_d of the formula (to one tick: the observer sees the step one sample after it and the crossing
+    is quantised to a tick; 2 ticks of tolerance)."""
+    N, t0, zeta = 3000, 0.5, 11.0
+    e = np.zeros((N, atlas.n))
+    e[int(t0 / DT) :, joint] = step
+    rep = replay_residual(_static_log(atlas, e), atlas, ObserverSettings(observer_gain=5.0))
+    before = np.abs(rep.residual[: int(t0 / DT)]).max()
+    assert before < 1e-6, f"exact model at rest: the residual should be 0 before the step; got {before:.2e} Nm"
+    k = int(np.argmax(np.abs(rep.residual[:, joint]) > zeta))
+    T_o = -DT / math.log1p(-5.0 * DT)
+    predicted = detection_delay(zeta, step, T_o)
+    assert predicted is not None
+    np.testing.assert_allclose(rep.t[k] - t0, predicted, atol=2 * DT, err_msg="crossing time vs t_d formula")
+    np.testing.assert_allclose(rep.residual[-1, joint], step, rtol=1e-3, err_msg="the residual settles at the step")
+
+
+def test_replay_reproduces_the_online_residual(atlas):
+    """A simulated free-motion run (noise, +-10 % model): the offline replay of its recorded measurements
+    through a new Controller gives the online residual. The log does not hold the measured gravity vector
+    (noise 2e-4 m/s^2, 2e-5 of g, on gravity torques below ~100 Nm, low-passed by the observer): 1e-4 Nm."""
+    from reflexarm.experiments.collision import controller_model
+
+    model, _ = controller_model(atlas, 0.1, 0)
+    run = record_free_motion_log(2.0, model=model, seed=3)
+    rep = replay_residual(run.log, model)
+    assert rep.fault_ticks == 0
+    np.testing.assert_allclose(np.abs(rep.residual).max(axis=0), run.max_abs_residual, atol=1e-4)
+
+
+def test_study_and_command_agree_and_number_joints_from_one(atlas, tmp_path):
+    log = _static_log(atlas, _random_disturbance(atlas.n, 60.0, seed=7), source="synthetic")
+    path = save_log(log, tmp_path / "free.parquet")
+    kw = dict(rate_per_hour=60.0, contact_rate_per_hour=600.0, step_torque=20.0, gap_s=0.1, n_boot=50)
+    prop = tune_thresholds(log, atlas, **kw)
+    assert [r["joint"] for r in prop.rows()] == list(range(1, atlas.n + 1))
+    assert np.all(prop.contact < prop.collision), "the contact level is the lower one"
+    # the residual follows the held values: its maximum per joint is near the largest drawn value
+    assert np.all(prop.collision > 0.5 * np.array([j.fit.x_max for j in prop.joints]))
+    out = tmp_path / "out"
+    code = main(
+        ["tune-thresholds", str(path), "--rate", "60", "--contact-rate", "600", "--step-torque", "20",
+         "--gap", "0.1", "--out", str(out)]  # fmt: skip
+    )
+    assert code == 0
+    doc = json.loads((out / "thresholds.json").read_text())
+    # the bootstrap draws differ (200 in the command, 50 here); the levels do not depend on them
+    np.testing.assert_allclose(doc["collision_Nm"], prop.collision, rtol=1e-9)
+    np.testing.assert_allclose(doc["contact_Nm"], prop.contact, rtol=1e-9)
+    assert [j["joint"] for j in doc["joints"]] == list(range(1, atlas.n + 1))
+    assert set(doc["fits"]) == {str(j) for j in range(1, atlas.n + 1)}
+    assert "generalized Pareto" in doc["method"]["tail"]
+    for name in ("thresholds.csv", "thresholds.png", "threshold_tails.png"):
+        assert (out / name).is_file()
+
+
+def test_a_log_too_short_for_the_rate_is_refused_with_the_minimum(atlas):
+    log = _static_log(atlas, _random_disturbance(atlas.n, 30.0, seed=8))
+    with pytest.raises(LogTooShortError) as info:
+        tune_thresholds(log, atlas, rate_per_hour=1.0, contact_rate_per_hour=60.0, gap_s=0.1)
+    e = info.value
+    # 7 joints at 1/7 per hour each: a return period of 7 h, of which 1/10 is the minimum span
+    assert e.minimum_s == pytest.approx(7 * 3600.0 / 10.0)
+    assert e.duration_s == pytest.approx(30.0, abs=2 * DT)
+    assert (e.rate_per_hour, e.level) == (1.0, "collision")
+    assert "needs at least 42.0 min of free-motion log" in str(e) and "got 0.5 min" in str(e)
+    with pytest.warns(ThresholdWarning, match="extrapolating as asked"):
+        prop = tune_thresholds(
+            log, atlas, rate_per_hour=1.0, contact_rate_per_hour=600.0, gap_s=0.1, allow_extrapolation=True, n_boot=20
+        )
+    assert any("extrapolated" in note for note in prop.notes)
+
+
+def test_bad_settings_are_refused(atlas):
+    log = _static_log(atlas, np.zeros((100, atlas.n)))
+    with pytest.raises(ConfigError, match=r"contact level needs a higher false-alarm rate than the collision level"):
+        tune_thresholds(log, atlas, rate_per_hour=10.0, contact_rate_per_hour=5.0)
+    with pytest.raises(ConfigError, match="rate_per_hour must be a positive number of false alarms per hour; got -1"):
+        tune_thresholds(log, atlas, rate_per_hour=-1.0)
+    with pytest.raises(ConfigError, match="EFC.*needs the wrist wrench; static has no fx..mz columns"):
+        replay_residual(log, atlas, ObserverSettings(kappa_ext=1))
+
+
+def test_a_trace_is_read_with_a_warning_about_its_true_velocities(atlas, tmp_path):
+    N, n = 50, atlas.n
+    rng = np.random.default_rng(0)
+    q = np.tile(EE_START, (N, 1))
+    z = np.zeros((N, n))
+    tr = Trace(
+        t=np.arange(N) * DT, q=q, dq=z, q_meas=q + rng.uniform(-1e-4, 1e-4, q.shape), q_d=q, dq_d=z, tau=z,
+        tau_m=z + 1.0, residual=z, collision=np.zeros(N, bool), collided=np.zeros((N, n), bool),
+        mode=np.full(N, "compliant"), fault=np.full(N, ""), wrench=np.zeros((N, 6)), f_ext_ee=np.zeros((N, 3)),
+        tau_ext=z,
+    )  # fmt: skip
+    path = tr.save(tmp_path / "run.parquet")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        log = load_free_motion_log(path, atlas)
+    assert any(issubclass(w.category, ThresholdWarning) and "true joint velocities" in str(w.message) for w in caught)
+    np.testing.assert_array_equal(log.q, tr.q_meas)
+    np.testing.assert_array_equal(log.tau, tr.tau_m)
