@@ -129,3 +129,34 @@ def write_robot_copy(result: Any, robot: Any, out: Path, args: argparse.Namespac
     for note in notes[1:]:  # the first says how the links were chosen, printed by for_controller if it matters
         say(args, f"{path.name}: {note}")
     return path.name
+
+
+def export_excitation_csv(args: argparse.Namespace, robot: Any, design: Any) -> Path:
+    """``excite --csv OUT --rate HZ``: the excitation (``--periods`` periods) sampled and checked, as CSV."""
+    from reflexarm._cli.common import format_table
+    from reflexarm.ident.excitation_export import sample_excitation, write_excitation_csv
+
+    trajectory = design.trajectory.with_periods(args.periods)
+    amax = design.bounds.get("max_acceleration", args.max_acceleration)
+    sampled = sample_excitation(trajectory, robot, rate=args.rate, max_acceleration=amax)
+    path = write_excitation_csv(sampled, args.csv)
+    print(
+        f"\nexcitation sampled at {args.rate:g} Hz (base frequency {trajectory.base_frequency_hz:g} Hz, "
+        f"{trajectory.n_harmonics} harmonics up to {trajectory.n_harmonics * trajectory.base_frequency_hz:g} Hz, "
+        f"{args.periods} period(s) of {trajectory.period:g} s): {sampled.t.size:,} rows -> {path}"
+    )
+    print("columns: t [s], position_<joint> [rad], velocity_<joint> [rad/s], acceleration_<joint> [rad/s^2]")
+    print("smallest distance to each limit over the samples (position/velocity: the robot file's; acceleration: "
+          "the excitation's bound):")  # fmt: skip
+    print(
+        format_table(
+            sampled.margin_rows(),
+            [
+                ("joint", "joint", "{}"),
+                ("position_margin", "position [rad]", "{:.4f}"),
+                ("velocity_margin", "velocity [rad/s]", "{:.4f}"),
+                ("acceleration_margin", "acceleration [rad/s^2]", "{:.4f}"),
+            ],
+        )
+    )
+    return path

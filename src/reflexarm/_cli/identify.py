@@ -17,6 +17,7 @@ import numpy as np
 
 from reflexarm._cli.common import add_common, format_table, out_dir
 from reflexarm._cli.ident_common import (
+    export_excitation_csv,
     load_robot_arg,
     parse_floats,
     parse_joints,
@@ -53,7 +54,18 @@ def register(sub: argparse._SubParsersAction) -> None:
         "the paper's sensor noise with seed --seed) and write what the robot logs to LOG (.csv/.parquet/.npz); "
         "with --maxiter 0 the trajectory is the seeded random start: e.g. a held-out validation log",
     )
-    e.add_argument("--periods", type=int, default=2, help="periods recorded with --record (default 2)")
+    e.add_argument(
+        "--periods", type=int, default=2, help="periods recorded with --record and exported with --csv (default 2)"
+    )
+    e.add_argument(
+        "--csv",
+        default=None,
+        metavar="OUT",
+        help="also write the excitation sampled at --rate as CSV (t, position_<joint>, velocity_<joint>, "
+        "acceleration_<joint> in s, rad, rad/s, rad/s^2), checked against the position, velocity and acceleration "
+        "limits (refused beyond them)",
+    )
+    e.add_argument("--rate", type=float, default=1000.0, help="sampling rate of --csv [Hz] (default 1000)")
     e.set_defaults(func=_excite)
 
     i = sub.add_parser("identify", help="identify friction (single-joint runs) or the base parameters")
@@ -198,8 +210,10 @@ def _excite(args: argparse.Namespace) -> int:
         f"acceleration {lim['acceleration']:.3f}"
     )
     recorded = ""
+    if args.csv is not None:
+        recorded += ", " + export_excitation_csv(args, robot, design).name
     if args.record is not None:
-        recorded = ", " + _record(args, robot, design.trajectory.with_periods(args.periods)).name
+        recorded += ", " + _record(args, robot, design.trajectory.with_periods(args.periods)).name
     print(f"\nwrote {out}/ (excitation.json, {fig.name}{recorded})")
     return 0
 

@@ -84,6 +84,11 @@ class ExcitationDesign:
             "iterations": self.iterations,
             "message": self.message,
             "bounds": self.bounds,
+            "units": {
+                "trajectory": "base_frequency_hz [Hz], period_s [s], a and b [rad/s], offset [rad]",
+                "bounds": "lower, upper [rad], max_velocity [rad/s], max_acceleration [rad/s^2]",
+                "limits": "largest use of each limit on the trajectory sampled at 1 kHz (<= 1: within)",
+            },
         }
 
 

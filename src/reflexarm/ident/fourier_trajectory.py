@@ -8,6 +8,12 @@ Each joint follows
 
 with base frequency w_f [rad/s] and L harmonics: periodic with period 2 pi / w_f, so it ends where it
 starts. :mod:`reflexarm.ident.excitation` optimizes the coefficients.
+
+Units. In Python the trajectory holds w_f in rad/s (:attr:`FourierTrajectory.base_frequency`, the
+symbol of the equations; :attr:`FourierTrajectory.base_frequency_hz` is f_f = w_f / (2 pi) in Hz, the
+unit of ``reflexarm excite --base-frequency``). Files store Hz under a key that says so
+(``"base_frequency_hz"``, with ``"period_s"``); files written before that hold ``"base_frequency"`` in
+rad/s and are converted when read.
 """
 
 from __future__ import annotations
@@ -66,6 +72,18 @@ class FourierTrajectory:
     @property
     def n_harmonics(self) -> int:
         return int(self.a.shape[1])
+
+    @property
+    def base_frequency_hz(self) -> float:
+        """f_f = w_f / (2 pi) [Hz]."""
+        return self.base_frequency / (2.0 * np.pi)
+
+    @classmethod
+    def from_hz(
+        cls, base_frequency_hz: float, a: npt.ArrayLike, b: npt.ArrayLike, offset: npt.ArrayLike, periods: int = 1
+    ) -> FourierTrajectory:
+        """The trajectory of base frequency f_f [Hz] (w_f = 2 pi f_f)."""
+        return cls(2.0 * np.pi * float(base_frequency_hz), np.asarray(a), np.asarray(b), np.asarray(offset), periods)
 
     @property
     def period(self) -> float:
@@ -138,8 +156,10 @@ class FourierTrajectory:
         }
 
     def to_dict(self) -> dict[str, object]:
+        """JSON form: the base frequency in Hz (``base_frequency_hz``) and the period in s."""
         return {
-            "base_frequency": self.base_frequency,
+            "base_frequency_hz": self.base_frequency_hz,
+            "period_s": self.period,
             "a": self.a.tolist(),
             "b": self.b.tolist(),
             "offset": self.offset.tolist(),
@@ -148,9 +168,14 @@ class FourierTrajectory:
 
     @classmethod
     def from_dict(cls, d: dict[str, object]) -> FourierTrajectory:
+        """From :meth:`to_dict`'s form, or an older one with ``base_frequency`` in rad/s (converted)."""
         try:
+            if "base_frequency_hz" in d:
+                w = 2.0 * np.pi * float(d["base_frequency_hz"])  # type: ignore[arg-type]
+            else:
+                w = float(d["base_frequency"])  # type: ignore[arg-type]  # files before the unit was named: rad/s
             return cls(
-                float(d["base_frequency"]),  # type: ignore[arg-type]
+                w,
                 np.asarray(d["a"], dtype=float),
                 np.asarray(d["b"], dtype=float),
                 np.asarray(d["offset"], dtype=float),
