@@ -98,10 +98,8 @@ def test_study_and_command_agree_and_number_joints_from_one(atlas, tmp_path):
     # the residual follows the held values: its maximum per joint is near the largest drawn value
     assert np.all(prop.collision > 0.5 * np.array([j.fit.x_max for j in prop.joints]))
     out = tmp_path / "out"
-    code = main(
-        ["tune-thresholds", str(path), "--rate", "60", "--contact-rate", "600", "--step-torque", "20",
-         "--gap", "0.1", "--out", str(out)]  # fmt: skip
-    )
+    args = f"tune-thresholds {path} --rate 60 --contact-rate 600 --step-torque 20 --gap 0.1 --out {out}"
+    code = main(args.split())
     assert code == 0
     doc = json.loads((out / "thresholds.json").read_text())
     # the bootstrap draws differ (200 in the command, 50 here); the levels do not depend on them
