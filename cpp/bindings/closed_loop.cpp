@@ -12,6 +12,7 @@
 #include <tuple>
 #include <vector>
 
+#include <nanobind/eigen/dense.h>
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/string.h>
@@ -70,6 +71,28 @@ NB_MODULE(_closed_loop, m)
   m.attr("STEP_OK") = static_cast<int>(StepStatus::Ok);
   m.attr("STEP_DIVERGED") = static_cast<int>(StepStatus::Diverged);
   m.attr("STEP_TIME_MISMATCH") = static_cast<int>(StepStatus::TimeMismatch);
+
+  m.def(
+    "replay_torques",
+    [](std::uintptr_t model_address, std::uintptr_t data_address, const Arr<const double> & tau, const IntArr & vadr,
+       int substeps) {
+      const auto * mm = reinterpret_cast<const mjModel *>(model_address);
+      auto * dd = reinterpret_cast<mjData *>(data_address);
+      const std::vector<int> adr = ints(vadr);
+      const long n = static_cast<long>(adr.size());
+      const long N = tau.ndim() == 2 ? static_cast<long>(tau.shape(0)) : -1;
+      const double * t = rowsOf(tau, N, n, "tau");
+      nb::gil_scoped_release release;
+      for (long k = 0; k < N; ++k)
+      {
+        for (long i = 0; i < n; ++i)
+          dd->qfrc_applied[adr[i]] = t[k * n + i];
+        for (int s = 0; s < substeps; ++s)
+          mj_step(mm, dd);
+      }
+    },
+    "model_address"_a, "data_address"_a, "tau"_a, "vadr"_a, "substeps"_a,
+    "MuJoCo stepping alone (the benchmark's baseline): each row of tau held for `substeps` physics steps.");
 
   nb::class_<PyLoop>(m, "ClosedLoop")
     .def(

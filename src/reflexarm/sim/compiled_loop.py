@@ -1,0 +1,302 @@
+"""run_compiled: the closed loop of :func:`~reflexarm.sim.run_closed_loop` as one C++ call per run.
+
+The plant stays the Python :class:`~reflexarm.sim.Plant` (its compiled MuJoCo model and data are handed
+to C++ by address, so the run continues from its state and leaves it there); the sensor noise is drawn in
+Python from the plant's own generator, in the same blocks as :meth:`Plant.measure` draws it; the reference
+is sampled in Python at the tick times MuJoCo's clock will show; the controller is the C++ core
+(``reflexarm._core``) configured like the given :class:`~reflexarm.control.Controller`; every tick is
+recorded by C++ into preallocated numpy arrays, returned as the same :class:`Trace`. Scenes act through
+data (see :mod:`reflexarm.sim._playback`); at the few ticks where a scene must look at the state (a force
+switched on, a stick started) the loop stops, runs the scene's Python ``update`` and goes on.
+
+:func:`compiled_reason` says why a run cannot be compiled (None when it can); :func:`run_fast` uses the
+compiled loop when it can and :func:`run_closed_loop` otherwise. The Python ``controller`` object itself is
+not stepped by the compiled loop (its state after the run is its state before it).
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import fields
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+
+from reflexarm.errors import ConfigError, SimulationError
+from reflexarm.sim._plant_sensors import _NOISE_BLOCK
+from reflexarm.sim._playback import ScenePlay, event_ticks, playback
+from reflexarm.sim.plant import MAX_SPEED, Plant
+from reflexarm.sim.recording import _Recorder
+from reflexarm.sim.runner import ControllerLike, TrajectoryLike, _check, run_closed_loop
+from reflexarm.sim.trace import Trace
+
+__all__ = ["compiled_reason", "run_compiled", "run_fast"]
+
+#: Mode names in the order of the C++ enum reflexarm::Mode (as reflexarm.control.controller.MODES).
+_MODES = np.array(["compliant", "precise_stiff", "precise_ee_compliant", "gravity_compensation", "fault"])
+
+
+def _modules() -> tuple[ModuleType, ModuleType] | str:
+    try:
+        core = importlib.import_module("reflexarm._core")  # registers ControllerParams for _closed_loop
+        loop = importlib.import_module("reflexarm._closed_loop")
+    except ImportError as e:
+        return f"the compiled loop is not built ({e}); run make install"
+    return core, loop
+
+
+def compiled_reason(plant: Plant, controller: Any, *, reset_controller: bool = True) -> str | None:
+    """Why this run cannot use the compiled loop (a sentence), or None if it can."""
+    mods = _modules()
+    if isinstance(mods, str):
+        return mods
+    from reflexarm.control import Controller
+
+    if type(controller) is not Controller:
+        return f"the controller is a {type(controller).__name__}, not a reflexarm Controller (its step is Python)"
+    if not reset_controller:
+        return "reset_controller=False: the compiled loop starts its controller from a reset"
+    if plant._extra is not None:
+        return "the plant has a Python extra_joint_torque (called every substep); use smooth_friction for that law"
+    if plant._failed is not None:
+        return f"the plant failed earlier ({plant._failed})"
+    for s in plant.scenes:
+        p = playback(s, plant)
+        if isinstance(p, str):
+            return p
+    return None
+
+
+def run_fast(
+    plant: Plant, controller: ControllerLike, trajectory: TrajectoryLike, duration: float, **kwargs: Any
+) -> Trace:
+    """:func:`run_compiled` when :func:`compiled_reason` finds nothing against it, else :func:`run_closed_loop`
+    (same arguments; ``progress`` and ``callback`` always take the Python loop). ``trace.meta["loop"]`` says which."""
+    reset = bool(kwargs.get("reset_controller", True))
+    if (
+        kwargs.get("callback") is None
+        and not kwargs.get("progress")
+        and compiled_reason(plant, controller, reset_controller=reset) is None
+    ):
+        return run_compiled(plant, controller, trajectory, duration)
+    trace = run_closed_loop(plant, controller, trajectory, duration, **kwargs)
+    trace.meta["loop"] = "python"
+    return trace
+
+
+def _core_params(controller: Any, core: ModuleType) -> Any:
+    """The core's ControllerParams of a (reset) Python Controller: those the Controller configures its own core
+    with (``control._setup.core_params``) when it has that function, with the switches it has now."""
+    setup = importlib.import_module("reflexarm.control._setup")
+    if hasattr(setup, "core_params"):
+        p = setup.core_params(controller, core)
+        p.kappa_f, p.kappa_eps, p.kappa_ext = (
+            int(controller.kappa_f),
+            int(controller.kappa_eps),
+            int(controller.kappa_ext),
+        )
+        return p
+    p = core.ControllerParams()
+    robot, imp = controller.robot, controller.impedance
+    gains = getattr(imp, "gains", imp)
+    p.stiffness = np.array(gains.stiffness, dtype=float)
+    p.damping_ratio = np.array(gains.damping_ratio, dtype=float)
+    p.observer_gain = np.array(controller.observer.observer_gain, dtype=float)
+    det = controller.detection_observer
+    p.detection_observer_gain = np.zeros(0) if det is None else np.array(det.observer_gain, dtype=float)
+    p.threshold = np.zeros(0) if controller.detector is None else np.array(controller.detector.threshold, dtype=float)
+    p.reaction = controller.reaction
+    p.kappa_f, p.kappa_eps, p.kappa_ext = int(controller.kappa_f), int(controller.kappa_eps), int(controller.kappa_ext)
+    p.residual_limit, p.switch_time, p.dt = controller.residual_limit, controller.switch_time, controller.dt
+    p.damping_update_period = int(imp.damping_update_period)
+    fr = robot.friction
+    p.friction_coulomb, p.friction_viscous = fr.coulomb.copy(), fr.viscous.copy()
+    p.friction_velocity_band = fr.velocity_band
+    if robot.has_springs:
+        p.spring_stiffness = np.array(robot.spring_stiffness, dtype=float)
+        p.spring_reference = np.array(robot.spring_reference, dtype=float)
+    p.sensor_frame_id = robot.sensor_frame_id
+    limit = controller.torque_limit
+    p.torque_limit = np.full(robot.n, np.inf) if limit is None else np.array(limit, dtype=float)
+    rate = controller.torque_rate_limit
+    p.torque_rate_limit = np.zeros(0) if rate is None else np.array(rate, dtype=float)
+    bounds = core.InputBounds()
+    for f in fields(controller.input_bounds):
+        setattr(bounds, f.name, float(getattr(controller.input_bounds, f.name)))
+    p.input_bounds = bounds
+    p.period_band_low, p.period_band_high = (float(x) for x in controller.period_band)
+    return p
+
+
+def _tick_times(plant: Plant, N: int) -> np.ndarray:
+    """MuJoCo's clock at each of the next N ticks (it adds ``opt.timestep`` once per physics step)."""
+    h = float(plant.model.opt.timestep)
+    t = float(plant.data.time)
+    out = np.empty(N)
+    for k in range(N):
+        out[k] = t
+        for _ in range(plant.substeps):
+            t += h
+    return out
+
+
+def _draw_noise(plant: Plant, N: int) -> np.ndarray | None:
+    """The noise rows of the next N measurements, drawn as N calls of ``Plant.measure`` would draw them."""
+    if not plant._noisy:
+        return None
+    out = np.empty((N, plant._dim))
+    k = 0
+    while k < N:
+        if plant._noise_i >= plant._noise_rows.shape[0]:
+            plant._noise_rows = plant._rng.uniform(-1.0, 1.0, (_NOISE_BLOCK, plant._dim)) * plant._levels
+            plant._noise_i = 0
+        take = min(N - k, plant._noise_rows.shape[0] - plant._noise_i)
+        out[k : k + take] = plant._noise_rows[plant._noise_i : plant._noise_i + take]
+        plant._noise_i += take
+        k += take
+    return out
+
+
+def _forces(plant: Plant) -> np.ndarray:
+    rows = [[f.body, *f.force, *f.point_local] for f in plant._forces.values()]
+    return np.array(rows, dtype=float).reshape(-1, 7)
+
+
+def run_compiled(
+    plant: Plant,
+    controller: ControllerLike,
+    trajectory: TrajectoryLike,
+    duration: float,
+    *,
+    reset_controller: bool = True,
+) -> Trace:
+    """:func:`~reflexarm.sim.run_closed_loop` (same arguments and :class:`Trace`, tick for tick) as compiled code.
+
+    Raises:
+        ConfigError: this run cannot be compiled (the message says why; :func:`run_fast` falls back instead).
+        SimulationError: the plant diverged (as in the Python loop; the trace so far is attached as ``.trace``).
+    """
+    N, meta = _check(plant, controller, trajectory, duration)
+    reason = compiled_reason(plant, controller, reset_controller=reset_controller)
+    if reason is not None:
+        raise ConfigError(f"this run cannot use the compiled loop: {reason}")
+    mods = _modules()
+    assert not isinstance(mods, str)
+    core, cl = mods
+    ctrl: Any = controller  # a reflexarm Controller (compiled_reason checked it)
+    ctrl.reset()  # the switches to configure from are those after a reset
+    m, n = plant.model, plant.n
+    loop = cl.ClosedLoop(
+        m._address,
+        plant.data._address,
+        ctrl.robot.pin_model.saveToString(),
+        _core_params(ctrl, core),
+        np.asarray(plant._qadr_arr, dtype=np.int64),
+        np.asarray(plant._arm_dofs, dtype=np.int64),
+        np.asarray(plant._load_bodies, dtype=np.int64),
+        np.asarray(plant._arm_bodies, dtype=np.int64),
+        plant._force_adr,
+        plant._torque_adr,
+        plant._com_ref_body,
+        plant._sensor_site,
+        plant._physical_sensor,
+        plant.substeps,
+        MAX_SPEED,
+        tuple(float(g) for g in plant._gravity),
+    )
+    times = _tick_times(plant, N)
+    rec = _Recorder(N, n)
+    ddq_d = np.zeros((N, n))
+    sample, Q_D, DQ_D = trajectory.sample, rec.q_d, rec.dq_d
+    for k in range(N):
+        r = sample(float(times[k]))
+        Q_D[k], DQ_D[k], ddq_d[k] = r.q_d, r.dq_d, r.ddq_d
+    mode, fault_code, fault_info = np.zeros(N, np.int32), np.zeros(N, np.int32), np.zeros((N, 5))
+    collision, collided = rec.collision.view(np.uint8), rec.collided.view(np.uint8)
+    noise = _draw_noise(plant, N)  # a local: the loop reads it through a raw pointer until the run ends
+    loop.set_buffers(
+        noise, rec.q_d, rec.dq_d, ddq_d, rec.t, rec.q, rec.dq, rec.q_meas, rec.tau, rec.tau_m,
+        rec.residual, rec.wrench, rec.tau_ext, rec.f_ext_ee, collision, collided, mode, fault_code, fault_info,
+    )  # fmt: skip
+    plays = [p for p in (playback(s, plant) for s in plant.scenes) if isinstance(p, ScenePlay)]
+    plans: dict[int, np.ndarray] = {}
+    qrec, mrec, consts = [], [], []
+    for p in plays:
+        if p.mocap_id is not None:
+            plans[id(p)] = np.full((N, 3), np.nan)
+        for key, (adr, size) in p.qpos_keys.items():
+            rec.extras[key] = np.zeros((N, size))
+            qrec.append((adr, size, rec.extras[key]))
+        for key, mid in p.mocap_keys.items():
+            rec.extras[key] = np.zeros((N, 3))
+            mrec.append((mid, rec.extras[key]))
+        if p.constant_keys:
+            consts.append(p)
+    loop.set_scene_data([(p.mocap_id, plans[id(p)]) for p in plays if p.mocap_id is not None], qrec, mrec)
+    loop.set_forces(_forces(plant))
+    loop.set_applied_torque(np.array(plant._tau))
+
+    def hold_constants(k_from: int) -> None:  # values of observe() from row k_from on
+        for p in consts:
+            for key, value in p.scene.observe(plant).items():
+                v = np.asarray(value)
+                arr = rec.extras.setdefault(key, np.zeros((N, *v.shape), dtype=v.dtype))
+                arr[k_from:] = v
+
+    events = event_ticks(plays, times)
+    done = 0
+    try:
+        hold_constants(0)
+        for k_event in [*sorted(events), N]:
+            status = _advance(loop, done, k_event, rec)
+            done = rec.done
+            if status or k_event == N:
+                if status:
+                    plant._fail(float(np.sum(plant.data.qvel**2)) if status == cl.STEP_DIVERGED else np.inf)
+                break
+            loop.sense(k_event)
+            rec.done = done = k_event + 1
+            for p in events[k_event]:
+                p.scene.update(plant)
+                p.plan_after_update(plant, k_event, times, plans.get(id(p)))
+            hold_constants(k_event + 1)
+            loop.set_forces(_forces(plant))
+            status = loop.act(k_event)
+            if status:
+                plant._fail(float(np.sum(plant.data.qvel**2)) if status == cl.STEP_DIVERGED else np.inf)
+    except BaseException as e:
+        _finish(plant, loop, rec, mode, fault_code, fault_info, core)
+        try:
+            e.trace = rec.trace(meta | {"loop": "compiled", "error": f"{type(e).__name__}: {e}"})  # type: ignore[attr-defined]
+        except Exception:  # pragma: no cover - never mask the original error
+            pass
+        raise
+    _finish(plant, loop, rec, mode, fault_code, fault_info, core)
+    if not np.array_equal(rec.t[: rec.done], times[: rec.done]):
+        raise SimulationError("the compiled loop's clock differs from the sampled reference times; not returning it")
+    return rec.trace(meta | {"loop": "compiled"})
+
+
+def _advance(loop: Any, k0: int, k1: int, rec: _Recorder) -> int:
+    """Ticks [k0, k1) in C++; ``rec.done`` is updated; returns the step status (0: fine)."""
+    if k1 <= k0:
+        return 0
+    ran, status = loop.run(k0, k1)
+    rec.done = k0 + ran
+    return int(status)
+
+
+def _finish(
+    plant: Plant, loop: Any, rec: _Recorder, mode: np.ndarray, code: np.ndarray, info: np.ndarray, core: ModuleType
+) -> None:
+    """Mode and fault texts of the recorded rows; the plant's torque and tick count as after the Python loop."""
+    d = rec.done
+    rec.mode[:] = _MODES[mode[:d]].tolist()
+    faults = [""] * d
+    for k in np.flatnonzero(code[:d]):
+        s, i, v, lo, hi = info[k]
+        faults[k] = core.describe_fault(int(code[k]), int(s), int(i), float(v), float(lo), float(hi))
+    rec.fault[:] = faults
+    plant._tau[:] = loop.applied_torque
+    plant._tick += d
