@@ -88,6 +88,7 @@ def test_velocity_tracking_command_prints_both_controllers(tmp_path, capsys):
         line = next(ln for ln in text.out.splitlines() if ln.strip().startswith(r["controller"]))
         assert f"{r['rms_dq_error']:.4f}" in line
     assert doc["controller_model"] == {"source": "perturbed", "level": 0.1, "seed": 0}
+    assert (doc["setup"]["joint"], doc["setup"]["joint_name"]) == (4, "l_arm_elx")  # 1-based, as --joint
     assert (out / "fig5_velocity_tracking.png").is_file()
 
 

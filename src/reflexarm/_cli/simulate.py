@@ -324,6 +324,7 @@ def _velocity(args: argparse.Namespace) -> int:
         tr.save(out / f"velocity_tracking_{name.lower()}.npz")
     doc = res.as_dict()
     doc["controller_model"] = choice.describe()
+    doc["setup"] = {**doc["setup"], "joint": j + 1, "joint_name": robot.joint_names[j]}  # 1-based, as --joint
     (out / "velocity_tracking_summary.json").write_text(json.dumps(doc, indent=2))
     fig = plot_velocity_tracking(res, out / "fig5_velocity_tracking.png")
     pictures = scene.finish(list(res.traces), summary=out / "velocity_tracking_summary.json")
