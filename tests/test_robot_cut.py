@@ -22,6 +22,7 @@ from reflexarm.cli import main
 from reflexarm.control import Controller
 from reflexarm.errors import ModelError
 from reflexarm.robots import RobotFileWarning, RobotModel, load_robot
+from reflexarm.robots._urdf import inertia_box
 from reflexarm.robots.example_arms import UR_LIKE_FINGERS, UR_LIKE_JOINTS, UR_LIKE_TIP, write_ur_like_arm
 from reflexarm.signals import Reference
 from reflexarm.sim import Plant, SensorNoise
@@ -144,6 +145,39 @@ def test_cut_arm_holds_still_in_closed_loop_and_detects_a_push(ur_arm: Path) -> 
             break
     assert at_rest.max() < 1e-6, at_rest  # Nm: the same model on both sides, only the observer's round-off
     assert delay is not None and delay < MAX_DETECTION_TIME, delay
+
+
+def test_inertia_box_has_the_links_inertia() -> None:
+    """The stand-in collision box of a link whose meshes are missing: MuJoCo, deriving the body's inertia
+    from that box alone (uniform density, inertiafromgeom), gets back the link's mass, COM and inertia.
+    The inertia is full (products of inertia) and its COM frame rotated, so axes and rpy are exercised."""
+    link = ET.fromstring(
+        '<link name="l"><inertial><origin xyz="0.1 -0.05 0.2" rpy="0.3 -0.4 1.1"/><mass value="2.5"/>'
+        '<inertia ixx="0.04" ixy="0.004" ixz="-0.003" iyy="0.03" iyz="0.002" izz="0.02"/></inertial></link>'
+    )
+    box = inertia_box(link)
+    assert box is not None
+    xyz, rpy, size = box
+    robot_text = (
+        '<robot name="b"><link name="base"/><link name="l"><collision><origin xyz="{}" rpy="{}"/><geometry>'
+        '<box size="{}"/></geometry></collision></link><joint name="j" type="revolute"><parent link="base"/>'
+        '<child link="l"/><axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>'
+        '<mujoco><compiler inertiafromgeom="true" boundmass="0" boundinertia="0"/></mujoco></robot>'
+    ).format(*(" ".join(f"{v:.17g}" for v in a) for a in (xyz, rpy, size)))
+    spec = mujoco.MjSpec.from_string(robot_text)
+    spec.geoms[0].density = 2.5 / float(np.prod(size))
+    mj = spec.compile()
+    d = mujoco.MjData(mj)
+    mujoco.mj_forward(mj, d)
+    b = mj.body("l").id
+    R = d.ximat[b].reshape(3, 3)
+    world_inertia = R @ np.diag(mj.body_inertia[b]) @ R.T
+    expected = pin.rpy.rpyToMatrix(0.3, -0.4, 1.1)
+    urdf_inertia = np.array([[0.04, 0.004, -0.003], [0.004, 0.03, 0.002], [-0.003, 0.002, 0.02]])
+    np.testing.assert_allclose(mj.body_mass[b], 2.5, rtol=1e-12)
+    np.testing.assert_allclose(d.xipos[b], [0.1, -0.05, 0.2], atol=1e-12)
+    # MuJoCo computes a box's inertia in closed form; 1e-9 covers the eigen-decompositions on both sides
+    np.testing.assert_allclose(world_inertia, expected @ urdf_inertia @ expected.T, atol=1e-9)
 
 
 # ---------------------------------------------------------------------- reduced model == whole model

@@ -7,7 +7,9 @@
   file's folder and its parents (``DIR/PKG/rest``, or ``DIR/rest`` when ``DIR`` is named ``PKG``);
   ``file://`` and relative paths are taken from the file's folder. MuJoCo gets absolute paths; meshes
   that cannot be found are dropped with their geoms and a note (meshes only shape contact and visuals;
-  the dynamics come from ``<inertial>``). Pinocchio does not read meshes for the dynamics at all.
+  the dynamics come from ``<inertial>``). Pinocchio does not read meshes for the dynamics at all. A link
+  left without any collision geometry that way gets, in the plant only, a box with its mass and inertia
+  (so scenes still touch the arm), with a note.
 """
 
 from __future__ import annotations
@@ -18,12 +20,16 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from reflexarm.errors import ModelError
 
 __all__ = ["UrdfFile", "mujoco_urdf_text", "read_urdf", "resolve_mesh_uri"]
 
 #: How many folders above the robot file are searched for a ``package://`` package.
 PACKAGE_SEARCH_DEPTH = 4
+#: An inertia whose equivalent box has a side shorter than this [m] gets no stand-in collision box.
+MIN_BOX_SIDE = 1e-3
 
 
 @dataclass
@@ -111,6 +117,7 @@ def mujoco_urdf_text(urdf: UrdfFile) -> tuple[str, list[str]]:
     found: dict[str, str] = {}
     missing: dict[str, str] = {}
     dropped = 0
+    bare: list[ET.Element] = []  # links left without collision geometry by a missing mesh
     for link in root.iter("link"):
         for tag in ("visual", "collision"):
             for element in link.findall(tag):
@@ -126,10 +133,13 @@ def mujoco_urdf_text(urdf: UrdfFile) -> tuple[str, list[str]]:
                     missing[uri] = how
                     link.remove(element)
                     dropped += 1
+                    if link.find("collision") is None and link not in bare:
+                        bare.append(link)
                     continue
                 mesh.set("filename", str(f.resolve()))
                 if how:
                     found[how.split(" -> ")[0]] = how
+    boxed = _inertia_boxes(root, bare)
     for old in root.findall("mujoco"):
         root.remove(old)
     block = ET.SubElement(root, "mujoco")
@@ -144,4 +154,77 @@ def mujoco_urdf_text(urdf: UrdfFile) -> tuple[str, list[str]]:
             f"{where}: {len(missing)} mesh file(s) not found ({shown}); the {dropped} collision geom(s) using them "
             "were dropped (meshes only shape contact; masses and inertias come from the <inertial> elements)"
         )
+    if boxed:
+        notes.append(
+            f"{where}: in the plant, {len(boxed)} link(s) left without collision geometry ({', '.join(boxed[:4])}"
+            f"{' ...' if len(boxed) > 4 else ''}) touch the scene through a box with the link's mass and inertia "
+            "(centred at its centre of mass, along its principal axes)"
+        )
     return ET.tostring(root, encoding="unicode"), notes
+
+
+def _inertia_boxes(root: ET.Element, links: list[ET.Element]) -> list[str]:
+    """Give each link a collision box of uniform density with its mass and rotational inertia; return the
+    names of the links that got one (links without a positive mass or inertia get none)."""
+    named = []
+    for link in links:
+        if link.find("collision") is not None:
+            continue
+        box = inertia_box(link)
+        if box is None:
+            continue
+        xyz, rpy, size = box
+        collision = ET.SubElement(link, "collision", name=f"{link.get('name')}_inertia_box")
+        ET.SubElement(collision, "origin", xyz=" ".join(f"{v:.9g}" for v in xyz), rpy=" ".join(f"{v:.9g}" for v in rpy))
+        ET.SubElement(ET.SubElement(collision, "geometry"), "box", size=" ".join(f"{v:.9g}" for v in size))
+        named.append(str(link.get("name")))
+    return named
+
+
+def inertia_box(link: ET.Element) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(origin xyz, origin rpy, full side lengths) of the solid box with the ``<inertial>`` of a URDF link.
+
+    For a box of sides a, b, c and mass m, I_a = m (b^2 + c^2) / 12 etc., so a^2 = 6 (I_b + I_c - I_a) / m
+    along the principal axes (the eigenvectors of the inertia about the centre of mass). ``None`` without a
+    positive mass or when the inertia does not fit a box (a side would be shorter than 1 mm).
+    """
+    inertial = link.find("inertial")
+    mass = inertial.find("mass") if inertial is not None else None
+    tensor = inertial.find("inertia") if inertial is not None else None
+    if inertial is None or mass is None or tensor is None:
+        return None
+    try:
+        m = float(mass.get("value", "0"))
+        i = {k: float(tensor.get(k, "0")) for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}
+        origin = inertial.find("origin")
+        xyz = np.array([float(v) for v in (origin.get("xyz", "0 0 0") if origin is not None else "0 0 0").split()])
+        rpy = np.array([float(v) for v in (origin.get("rpy", "0 0 0") if origin is not None else "0 0 0").split()])
+    except ValueError:
+        return None
+    if not m > 0.0 or xyz.shape != (3,) or rpy.shape != (3,):
+        return None
+    inertia = np.array([[i["ixx"], i["ixy"], i["ixz"]], [i["ixy"], i["iyy"], i["iyz"]], [i["ixz"], i["iyz"], i["izz"]]])
+    principal, axes = np.linalg.eigh(inertia)
+    if np.linalg.det(axes) < 0:
+        axes[:, 2] *= -1.0
+    squares = 6.0 * (principal.sum() - 2.0 * principal) / m
+    if np.any(squares < MIN_BOX_SIDE**2):
+        return None
+    frame = _rpy_matrix(rpy) @ axes  # principal axes in the link frame
+    return xyz, _matrix_rpy(frame), np.sqrt(squares)
+
+
+def _rpy_matrix(rpy: np.ndarray) -> np.ndarray:
+    r, p, y = rpy
+    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+    rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
+    ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
+    rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
+    return rz @ ry @ rx  # URDF: fixed-axis roll, then pitch, then yaw
+
+
+def _matrix_rpy(R: np.ndarray) -> np.ndarray:
+    pitch = np.arcsin(np.clip(-R[2, 0], -1.0, 1.0))
+    if abs(R[2, 0]) < 1.0 - 1e-12:
+        return np.array([np.arctan2(R[2, 1], R[2, 2]), pitch, np.arctan2(R[1, 0], R[0, 0])])
+    return np.array([0.0, pitch, np.arctan2(-R[0, 1], R[1, 1])])  # gimbal lock: roll folded into yaw
