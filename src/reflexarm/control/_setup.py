@@ -1,19 +1,21 @@
-"""Construction-time pieces of :class:`reflexarm.control.Controller`: the period band, the torque limit and
-the compiled tick's ``work`` array (parameters and plausibility bounds, see :mod:`._kernels`)."""
+"""Construction-time pieces of :class:`reflexarm.control.Controller`: the period band, the torque limit, the
+C++ core (``reflexarm._core``) and the parameters it is configured with."""
 
 from __future__ import annotations
 
+import importlib
 import math
 import warnings
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from dataclasses import fields
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
 from reflexarm._validation import as_vector
-from reflexarm.control import _kernels as _k
-from reflexarm.errors import ConfigError
+from reflexarm.errors import ConfigError, ModelError
 from reflexarm.robots.robot_model import RobotModel
 
 if TYPE_CHECKING:
@@ -61,37 +63,42 @@ def resolve_torque_limit(robot: RobotModel, torque_limit: npt.ArrayLike | str | 
     return as_vector(torque_limit, n, "torque_limit", positive=True)
 
 
-def fill_work(ctrl: Controller) -> None:
-    """Write the controller's parameters and plausibility bounds into its ``work`` array."""
-    w, rows, b, robot, dt = ctrl._work, ctrl._rows, ctrl.input_bounds, ctrl.robot, ctrl.dt
-    w[_k.N_JOINTS] = ctrl.n
-    w[_k.DT] = dt
-    w[_k.PERIOD_LO], w[_k.PERIOD_HI] = ctrl.period_band[0] * dt, ctrl.period_band[1] * dt
-    w[_k.INV_BAND] = 1.0 / robot.friction.velocity_band
-    w[_k.LIMIT] = ctrl.residual_limit
-    w[_k.USE_DET] = float(ctrl.detection_observer is not None)
-    w[_k.G_NORM] = float(np.linalg.norm(ctrl._gravity))
-    w[_k.G_TOL] = b.gravity_tolerance
-    w[_k.FORCE_MAX], w[_k.MOMENT_MAX] = b.max_force, b.max_moment
-    rows[_k.K_ROW] = ctrl.impedance.gains.stiffness
-    rows[_k.DAMPING_RATIO_ROW] = ctrl.impedance.gains.damping_ratio
-    rows[_k.KO_ROW] = ctrl.observer.observer_gain
-    if ctrl.detection_observer is not None:
-        rows[_k.KO_DET_ROW] = ctrl.detection_observer.observer_gain
-    rows[_k.THRESHOLD_ROW] = np.inf if ctrl.detector is None else ctrl.detector.threshold
-    rows[_k.COULOMB_ROW] = robot.friction.coulomb
-    rows[_k.VISCOUS_ROW] = robot.friction.viscous
-    lower = np.asarray(robot.lower_limit, dtype=float)
-    upper = np.asarray(robot.upper_limit, dtype=float)
-    rows[_k.Q_LO_ROW] = np.where(np.isfinite(lower), lower - b.position_margin, -np.inf)
-    rows[_k.Q_HI_ROW] = np.where(np.isfinite(upper), upper + b.position_margin, np.inf)
-    vel = np.asarray(robot.velocity_limit, dtype=float)
-    rows[_k.DQ_MAX_ROW] = np.where(np.isfinite(vel) & (vel > 0), b.velocity_factor * vel, b.max_velocity)
-    rows[_k.DDQ_MAX_ROW] = b.max_acceleration
-    # tau_m is judged against the saturation, or the model's effort limit when saturation is off
-    ref = np.where(np.isfinite(ctrl.torque_limit), ctrl.torque_limit, np.asarray(robot.effort_limit, dtype=float))
-    ok = np.isfinite(ref) & (ref > 0)
-    rows[_k.TAU_M_MAX_ROW] = np.where(ok, b.torque_factor * np.where(ok, ref, 1.0), b.max_torque)
-    rows[_k.TAU_MAX_ROW] = ctrl.torque_limit
-    rate = ctrl.torque_rate_limit
-    rows[_k.TAU_STEP_ROW] = np.inf if rate is None else rate * dt
+def load_core() -> ModuleType:
+    """The compiled module ``reflexarm._core`` (built by ``make install``), or a ModelError saying how to get it."""
+    try:
+        return importlib.import_module("reflexarm._core")
+    except ImportError as e:
+        raise ModelError(
+            f"reflexarm's C++ core (module reflexarm._core) cannot be imported ({e}); expected it built and "
+            "installed by `make install` (needs cmake >= 3.18 and a C++17 compiler)"
+        ) from e
+
+
+def core_params(ctrl: Controller, core: ModuleType) -> Any:
+    """The core's ControllerParams for a Controller whose Python-side checks have passed."""
+    p = core.ControllerParams()
+    robot, imp = ctrl.robot, ctrl.impedance
+    p.stiffness, p.damping_ratio = imp.gains.stiffness.copy(), imp.gains.damping_ratio.copy()
+    p.observer_gain = ctrl.observer.observer_gain.copy()
+    det = ctrl.detection_observer
+    p.detection_observer_gain = np.zeros(0) if det is None else det.observer_gain.copy()
+    p.threshold = np.zeros(0) if ctrl.detector is None else ctrl.detector.threshold.copy()
+    p.reaction = ctrl.reaction
+    p.kappa_f, p.kappa_eps, p.kappa_ext = ctrl._kappa_init
+    p.residual_limit, p.switch_time, p.dt = ctrl.residual_limit, ctrl.switch_time, ctrl.dt
+    p.damping_update_period = imp.damping_update_period
+    fr = robot.friction
+    p.friction_coulomb, p.friction_viscous = fr.coulomb.copy(), fr.viscous.copy()
+    p.friction_velocity_band = fr.velocity_band
+    if robot.has_springs:
+        p.spring_stiffness = np.array(robot.spring_stiffness, dtype=float)
+        p.spring_reference = np.array(robot.spring_reference, dtype=float)
+    p.sensor_frame_id = robot.sensor_frame_id
+    p.torque_limit = ctrl.torque_limit.copy()
+    p.torque_rate_limit = np.zeros(0) if ctrl.torque_rate_limit is None else ctrl.torque_rate_limit.copy()
+    bounds = core.InputBounds()
+    for f in fields(ctrl.input_bounds):
+        setattr(bounds, f.name, getattr(ctrl.input_bounds, f.name))
+    p.input_bounds = bounds
+    p.period_band_low, p.period_band_high = ctrl.period_band
+    return p

@@ -1,9 +1,10 @@
-"""The controller's edge: plausibility bounds, fault descriptions, timing statistics, input conversion.
+"""The controller's edge: fault codes, plausibility bounds, timing statistics, input conversion.
 
 Everything :meth:`reflexarm.control.Controller.step` receives is checked against the contract written
-down in the :class:`~reflexarm.control.Controller` docstring. The bounds are plain data (arrays and
-scalars in the compiled tick's ``work`` array) and the faults are integer codes
-(:mod:`reflexarm.control._kernels`), so the same contract can be carried into a C++ tick.
+down in the :class:`~reflexarm.control.Controller` docstring, by the C++ core (``reflexarm._core``,
+``cpp/src/contract.cpp``), which also writes the fault texts. This module holds the codes and signal ids the
+core reports (the same numbers as ``reflexarm::FaultCode`` and ``reflexarm::Signal``), the bounds as a Python
+dataclass, and the conversion of inputs that are not float64 arrays.
 """
 
 from __future__ import annotations
@@ -15,44 +16,50 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from reflexarm.control import _kernels as _k
 from reflexarm.errors import ConfigError, SignalError
 
 __all__ = ["FAULT_CODES", "InputBounds", "TimingStats"]
 
+# ---- fault codes of the tick (negative; 0: accepted), as reflexarm::FaultCode
+BAD_SHAPE = -1  # a signal has the wrong length (raised as SignalError by the Python face)
+NON_FINITE = -2  # signal[index] = value is NaN/inf
+OUT_OF_BOUNDS = -3  # signal[index] = value outside [lo, hi]
+TIME_NOT_INCREASING = -4  # t = value <= last accepted t = lo
+MODEL_NON_FINITE = -5  # a Pinocchio term is NaN/inf
+MASS_NOT_POSITIVE_DEFINITE = -6  # the damping update's Cholesky factorization failed
+OBSERVER_INVALID = -7  # latched until reset
+OUTPUT_NON_FINITE = -8  # the control law gave NaN/inf (never expected with accepted inputs); latches as -7
+
+# ---- signal ids of a fault, as reflexarm::Signal
+(SIG_T, SIG_Q, SIG_DQ, SIG_TAU_M, SIG_WRENCH, SIG_GRAVITY, SIG_Q_D, SIG_DQ_D, SIG_DDQ_D, SIG_MODEL, SIG_PERIOD) = range(
+    11
+)
+
 #: Fault codes of :attr:`Command.fault_code` (0: no fault) and what they mean.
 FAULT_CODES: dict[int, str] = {
     0: "none",
-    _k.NON_FINITE: "non-finite signal",
-    _k.OUT_OF_BOUNDS: "signal beyond its plausibility bound",
-    _k.TIME_NOT_INCREASING: "time stamp repeated or going backwards",
-    _k.MODEL_NON_FINITE: "non-finite dynamics terms of the model",
-    _k.MASS_NOT_POSITIVE_DEFINITE: "mass matrix not positive definite",
-    _k.OBSERVER_INVALID: "observer state invalid (latched until reset)",
-    _k.OUTPUT_NON_FINITE: "non-finite control law (latched until reset, as an invalid observer)",
+    NON_FINITE: "non-finite signal",
+    OUT_OF_BOUNDS: "signal beyond its plausibility bound",
+    TIME_NOT_INCREASING: "time stamp repeated or going backwards",
+    MODEL_NON_FINITE: "non-finite dynamics terms of the model",
+    MASS_NOT_POSITIVE_DEFINITE: "mass matrix not positive definite",
+    OBSERVER_INVALID: "observer state invalid (latched until reset)",
+    OUTPUT_NON_FINITE: "non-finite control law (latched until reset, as an invalid observer)",
 }
 
-_SIGNALS = {
-    _k.SIG_T: ("measurement t", "s"),
-    _k.SIG_Q: ("measurement q", "rad"),
-    _k.SIG_DQ: ("measurement dq", "rad/s"),
-    _k.SIG_TAU_M: ("measurement tau_m", "Nm"),
-    _k.SIG_WRENCH: ("measurement wrench", "N or Nm"),
-    _k.SIG_GRAVITY: ("measurement gravity", "m/s^2"),
-    _k.SIG_Q_D: ("reference q_d", "rad"),
-    _k.SIG_DQ_D: ("reference dq_d", "rad/s"),
-    _k.SIG_DDQ_D: ("reference ddq_d", "rad/s^2"),
-    _k.SIG_MODEL: ("model", ""),
-}
-# which InputBounds field sets the bound of each signal (named in the fault text)
-_BOUND_NAMES = {
-    _k.SIG_Q: "joint limits +- InputBounds.position_margin",
-    _k.SIG_Q_D: "joint limits +- InputBounds.position_margin",
-    _k.SIG_DQ: "InputBounds.velocity_factor x velocity limit",
-    _k.SIG_DQ_D: "InputBounds.velocity_factor x velocity limit",
-    _k.SIG_TAU_M: "InputBounds.torque_factor x torque limit",
-    _k.SIG_DDQ_D: "InputBounds.max_acceleration",
-    _k.SIG_GRAVITY: "model gravity +- InputBounds.gravity_tolerance",
+#: Signal names as in the fault texts, by signal id.
+SIGNAL_NAMES = {
+    SIG_T: "measurement t",
+    SIG_Q: "measurement q",
+    SIG_DQ: "measurement dq",
+    SIG_TAU_M: "measurement tau_m",
+    SIG_WRENCH: "measurement wrench",
+    SIG_GRAVITY: "measurement gravity",
+    SIG_Q_D: "reference q_d",
+    SIG_DQ_D: "reference dq_d",
+    SIG_DDQ_D: "reference ddq_d",
+    SIG_MODEL: "model",
+    SIG_PERIOD: "update period",
 }
 
 
@@ -116,53 +123,18 @@ class TimingStats(NamedTuple):
     band: tuple[float, float]
 
 
-def timing_stats(work: np.ndarray) -> TimingStats:
-    """Read the timing statistics from the compiled tick's ``work`` array."""
-    count = int(work[_k.T_COUNT])
+def timing_stats(raw: tuple[int, float, float, float, int, float, float]) -> TimingStats:
+    """TimingStats from the core's ``timing`` tuple (n_periods, sum, min, max, clipped, band_low, band_high)."""
+    count, total, lo, hi, clipped, band_lo, band_hi = raw
     nan = math.nan
     return TimingStats(
-        count,
-        float(work[_k.T_SUM]) / count if count else nan,
-        float(work[_k.T_MIN]) if count else nan,
-        float(work[_k.T_MAX]) if count else nan,
-        int(work[_k.T_CLIPPED]),
-        (float(work[_k.PERIOD_LO]), float(work[_k.PERIOD_HI])),
+        int(count),
+        float(total) / count if count else nan,
+        float(lo) if count else nan,
+        float(hi) if count else nan,
+        int(clipped),
+        (float(band_lo), float(band_hi)),
     )
-
-
-def describe_fault(code: int, work: np.ndarray) -> str:
-    """Human-readable text of a fault code with its details (signal, component, value, bound)."""
-    signal = int(work[_k.F_SIGNAL])
-    index = int(work[_k.F_INDEX])
-    value, lo, hi = float(work[_k.F_VALUE]), float(work[_k.F_LO]), float(work[_k.F_HI])
-    name, unit = _SIGNALS.get(signal, ("input", ""))
-    where = f"{name}[{index}]" if index >= 0 else name
-    if code == _k.NON_FINITE:
-        return f"non-finite {where} = {value!r}"
-    if code == _k.OUT_OF_BOUNDS:
-        if signal == _k.SIG_WRENCH:
-            bound = "InputBounds.max_force" if index < 3 else "InputBounds.max_moment"
-            unit = "N" if index < 3 else "Nm"
-        elif signal == _k.SIG_GRAVITY:
-            where = f"|{name}|"
-            bound = _BOUND_NAMES[signal]
-        else:
-            bound = _BOUND_NAMES.get(signal, "bound")
-        return f"{where} = {value:.6g} {unit} outside the plausible [{lo:.6g}, {hi:.6g}] {unit} ({bound})"
-    if code == _k.TIME_NOT_INCREASING:
-        return (
-            f"measurement t = {value!r} s does not advance past the last accepted t = {lo!r} s "
-            "(repeated or backwards time stamp)"
-        )
-    if code == _k.MODEL_NON_FINITE:
-        return "non-finite model terms (gravity, Coriolis, momentum or feed-forward) at this state"
-    if code == _k.MASS_NOT_POSITIVE_DEFINITE:
-        return "mass matrix of the model not positive definite at this q; damping not updated"
-    if code == _k.OBSERVER_INVALID:
-        return "observer state invalid (non-finite): collision detection is off until reset()"
-    if code == _k.OUTPUT_NON_FINITE:
-        return f"non-finite control law on joint {index}: collision detection is off until reset()"
-    return f"fault {code}"
 
 
 def _as_time(value: object) -> float:
@@ -189,8 +161,8 @@ def as_signal(value: object, length: int, name: str) -> np.ndarray:
         raise SignalError(name, f"dtype {arr.dtype}", expected, "complex, bool, str and object values are refused")
     if arr.shape != (length,):
         raise SignalError(name, f"shape {arr.shape}", expected)
-    if arr.dtype == np.float64:
-        return arr  # any layout, read-only or not: the tick takes it as it is
+    if arr.dtype == np.float64 and arr.flags.c_contiguous:
+        return arr  # read-only or not: the tick takes it as it is
     return np.ascontiguousarray(arr, dtype=np.float64)
 
 
@@ -221,23 +193,25 @@ def convert_inputs(measurement: Any, reference: Any, n: int) -> tuple[tuple[Any,
     return (_as_time(t), *arrays), converted
 
 
-def shape_error(work: np.ndarray) -> SignalError:
-    """The SignalError for a BAD_SHAPE code of the tick."""
-    name, _ = _SIGNALS[int(work[_k.F_SIGNAL])]
-    return SignalError(name, f"shape ({int(work[_k.F_VALUE])},)", f"a real vector of shape ({int(work[_k.F_HI])},)")
+def shape_error(signal: int, received: int, expected: int) -> SignalError:
+    """The SignalError for a BAD_SHAPE fault of the tick (signal id, received length, expected length)."""
+    return SignalError(SIGNAL_NAMES[signal], f"shape ({received},)", f"a real vector of shape ({expected},)")
 
 
-def signal_bounds(work: np.ndarray, rows: np.ndarray) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """The plausibility bounds per signal as (low, high) arrays, read from the tick's ``work`` array."""
-    dq, ddq, tau_m = rows[_k.DQ_MAX_ROW].copy(), rows[_k.DDQ_MAX_ROW].copy(), rows[_k.TAU_M_MAX_ROW].copy()
-    wrench = np.array([work[_k.FORCE_MAX]] * 3 + [work[_k.MOMENT_MAX]] * 3)
-    g_lo, g_hi = max(work[_k.G_NORM] - work[_k.G_TOL], 0.0), work[_k.G_NORM] + work[_k.G_TOL]
-    q = rows[_k.Q_LO_ROW].copy(), rows[_k.Q_HI_ROW].copy()
+def signal_bounds(
+    bounds: tuple[np.ndarray, ...], input_bounds: InputBounds, g_norm: float
+) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """The plausibility bounds per signal as (low, high) arrays, from the core's per-joint ``bounds``
+    (q_lo, q_hi, dq_max, ddq_max, tau_m_max, ...), the InputBounds and the model's |gravity|."""
+    q_lo, q_hi, dq, ddq, tau_m = (np.array(b, dtype=float) for b in bounds[:5])
+    b = input_bounds
+    wrench = np.array([b.max_force] * 3 + [b.max_moment] * 3)
+    g_lo, g_hi = max(g_norm - b.gravity_tolerance, 0.0), g_norm + b.gravity_tolerance
     return {
-        "q": q,
-        "q_d": q,
+        "q": (q_lo, q_hi),
+        "q_d": (q_lo.copy(), q_hi.copy()),
         "dq": (-dq, dq),
-        "dq_d": (-dq, dq),
+        "dq_d": (-dq, dq.copy()),
         "ddq_d": (-ddq, ddq),
         "tau_m": (-tau_m, tau_m),
         "wrench": (-wrench, wrench),

@@ -1,8 +1,10 @@
 """Controller: impedance control (2) + momentum observer (4)-(6) + collision detection (12) and reaction (13).
 
-One object behind ``step(measurement, reference) -> Command``. The dynamics terms are evaluated once per
-tick and shared by the control law and the observer(s); the input contract, the observers, the control
-law and the torque bounds run in one compiled pass (:mod:`reflexarm.control._kernels`).
+One object behind ``step(measurement, reference) -> Command``. The tick runs in the C++ core
+(``reflexarm._core``, ``cpp/src/controller.cpp``): one call per tick evaluates the dynamics terms once and
+shares them between the control law and the observer(s), checks the input contract and bounds the torque.
+This class is the Python face of that core: it validates the parameters, converts inputs of other types and
+builds the :class:`~reflexarm.signals.Command`.
 """
 
 from __future__ import annotations
@@ -11,17 +13,16 @@ import math
 
 import numpy as np
 import numpy.typing as npt
-import pinocchio as pin
 
 from reflexarm._validation import as_positive_scalar, as_switch, as_vector
-from reflexarm.control import _kernels as _k
-from reflexarm.control._setup import check_period_band, fill_work, resolve_torque_limit
+from reflexarm.control._setup import check_period_band, core_params, load_core, resolve_torque_limit
 from reflexarm.control.collision import CollisionDetector
 from reflexarm.control.contract import (
+    BAD_SHAPE,
     InputBounds,
     TimingStats,
+    _as_time,
     convert_inputs,
-    describe_fault,
     shape_error,
     signal_bounds,
     timing_stats,
@@ -33,8 +34,6 @@ from reflexarm.robots.robot_model import RobotModel
 from reflexarm.signals import Command, Measurement, Reference
 
 __all__ = ["MODES", "REACTIONS", "Controller"]
-
-_F64 = np.dtype(np.float64)
 
 #: Reactions to a detected collision: eq. (13) gravity compensation; switch to the compliant mode
 #: (kappa_eps = 0, Fig. 3); or none (detection is reported only).
@@ -59,8 +58,8 @@ class Controller:
        signal): ``measurement`` unpacks to ``(t, q, dq, tau_m, wrench, gravity)`` and ``reference`` to
        ``(q_d, dq_d, ddq_d)``; t is a real number; q, dq, tau_m, q_d, dq_d, ddq_d have shape (n,), wrench
        (6,), gravity (3,); values are real (integer or floating dtypes, lists of numbers). Complex, bool,
-       str and object values raise. Float64 arrays go straight into the compiled tick; anything else is
-       converted once to contiguous float64 first (some 10-20 us more, never a recompilation).
+       str and object values raise. Contiguous float64 arrays (read-only or not) and a float t go straight
+       into the C++ tick; anything else is converted once to contiguous float64 first (some 10-20 us more).
     2. *Values* (run-time faults: the tick returns the **safe command**, ``Command.mode == "fault"``,
        ``Command.fault`` naming the signal, the component, the value and the bound, ``fault_code`` one of
        :data:`~reflexarm.control.contract.FAULT_CODES`): t finite and strictly later than the last accepted
@@ -89,8 +88,11 @@ class Controller:
     **Time.** The observer integrates the measured period ``t - t_last_accepted`` clipped to
     ``[period_band[0] * dt, period_band[1] * dt]``; :attr:`timing` reports the periods seen.
 
-    The bounds, the state and the fault codes are plain data (one float64 array and integer codes, see
-    :mod:`reflexarm.control._kernels`), so the same contract carries over to a compiled C++ tick.
+    **One implementation.** The tick (contract, dynamics terms, observers, detection, law, bounds, reaction)
+    runs in the C++ core ``reflexarm._core`` (``cpp/``, :class:`reflexarm::Controller`, the class a C++ or
+    ros2_control loop uses); this class checks the construction parameters, converts inputs that are not
+    float64 arrays and turns the core's result into a :class:`Command`. Fault codes and signal ids are those
+    of :mod:`reflexarm.control.contract`.
 
     Args:
         robot: the controller's model (M_hat, C_hat, g_hat, tau_f_hat, Jacobian of the wrist sensor
@@ -154,23 +156,20 @@ class Controller:
         self.robot = self.impedance.robot  # the private copy
         n = self.robot.n
         self.n = n
-        # all parameters and state of the compiled tick live in one array (see control/_kernels.py)
-        self._work = w = np.zeros(_k.layout_size(n))
-        self._rows = rows = w[_k.N_HEADER : _k.N_HEADER + _k.N_ROWS * n].reshape(_k.N_ROWS, n)
-        self._mats = w[_k.N_HEADER + _k.N_ROWS * n :].reshape(_k.N_MATS, n, n)
-        self.observer = MomentumObserver(n, observer_gain, self.dt, _state=rows[_k.INT_ROW : _k.INT_ROW + 3])
+        # the observers validate their gains here; below they are rebuilt on the core's state
+        self.observer = MomentumObserver(n, observer_gain, self.dt)
         self.detection_observer = (
-            None
-            if detection_observer_gain is None
-            else MomentumObserver(n, detection_observer_gain, self.dt, _state=rows[_k.INT_DET_ROW : _k.INT_DET_ROW + 3])
+            None if detection_observer_gain is None else MomentumObserver(n, detection_observer_gain, self.dt)
         )
         self.detector = None if threshold is None else CollisionDetector(n, threshold)
         if reaction not in REACTIONS:
             raise ConfigError(f"unknown reaction {reaction!r}; choose one of: {', '.join(REACTIONS)}")
         self.reaction = reaction
-        self.kappa_f = as_switch(kappa_f, "kappa_f")
-        self.kappa_eps = as_switch(kappa_eps, "kappa_eps")
-        self.kappa_ext = as_switch(kappa_ext, "kappa_ext")
+        self._kappa_init = (
+            as_switch(kappa_f, "kappa_f"),
+            as_switch(kappa_eps, "kappa_eps"),
+            as_switch(kappa_ext, "kappa_ext"),
+        )
         self.residual_limit = as_positive_scalar(residual_limit, "residual_limit")
         if not (isinstance(switch_time, (int, float)) and math.isfinite(switch_time) and switch_time >= 0):
             raise ConfigError(f"switch_time must be a non-negative number of seconds; got {switch_time!r}")
@@ -186,55 +185,24 @@ class Controller:
         self.torque_rate_limit = (
             None if torque_rate_limit is None else as_vector(torque_rate_limit, n, "torque_rate_limit", positive=True)
         )
-        self._eps_weight = float(self.kappa_eps)  # ramped kappa_eps actually applied
-        self._kappa_eps_before_reaction = self.kappa_eps
 
-        model = self.robot.pin_model
-        self._model = model
-        self._data_g, self._data_c, self._data_j, self._data_m = (model.createData() for _ in range(4))
-        self._model0 = self.impedance.model_no_gravity  # M(q) x as a zero-gravity RNEA
-        self._data_p, self._data_ff = self._model0.createData(), self._model0.createData()
-        self._sensor_id = self.robot.sensor_frame_id
-        self._zeros = np.zeros(n)
-        self._zeros6n = np.zeros((6, n))
-        # joint springs of the robot file (Pinocchio has none): g_hat(q) includes K_s (q - q_s)
-        self._has_springs = self.robot.has_springs
-        self._spring_k, self._spring_q = self.robot.spring_stiffness, self.robot.spring_reference
-        self._spring = np.zeros(n)
-        self._M = self._mats[_k.M_MAT]
-        self.impedance.damping = self._mats[_k.D_MAT]  # one damping matrix, updated by the tick
-        self._gravity = np.asarray(model.gravity.linear, dtype=float).copy()  # last accepted
-        self._gravity_in_model = self._gravity.copy()  # what the model holds now (may be a candidate)
-        self._gravity_staged = False
-        self._damping_countdown = 0
-        self._damping_period = self.impedance.damping_update_period
-        self._converting = False
-        self._fast = False  # the first tick checks the input types (then: float64 arrays go straight in)
-        _k.warm_up()
-        self._tau_out = self._rows[_k.TAU_ROW]  # the last command sent
-        self._r_det = self.detection_residual
-        self.reacted = False
+        core = load_core()
+        try:  # the model crosses as text (a Boost.Python pin.Model cannot be passed to nanobind)
+            self._core = c = core.Controller(self.robot.pin_model.saveToString(), core_params(self, core))
+        except ValueError as e:  # the core's ConfigError: the checks above should have caught it
+            raise ConfigError(f"the C++ core refused the controller's parameters: {e}") from e
+        views = c.observer_arrays  # live, writable views of the core's observer states
+        self.observer = MomentumObserver(n, self.observer.observer_gain, self.dt, _state=views[:3])
+        if self.detection_observer is not None:
+            gain = self.detection_observer.observer_gain
+            self.detection_observer = MomentumObserver(n, gain, self.dt, _state=views[3:])
+        self.impedance.damping = c.damping  # read-only live view of the damping matrix the tick uses
+        self._update = c.update
+        self._tau, self._residual, self._saturated, self._collided = c.tau, c.residual, c.saturated, c.collided
+        self._sat_shift = int(core.SAT_SHIFT)
+        self._g_norm = float(np.linalg.norm(self.robot.pin_model.gravity.linear))
         self.last_fault = ""
-        fill_work(self)
-        self._set_switch_flags()
-        self._update_mode()
-
-    def _set_switch_flags(self) -> None:
-        w = self._work
-        w[_k.KAPPA_F] = self.kappa_f
-        w[_k.KAPPA_EXT] = self.kappa_ext
-        w[_k.EPS_WEIGHT] = self._eps_weight
-        self._gravity_mode = self.reacted and self.reaction == "gravity"
-        w[_k.GRAVITY_MODE] = float(self._gravity_mode)
-
-    def _update_mode(self) -> None:
-        if self.reacted and self.reaction == "gravity":
-            self._mode = "gravity_compensation"
-        elif not self.kappa_eps:
-            self._mode = "compliant"
-        else:
-            self._mode = "precise_ee_compliant" if self.kappa_ext else "precise_stiff"
-        self._set_switch_flags()
+        self._mode: str = c.mode
 
     # ------------------------------------------------------------------ run-time switches and facts
     def set_switches(
@@ -244,16 +212,31 @@ class Controller:
 
         kappa_ext only enters the observer's integrand (6), so flipping it moves the residual continuously.
         """
-        if kappa_f is not None:
-            self.kappa_f = as_switch(kappa_f, "kappa_f")
-            self.impedance.kappa_f = self.kappa_f
-        if kappa_eps is not None:
-            self.kappa_eps = as_switch(kappa_eps, "kappa_eps")
-            if self.switch_time == 0.0:
-                self._eps_weight = float(self.kappa_eps)
-        if kappa_ext is not None:
-            self.kappa_ext = as_switch(kappa_ext, "kappa_ext")
-        self._update_mode()
+        values = [-1 if v is None else as_switch(v, name) for v, name in
+                  ((kappa_f, "kappa_f"), (kappa_eps, "kappa_eps"), (kappa_ext, "kappa_ext"))]  # fmt: skip
+        self._core.set_switches(*values)
+        self.impedance.kappa_f = self.kappa_f
+        self._mode = self._core.mode
+
+    @property
+    def kappa_f(self) -> int:
+        """Friction compensation switch in (2) and (6) (0/1)."""
+        return int(self._core.kappa_f)
+
+    @property
+    def kappa_eps(self) -> int:
+        """Disturbance compensation switch in (2) (0/1; the applied weight ramps over ``switch_time``)."""
+        return int(self._core.kappa_eps)
+
+    @property
+    def kappa_ext(self) -> int:
+        """Wrist-wrench term in the observer (6), "EFC" (0/1)."""
+        return int(self._core.kappa_ext)
+
+    @property
+    def reacted(self) -> bool:
+        """True once a detected collision triggered the reaction (latched until :meth:`reset`)."""
+        return bool(self._core.reacted)
 
     @property
     def mode(self) -> str:
@@ -262,29 +245,34 @@ class Controller:
 
     @property
     def detection_residual(self) -> np.ndarray:
-        """The residual the detector looks at."""
+        """The residual the detector looks at (a live view of the core's state; copy it to keep it)."""
         return (self.detection_observer or self.observer).residual
+
+    @property
+    def damping(self) -> np.ndarray:
+        """The damping matrix D of (2) the tick uses now (read-only live view)."""
+        return np.asarray(self._core.damping)
 
     @property
     def timing(self) -> TimingStats:
         """Measured control periods since the last :meth:`reset` (see :class:`TimingStats`)."""
-        return timing_stats(self._work)
+        return timing_stats(self._core.timing)
 
     @property
     def signal_bounds(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """The plausibility bounds per signal as (low, high) arrays (copies)."""
-        return signal_bounds(self._work, self._rows)
+        return signal_bounds(self._core.bounds, self.input_bounds, self._g_norm)
 
     @property
     def observer_state(self) -> np.ndarray:
         """Copy of both observers' states (6, n): integral, p(0), residual of the compensation observer,
         then of the detection observer (zeros when there is none). A rejected tick leaves it unchanged."""
-        return self._rows[_k.INT_ROW : _k.R_DET_ROW + 1].copy()
+        return np.array(self._core.observer_arrays)
 
     @property
     def observer_invalid(self) -> bool:
         """True once the observer state became invalid (latched until :meth:`reset`)."""
-        return bool(self._work[_k.OBS_INVALID])
+        return bool(self._core.observer_invalid)
 
     def reset(self) -> None:
         """Clear observer states, the latched collision, reaction and observer fault, the clock and its
@@ -292,23 +280,12 @@ class Controller:
 
         After a ``"compliant"`` reaction the kappa_eps active before it is restored.
         """
-        if self.reacted and self.reaction == "compliant":
-            self.kappa_eps = self._kappa_eps_before_reaction
-        self.reacted = False
+        self._core.reset()
         self.last_fault = ""
-        self.observer.reset()
-        if self.detection_observer is not None:
-            self.detection_observer.reset()
         if self.detector is not None:
             self.detector.reset()
         self.impedance.reset()
-        self._damping_countdown = 0
-        w = self._work
-        for key in (_k.STARTED, _k.HAS_T, _k.LAST_T, _k.OBS_INVALID, _k.UPDATE_DAMPING,
-                    _k.T_COUNT, _k.T_SUM, _k.T_MIN, _k.T_MAX, _k.T_CLIPPED):  # fmt: skip
-            w[key] = 0.0
-        self._eps_weight = float(self.kappa_eps)
-        self._update_mode()
+        self._mode = self._core.mode
 
     # ------------------------------------------------------------------ the tick
     def step(self, measurement: Measurement, reference: Reference) -> Command:
@@ -319,142 +296,54 @@ class Controller:
         type or shape raises :class:`~reflexarm.errors.SignalError`. No NaN torque and no torque beyond
         ``torque_limit`` ever leaves this method.
         """
-        if not self._fast:
-            return self._step_converted(measurement, reference)
         try:
             t, q, dq, tau_m, wrench, gravity = measurement
             q_d, dq_d, ddq_d = reference
-            F = _F64  # another dtype would make the compiled call fail slowly (~1 ms): convert it first
-            # == not `is`: arrays made by a numba function loaded from its on-disk cache carry an unpickled
-            # float64 dtype object that is equal to, but not, the np.dtype(np.float64) singleton
-            if not (
-                q.dtype == F and dq.dtype == F and tau_m.dtype == F and wrench.dtype == F and gravity.dtype == F
-                and q_d.dtype == F and dq_d.dtype == F and ddq_d.dtype == F
-            ):  # fmt: skip
-                raise TypeError("not float64")  # handled below, outside this try
-            gm = self._gravity_in_model
-            if gravity[0] != gm[0] or gravity[1] != gm[1] or gravity[2] != gm[2]:
-                gm[:] = gravity  # a candidate: restored by _reject if the tick is not accepted
-                self._gravity_staged = True
-                self._model.gravity.linear = gm
-            model = self._model
-            g = pin.computeGeneralizedGravity(model, self._data_g, q)
-            if self._has_springs:
-                g = g + self._spring_torque(q)
-            C = pin.computeCoriolisMatrix(model, self._data_c, q, dq)
-            p = pin.rnea(self._model0, self._data_p, q, self._zeros, dq)  # M(q) dq
-            ff = pin.rnea(self._model0, self._data_ff, q_d, self._zeros, ddq_d)  # M(q_d) ddq_d
-            J = (
-                pin.computeFrameJacobian(model, self._data_j, q, self._sensor_id, pin.LOCAL)
-                if self.kappa_ext
-                else self._zeros6n
-            )
-            w = self._work
-            if self._eps_weight != self.kappa_eps:  # bumpless kappa_eps ramp (committed when accepted)
-                inc = self.dt / self.switch_time
-                e = self._eps_weight
-                w[_k.EPS_WEIGHT] = min(e + inc, 1.0) if self.kappa_eps > e else max(e - inc, 0.0)
-            if self._damping_countdown == 0 and not self._gravity_mode:
-                self._M[:] = pin.crba(model, self._data_m, q)  # upper triangle; the tick mirrors it
-                w[_k.UPDATE_DAMPING] = 1.0
-            status = _k.controller_tick(t, q, dq, tau_m, wrench, gravity, q_d, dq_d, ddq_d, g, C, p, ff, J, w)
-        except Exception:  # not float64 arrays of the right shapes: convert (or raise SignalError)
-            if self._converting:  # converted inputs failed as well: a genuine error, not the caller's
-                raise
-            self._restore_gravity()
+            if t.__class__ is not float:
+                t = _as_time(t)
+            status = self._update(t, q, dq, tau_m, wrench, gravity, q_d, dq_d, ddq_d)
+        except (TypeError, ValueError):  # not contiguous float64 vectors (or not unpackable): convert or raise
             return self._step_converted(measurement, reference)
-        if status < 0:
-            return self._reject(status)
-        if self._gravity_staged:
-            self._gravity[:] = gm
-            self._gravity_staged = False
-        if self._eps_weight != self.kappa_eps:
-            self._eps_weight = float(w[_k.EPS_WEIGHT])
-        if not self._gravity_mode:
-            self._damping_countdown = (self._damping_countdown or self._damping_period) - 1
-        self.last_fault = ""
         if status == 0:
+            self.last_fault = ""
             det = self.detector
-            detected = det.detected if det is not None else False
-            return Command(self._tau_out.copy(), self._r_det.copy(), detected, (), self._mode, "")
-        return self._with_events(status, t)
+            return Command(
+                self._tau.copy(), self._residual.copy(), det.detected if det is not None else False, (), self._mode, ""
+            )
+        return self._finish(status, t)
 
     def _step_converted(self, measurement: Measurement, reference: Reference) -> Command:
-        """The tick for inputs that are not all float64 arrays: convert them once (or raise SignalError).
+        """The tick for inputs that are not all contiguous float64 arrays: convert them once (or raise
+        SignalError naming the signal)."""
+        args, _ = convert_inputs(measurement, reference, self.n)
+        return self._finish(self._update(*args), args[0])
 
-        Ticks with other dtypes or lists come here (about 15 us more, no compilation); after a tick of
-        float64 arrays the next one takes the fast path again.
-        """
-        args, converted = convert_inputs(measurement, reference, self.n)
-        self._fast = self._converting = True
-        try:
-            return self.step(Measurement(*args[:6]), Reference(*args[6:]))
-        finally:
-            self._converting = False
-            self._fast = not converted
-
-    def _spring_torque(self, q: np.ndarray) -> np.ndarray:
-        """K_s (q - q_s) into a preallocated buffer [Nm]."""
-        np.subtract(q, self._spring_q, out=self._spring)
-        np.multiply(self._spring, self._spring_k, out=self._spring)
-        return self._spring
-
-    def _restore_gravity(self) -> None:
-        """Put the last accepted gravity back into the model (after a candidate was not accepted)."""
-        if self._gravity_staged:
-            self._gravity_in_model[:] = self._gravity
-            self._model.gravity.linear = self._gravity_in_model
-            self._gravity_staged = False
-
-    def _with_events(self, status: int, t: float) -> Command:
-        """An accepted tick with threshold crossings and/or a bounded torque."""
-        rows = self._rows
-        n_over = status & ((1 << _k.SAT_SHIFT) - 1)
-        saturated = tuple(np.flatnonzero(rows[_k.SAT_ROW]).tolist()) if status >> _k.SAT_SHIFT else ()
+    def _finish(self, status: int, t: float) -> Command:
+        """The Command of a tick from the core's status: a fault (< 0), or n_over + (n_saturated << SAT_SHIFT)."""
+        if status < 0:
+            return self._reject(status)
+        shift = self._sat_shift
+        n_over = status & ((1 << shift) - 1)
+        n_sat = status >> shift
+        saturated = tuple(np.flatnonzero(self._saturated).tolist()) if n_sat else ()
         collided: tuple[int, ...] = ()
         detected = False
         if self.detector is not None:
             if n_over:
-                collided = tuple(np.flatnonzero(rows[_k.OVER_ROW]).tolist())
+                collided = tuple(np.flatnonzero(self._collided).tolist())
                 self.detector.record(collided, float(t))
-                if not self.reacted and self.reaction != "none":
-                    self.reacted = True
-                    if self.reaction == "compliant":
-                        self._kappa_eps_before_reaction = self.kappa_eps
-                        self.set_switches(kappa_eps=0)
-                    self._update_mode()
+                self._mode = self._core.mode  # the reaction may have switched it
             detected = self.detector.detected
-        tau = rows[_k.TAU_ROW].copy()
-        return Command(tau, self.detection_residual.copy(), detected, collided, self.mode, "", saturated)
+        self.last_fault = ""
+        return Command(self._tau.copy(), self._residual.copy(), detected, collided, self._mode, "", saturated)
 
     def _reject(self, code: int) -> Command:
-        """The safe command for a rejected tick: gravity compensation at the last accepted position."""
-        w, rows = self._work, self._rows
-        w[_k.UPDATE_DAMPING] = 0.0
-        self._restore_gravity()
-        w[_k.EPS_WEIGHT] = self._eps_weight
-        if code == _k.BAD_SHAPE:
-            raise shape_error(w)
-        fault = describe_fault(code, w)
-        tau = np.zeros(self.n)
-        if w[_k.HAS_LAST_Q]:
-            g = pin.computeGeneralizedGravity(self._model, self._data_g, rows[_k.LAST_Q_ROW])
-            if self._has_springs:
-                g = g + self._spring_torque(rows[_k.LAST_Q_ROW])
-            if np.all(np.isfinite(g)):
-                tau[:] = g
-        bounded = tau.copy()
-        if w[_k.HAS_PREV_TAU]:
-            prev, step = rows[_k.TAU_ROW], rows[_k.TAU_STEP_ROW]
-            np.clip(bounded, prev - step, prev + step, out=bounded)
-        np.clip(bounded, -rows[_k.TAU_MAX_ROW], rows[_k.TAU_MAX_ROW], out=bounded)
-        saturated = tuple(np.flatnonzero(bounded != tau).tolist())
-        rows[_k.TAU_ROW] = bounded
-        w[_k.HAS_PREV_TAU] = 1.0
+        """The safe command the core computed for a rejected tick (a wrong shape raises SignalError)."""
+        c = self._core
+        if code == BAD_SHAPE:
+            signal, _, received, _, expected = c.fault_info
+            raise shape_error(signal, int(received), int(expected))
+        fault = c.fault
         self.last_fault = fault
-        if code in (_k.OBSERVER_INVALID, _k.OUTPUT_NON_FINITE):
-            collision = True  # detection is off: never report "no collision"
-        else:
-            collision = self.detector.detected if self.detector is not None else False
-        residual = self.detection_residual.copy()
-        return Command(bounded.copy(), residual, collision, (), "fault", fault, saturated, code)
+        saturated = tuple(np.flatnonzero(self._saturated).tolist())
+        return Command(self._tau.copy(), self._residual.copy(), bool(c.collision), (), "fault", fault, saturated, code)

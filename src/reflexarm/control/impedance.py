@@ -9,7 +9,7 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from reflexarm._validation import as_switch, as_vector
-from reflexarm.control._damping import modal_damping_into
+from reflexarm.control._setup import load_core
 from reflexarm.errors import ConfigError
 from reflexarm.robots.robot_model import RobotModel
 from reflexarm.signals import Reference
@@ -46,12 +46,20 @@ def modal_damping(mass_matrix: np.ndarray, stiffness: np.ndarray, damping_ratio:
         damping_ratio: modal damping ratios (n,).
     """
     M = np.ascontiguousarray(mass_matrix, dtype=float)
-    if not np.all(np.isfinite(M)) or np.any(np.linalg.eigvalsh(M) <= 0.0):
-        raise ConfigError("mass matrix is not symmetric positive definite")
-    out = np.empty_like(M)
-    if not modal_damping_into(M, np.asarray(stiffness, dtype=float), np.asarray(damping_ratio, dtype=float), out):
-        raise ConfigError("mass matrix is not symmetric positive definite")
-    return out
+    if M.ndim != 2 or not np.all(np.isfinite(M)) or np.any(np.linalg.eigvalsh(M) <= 0.0):
+        raise ConfigError(f"mass matrix is not symmetric positive definite; got {M.tolist()}")
+    D = _modal_damping_or_none(M, stiffness, damping_ratio)
+    if D is None:
+        raise ConfigError(f"mass matrix is not symmetric positive definite; got {M.tolist()}")
+    return D
+
+
+def _modal_damping_or_none(M: np.ndarray, stiffness: npt.ArrayLike, damping_ratio: npt.ArrayLike) -> np.ndarray | None:
+    """D from the upper triangle of M by the C++ core (the tick's own routine); None if M is unusable."""
+    D = load_core().modal_damping(
+        np.asarray(M, dtype=float), np.asarray(stiffness, dtype=float), np.asarray(damping_ratio, dtype=float)
+    )
+    return None if D is None else np.asarray(D)
 
 
 class JointImpedanceController:
@@ -116,11 +124,12 @@ class JointImpedanceController:
         Never raises on bad values: if q or M(q) is unusable (non-finite, not positive definite) D stays
         as it was and :attr:`damping_ok` is False.
         """
-        M = pin.crba(self._model, self._data, q)  # upper triangle filled; the kernel reads only that
+        M = pin.crba(self._model, self._data, q)  # upper triangle filled; the core reads only that
         self._M[:] = M
-        self.damping_ok = bool(
-            modal_damping_into(self._M, self.gains.stiffness, self.gains.damping_ratio, self.damping)
-        )
+        D = _modal_damping_or_none(self._M, self.gains.stiffness, self.gains.damping_ratio)
+        self.damping_ok = D is not None
+        if D is not None:
+            self.damping[:] = D
         return self.damping
 
     def maybe_update_damping(self, q: np.ndarray) -> bool:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import numpy.typing as npt
 
@@ -26,7 +28,9 @@ class MomentumObserver(DisturbanceObserver):
         dt: sample period [s].
     """
 
-    def __init__(self, n: int, observer_gain: npt.ArrayLike, dt: float, *, _state: np.ndarray | None = None) -> None:
+    def __init__(
+        self, n: int, observer_gain: npt.ArrayLike, dt: float, *, _state: Sequence[np.ndarray] | None = None
+    ) -> None:
         self.n = int(n)
         self.dt = as_positive_scalar(dt, "dt")
         self.observer_gain = as_vector(observer_gain, self.n, "observer_gain", positive=True)
@@ -35,7 +39,8 @@ class MomentumObserver(DisturbanceObserver):
                 f"observer_gain * dt must be < 1 for the discrete observer to be stable; got "
                 f"observer_gain={self.observer_gain.tolist()} 1/s with dt={self.dt} s"
             )
-        # state rows: integral, p(0), residual; a composing Controller may own the storage (``_state``)
+        # state rows: integral, p(0), residual; a composing Controller may own the storage (``_state``: three
+        # (n,) arrays, e.g. views of the C++ core's observer state)
         state = np.zeros((3, self.n)) if _state is None else _state
         self._integral, self._p0, self._r = state[0], state[1], state[2]
         self._buf = np.zeros(self.n)
