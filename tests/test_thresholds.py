@@ -98,7 +98,7 @@ def test_study_and_command_agree_and_number_joints_from_one(atlas, tmp_path):
     # the residual follows the held values: its maximum per joint is near the largest drawn value
     assert np.all(prop.collision > 0.5 * np.array([j.fit.x_max for j in prop.joints]))
     out = tmp_path / "out"
-    args = f"tune-thresholds {path} --rate 60 --contact-rate 600 --step-torque 20 --gap 0.1 --out {out}"
+    args = f"tune-thresholds {path} --rate 60 --contact-rate 600 --step-torque 20 --step-force 50 --gap 0.1 --out {out}"
     code = main(args.split())
     assert code == 0
     doc = json.loads((out / "thresholds.json").read_text())
@@ -108,6 +108,8 @@ def test_study_and_command_agree_and_number_joints_from_one(atlas, tmp_path):
     assert [j["joint"] for j in doc["joints"]] == list(range(1, atlas.n + 1))
     assert set(doc["fits"]) == {str(j) for j in range(1, atlas.n + 1)}
     assert "generalized Pareto" in doc["method"]["tail"]
+    assert [r["direction"] for r in doc["force_step"]["levels"]["collision"]] == ["+x", "-x", "+y", "-y", "+z", "-z"]
+    np.testing.assert_allclose(doc["force_step"]["posture_rad"], EE_START, atol=1e-12)
     for name in ("thresholds.csv", "thresholds.png", "threshold_tails.png"):
         assert (out / name).is_file()
 
@@ -157,3 +159,29 @@ def test_a_trace_is_read_with_a_warning_about_its_true_velocities(atlas, tmp_pat
     assert any(issubclass(w.category, ThresholdWarning) and "true joint velocities" in str(w.message) for w in caught)
     np.testing.assert_array_equal(log.q, tr.q_meas)
     np.testing.assert_array_equal(log.tau, tr.tau_m)
+
+
+def test_force_step_torques_are_the_virtual_work_of_the_force(atlas):
+    """tau = J_v^T F against finite differences of the end-effector position: tau_j = F . dp/dq_j
+    (central differences with h = 1e-6 rad: truncation ~h^2, round-off ~1e-10/h; 1e-6 Nm for 50 N)."""
+    from reflexarm.tuning import force_step_delays
+
+    q = EE_START + 0.1
+    force, h = 50.0, 1e-6
+    rows = force_step_delays(atlas, q, force, 11.0, 0.2)
+    assert [r["direction"] for r in rows] == ["+x", "-x", "+y", "-y", "+z", "-z"]
+    for r, axis in zip(rows[::2], range(3), strict=True):
+        fd = []
+        for j in range(atlas.n):
+            dq = np.zeros(atlas.n)
+            dq[j] = h
+            p_plus, p_minus = atlas.compute_frame_pose(q + dq)[1], atlas.compute_frame_pose(q - dq)[1]
+            fd.append(force * (p_plus[axis] - p_minus[axis]) / (2 * h))
+        np.testing.assert_allclose(r["joint_torque_Nm"], fd, atol=1e-6, err_msg=f"J_v^T F along {r['direction']}")
+        tau = np.abs(np.asarray(r["joint_torque_Nm"]))
+        if tau.max() > 11.0:
+            j = int(np.argmax(tau))  # equal zeta on every joint: the largest torque crosses first
+            assert r["first_joint"] == j + 1
+            assert r["delay_s"] == pytest.approx(detection_delay(11.0, tau[j], 0.2))
+        else:
+            assert r["first_joint"] is None and r["delay_s"] is None

@@ -56,6 +56,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--step-torque", type=float, default=30.0, metavar="NM",
         help="external torque step at a joint whose detection delay is reported [Nm] (default 30)",
     )  # fmt: skip
+    t.add_argument(
+        "--step-force", type=float, default=None, metavar="N",
+        help="also: delay of a force step [N] at the end effector along the base axes (J^T F at the logs' median "
+        "posture)",
+    )  # fmt: skip
     t.add_argument("--method", choices=METHODS, default="gpd", help="tail model (default gpd; exponential: xi = 0)")
     t.add_argument("--gap", type=float, default=None, metavar="S", help="declustering gap [s] (default 5 / k_o)")
     t.add_argument(
@@ -111,6 +116,7 @@ def _tune(args: argparse.Namespace) -> int:
             rate_per_hour=args.rate,
             contact_rate_per_hour=args.contact_rate,
             step_torque=args.step_torque,
+            step_force=args.step_force,
             method=args.method,
             gap_s=args.gap,
             allow_extrapolation=args.allow_extrapolation,

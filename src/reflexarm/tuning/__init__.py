@@ -6,6 +6,7 @@ lower contact level per joint for false-alarm rates the user gives, with the det
 :func:`record_free_motion_log` writes such logs in simulation (the built-in Atlas arm).
 """
 
+from reflexarm.tuning.delays import FORCE_DIRECTIONS, detection_delay, force_step_delays
 from reflexarm.tuning.free_motion_log import FreeMotionRun, record_free_motion_log
 from reflexarm.tuning.replay import (
     ObserverSettings,
@@ -22,7 +23,6 @@ from reflexarm.tuning.study import (
     JointThresholds,
     LogTooShortError,
     ThresholdProposal,
-    detection_delay,
     tune_thresholds,
 )
 from reflexarm.tuning.tail import METHODS, TailFit, cluster_maxima, fit_tail
@@ -30,6 +30,7 @@ from reflexarm.tuning.tail import METHODS, TailFit, cluster_maxima, fit_tail
 __all__ = [
     "DEFAULT_CONTACT_RATE",
     "DEFAULT_RATE",
+    "FORCE_DIRECTIONS",
     "MAX_EXTRAPOLATION",
     "METHODS",
     "FreeMotionRun",
@@ -43,6 +44,7 @@ __all__ = [
     "cluster_maxima",
     "detection_delay",
     "fit_tail",
+    "force_step_delays",
     "is_trace_file",
     "load_free_motion_log",
     "record_free_motion_log",

@@ -38,6 +38,7 @@ import numpy as np
 from reflexarm.errors import ConfigError, DataError
 from reflexarm.ident.robot_log import RobotLog
 from reflexarm.robots.robot_model import RobotModel
+from reflexarm.tuning.delays import detection_delay, force_step_delays
 from reflexarm.tuning.replay import (
     ObserverSettings,
     ResidualReplay,
@@ -54,7 +55,6 @@ __all__ = [
     "JointThresholds",
     "LogTooShortError",
     "ThresholdProposal",
-    "detection_delay",
     "tune_thresholds",
 ]
 
@@ -85,17 +85,6 @@ class LogTooShortError(DataError):
             f"free-motion log ({MAX_EXTRAPOLATION:g}x shorter than its per-joint return period); got "
             f"{duration_s / 60:.1f} min (record more, ask for a higher rate, or allow the extrapolation)"
         )
-
-
-def detection_delay(zeta: float, step: float, time_constant: float, baseline: float = 0.0) -> float | None:
-    """Time [s] for the residual r = b + s (1 - exp(-t / T_o)) to reach ``zeta``; None if it never does
-    (s <= zeta - b). ``baseline`` b [Nm], ``time_constant`` T_o [s], ``step`` s > 0 [Nm]."""
-    need = zeta - baseline
-    if need <= 0.0:
-        return 0.0
-    if step <= need:
-        return None
-    return float(-time_constant * math.log1p(-need / step))
 
 
 @dataclass(frozen=True)
@@ -150,6 +139,9 @@ class ThresholdProposal:
     method: str
     replays: list[ResidualReplay] = field(default_factory=list, repr=False)
     notes: list[str] = field(default_factory=list)
+    step_force: float | None = None
+    force_posture: list[float] | None = None
+    force_steps: dict[str, list[dict[str, object]]] = field(default_factory=dict)
 
     @property
     def collision(self) -> np.ndarray:
@@ -189,6 +181,14 @@ class ThresholdProposal:
             "contact_Nm": [float(v) for v in self.contact],
             "joints": self.rows(),
             "fits": {str(j.joint + 1): j.fit.as_dict() for j in self.joints},
+            "force_step": None
+            if self.step_force is None
+            else {
+                "force_N": self.step_force,
+                "posture_rad": self.force_posture,
+                "note": "tau = J_v(q)^T F at the first log's median posture; the first joint to cross, b = 0",
+                "levels": self.force_steps,
+            },
             "notes": list(self.notes),
         }
 
@@ -221,6 +221,14 @@ class ThresholdProposal:
                 f"{sec(d['collision_delay_s']):>7}/{sec(d['collision_delay_unfavourable_s']):>7} "
                 f"{sec(d['contact_delay_s']):>7}/{sec(d['contact_delay_unfavourable_s']):>7}"
             )
+        for level, rows in self.force_steps.items():
+            cells = ", ".join(
+                f"{r['direction']} {sec(r['delay_s'])} s (joint {r['first_joint']})"
+                if r["first_joint"] is not None
+                else f"{r['direction']} never"
+                for r in rows
+            )
+            lines.append(f"{self.step_force:g} N at the end effector, {level} level: {cells}")
         tail = "".join(f"\nnote: {x}" for x in self.notes)
         return head + "\n".join(lines) + tail
 
@@ -256,6 +264,7 @@ def tune_thresholds(
     rate_per_hour: float = DEFAULT_RATE,
     contact_rate_per_hour: float = DEFAULT_CONTACT_RATE,
     step_torque: float = 30.0,
+    step_force: float | None = None,
     method: str = "gpd",
     gap_s: float | None = None,
     allow_extrapolation: bool = False,
@@ -274,6 +283,8 @@ def tune_thresholds(
         rate_per_hour: false alarms per hour of the collision level, for the whole arm.
         contact_rate_per_hour: the same for the contact level (must be higher).
         step_torque: size of the external torque step [Nm] whose detection delay is reported.
+        step_force: if given, the delay of a force step of this size [N] at the end effector along the base
+            axes, mapped by J_v^T at the first log's median posture (:func:`~reflexarm.tuning.force_step_delays`).
         method: tail model, "gpd" or "exponential" (:data:`reflexarm.tuning.tail.METHODS`).
         gap_s: declustering gap [s] (default :data:`GAP_TIME_CONSTANTS` / k_o).
         allow_extrapolation: warn instead of raising when the logs are too short for a rate.
@@ -298,8 +309,19 @@ def tune_thresholds(
     log_list = [logs] if isinstance(logs, (RobotLog, str, os.PathLike)) else list(logs)
     if not log_list:
         raise ConfigError("no free-motion log given")
+    if step_force is not None and not (
+        isinstance(step_force, (int, float)) and math.isfinite(step_force) and step_force > 0
+    ):
+        raise ConfigError(f"step_force must be a positive force [N]; got {step_force!r}")
     read = load or (lambda path: load_free_motion_log(path, robot))
-    replays = [replay_residual(log if isinstance(log, RobotLog) else read(log), robot, s) for log in log_list]
+    replays = []
+    posture: np.ndarray | None = None
+    for item in log_list:
+        log = item if isinstance(item, RobotLog) else read(item)
+        if posture is None:
+            posture = np.median(log.q, axis=0)
+        replays.append(replay_residual(log, robot, s))
+        del log
     dt = replays[0].dt
     for r in replays[1:]:
         if abs(r.dt - dt) > 1e-3 * dt:
@@ -346,7 +368,7 @@ def tune_thresholds(
                 delays=delays,
             )
         )
-    return ThresholdProposal(
+    proposal = ThresholdProposal(
         joints=joints,
         rate_per_hour=rate,
         contact_rate_per_hour=contact_rate,
@@ -360,3 +382,11 @@ def tune_thresholds(
         replays=replays,
         notes=notes,
     )
+    if step_force is not None and posture is not None:
+        proposal.step_force = float(step_force)
+        proposal.force_posture = [float(v) for v in posture]
+        proposal.force_steps = {
+            "collision": force_step_delays(robot, posture, step_force, proposal.collision, time_constant),
+            "contact": force_step_delays(robot, posture, step_force, proposal.contact, time_constant),
+        }
+    return proposal
