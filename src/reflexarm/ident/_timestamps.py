@@ -39,8 +39,9 @@ __all__ = [
 TIME_UNITS: dict[str, float] = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 #: First stamps in this range [s] (2000-01-01 to 2100-01-01 UTC) are taken as Unix epoch times.
 EPOCH_RANGE_S = (946_684_800.0, 4_102_444_800.0)
-#: Sample periods [s] a joint log can plausibly have: 20 kHz to 1 Hz.
-PLAUSIBLE_PERIOD = (5e-5, 1.0)
+#: Sample periods [s] a joint log can plausibly have: 20 kHz to 10 Hz (a slower log cannot carry
+#: what identification needs below the default 10 Hz cutoff).
+PLAUSIBLE_PERIOD = (5e-5, 0.1)
 
 
 class TimeUnitWarning(UserWarning):
@@ -98,6 +99,9 @@ def relative_seconds(
     if unit is None:
         unit, how, ambiguous = _infer_unit(offset_raw, rel, integer or bool(np.all(arr == np.round(arr))), where)
     scale = TIME_UNITS[unit]
+    snapped = None if integer else _snap_quantized(rel, float(np.spacing(np.max(np.abs(arr)))))
+    if snapped is not None:
+        rel, shift = snapped
     t = rel * scale
     offset_s = offset_raw * scale
     parts = []
@@ -110,6 +114,11 @@ def relative_seconds(
             + (f" = {_utc(offset_s)}, a Unix epoch time" if epoch else f" = {offset_s:.9g} s")
             + ")"
         )
+    if snapped is not None:
+        parts.append(
+            f"float stamps of this magnitude resolve only {np.spacing(np.max(np.abs(arr))) * scale:.2g} s: put on "
+            f"their {float(np.median(np.diff(t))) * 1e3:.6g} ms grid (largest shift {shift * scale:.2g} s)"
+        )
     if ambiguous:
         msg = (
             f"{where}: the spacing of the time stamps ({column}) fits more than one unit ({', '.join(ambiguous)}); "
@@ -120,6 +129,30 @@ def relative_seconds(
         parts.append(msg.split(": ", 1)[1])
     note = f"{where}: time stamps ({column}): " + "; ".join(parts) if parts else None
     return t, note
+
+
+def _snap_quantized(rel: np.ndarray, resolution: float) -> tuple[np.ndarray, float] | None:
+    """Float stamps whose deviation from a uniform grid is within their own float resolution (epoch
+    seconds in float64 hold ~2.4e-7 s) are put on that grid: (grid times, largest shift), else None.
+
+    The grid's step is the span over the whole number of steps (each step rounded to whole periods of
+    the median step), exact to the resolution over the log's length; gaps of whole periods stay gaps.
+    """
+    steps = np.diff(rel)
+    if steps.size == 0 or resolution <= 0:
+        return None
+    median = float(np.median(steps))
+    if not median > 0 or resolution < 1e-9 * median:  # quantization invisible at this magnitude
+        return None
+    ticks = np.round(steps / median)
+    if np.any(ticks < 1):
+        return None
+    step = float(rel[-1] - rel[0]) / float(ticks.sum())
+    grid = rel[0] + step * np.r_[0.0, np.cumsum(ticks)]
+    shift = float(np.max(np.abs(rel - grid)))
+    if shift > 4 * resolution:  # jitter beyond the float resolution is the robot's: left to re-timing
+        return None
+    return grid, shift
 
 
 def _infer_unit(first: float, rel: np.ndarray, whole: bool, where: str) -> tuple[str, str, list[str]]:
