@@ -39,6 +39,8 @@ if TYPE_CHECKING:
 
 __all__ = ["CameraView", "StillCapture", "VideoRecorder", "frame_scene", "render_frame", "save_still"]
 
+#: What a still keeps of the plant: MuJoCo's integration state (time, qpos, qvel, mocap, applied forces).
+_STATE = mujoco.mjtState.mjSTATE_INTEGRATION
 #: Default video rate [frames per second of simulated time].
 DEFAULT_FPS = 30.0
 #: Below this |tau_ext| [Nm] on every joint nothing touches the arm: the still shows the start instead.
@@ -67,36 +69,36 @@ class StillCapture:
     """A run callback that keeps the state at contact, to render a still of it afterwards.
 
     It keeps MuJoCo's integration state at the first tick and at the tick of the largest true external
-    joint torque (max over joints of |tau_ext|, :meth:`Plant.true_external_torque`): the moment the scene
-    presses hardest on the arm. :meth:`save` renders the contact state when the peak reached
-    :data:`CONTACT_TORQUE`, else the first tick. One capture per run.
+    joint torque (the norm |tau_ext| over the joints, :meth:`Plant.true_external_torque`): the moment the
+    scene presses hardest on the arm. :meth:`save` renders the contact state when the peak reached
+    :data:`CONTACT_TORQUE`, else the first tick. One capture per run; per tick it costs one evaluation of
+    tau_ext and a dot product, and a copy of the state into a buffer when a new peak is reached.
     """
 
     def __init__(self) -> None:
         self.plant: Plant | None = None
-        self.peak_torque = 0.0  #: largest max_j |tau_ext,j| seen [Nm]
+        self.peak_torque = 0.0  #: largest |tau_ext| (norm over the joints) seen [Nm]
         self.peak_time: float | None = None  #: its time [s]
         self._start: np.ndarray | None = None
         self._peak: np.ndarray | None = None
         self._start_cmd: Command | None = None
         self._peak_cmd: Command | None = None
         self._buf = np.zeros(0)
+        self._peak2 = 0.0
 
     def __call__(self, k: int, plant: Plant, measurement: Measurement, command: Command) -> None:
         if self.plant is None:
-            self.plant, self._buf = plant, np.zeros(plant.n)
-            self._start, self._start_cmd = self._state(plant), command
-        peak = float(np.max(np.abs(plant.true_external_torque(out=self._buf)), initial=0.0))
-        if peak > self.peak_torque:
-            self.peak_torque, self.peak_time = peak, plant.time
-            self._peak, self._peak_cmd = self._state(plant), command
-
-    @staticmethod
-    def _state(plant: Plant) -> np.ndarray:
-        spec = mujoco.mjtState.mjSTATE_INTEGRATION
-        state = np.empty(mujoco.mj_stateSize(plant.model, spec))
-        mujoco.mj_getState(plant.model, plant.data, state, spec)
-        return state
+            self.plant, self._buf, self._peak2 = plant, np.zeros(plant.n), 0.0
+            size = mujoco.mj_stateSize(plant.model, _STATE)
+            self._start, self._peak = np.empty(size), np.empty(size)
+            mujoco.mj_getState(plant.model, plant.data, self._start, _STATE)
+            self._start_cmd = command
+        tau = plant.true_external_torque(out=self._buf)
+        peak2 = float(tau @ tau)
+        if peak2 > self._peak2:
+            self._peak2, self.peak_torque, self.peak_time = peak2, math.sqrt(peak2), plant.time
+            mujoco.mj_getState(plant.model, plant.data, self._peak, _STATE)
+            self._peak_cmd = command
 
     @property
     def contact(self) -> bool:
@@ -117,7 +119,7 @@ class StillCapture:
         plant = self.plant
         state, cmd = (self._peak, self._peak_cmd) if self.contact else (self._start, self._start_cmd)
         data = mujoco.MjData(plant.model)
-        mujoco.mj_setState(plant.model, data, state, mujoco.mjtState.mjSTATE_INTEGRATION)
+        mujoco.mj_setState(plant.model, data, state, _STATE)
         mujoco.mj_forward(plant.model, data)  # positions and contact forces of that state, for the arrows
         painter = _Painter(plant, width, height, None)
         try:
