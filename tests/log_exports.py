@@ -62,11 +62,13 @@ def write_bag(
     gripper: bool = True,
     start_ns: int = EPOCH_NS,
     receive_delay_ns: int = 300_000,
+    effort: bool = True,
 ) -> Path:
     """A rosbag2 bag (``storage`` "sqlite3" or "mcap") of ``log`` as sensor_msgs/JointState messages
     (header stamps = the log's times from ``start_ns``; bag receive times ``receive_delay_ns`` later),
     the joint order rotated from message to message, and (``gripper``) a gripper's own JointState
-    message every 10th sample; with ``wrench_topic`` the log's wrench as WrenchStamped at the same stamps."""
+    message every 10th sample; with ``wrench_topic`` the log's wrench as WrenchStamped at the same stamps;
+    ``effort=False`` leaves the arm's effort arrays empty."""
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
 
@@ -92,7 +94,7 @@ def write_bag(
                 name=[joint_names[j] for j in order],
                 position=np.ascontiguousarray(log.q[i, order], dtype=np.float64),
                 velocity=np.ascontiguousarray(log.dq[i, order], dtype=np.float64),
-                effort=np.ascontiguousarray(log.measured_torque[i, order], dtype=np.float64),
+                effort=np.ascontiguousarray(log.measured_torque[i, order] if effort else [], dtype=np.float64),
             )
             writer.write(conn, stamp + receive_delay_ns, store.serialize_cdr(msg, JointState.__msgtype__))
             if gripper and i % 10 == 0:
