@@ -62,7 +62,13 @@ COMMANDS = [
         id="ee-collision",
     ),
     pytest.param(
-        ["efc-step"], "efc_step_*.npz", "efc_step.json", "fig12_efc_step.png", "efc_step", marks=pytest.mark.slow
+        ["efc-step"],
+        "efc_step_*.npz",
+        "efc_step.json",
+        "fig12_efc_step.png",
+        "efc_step",
+        marks=pytest.mark.slow,
+        id="efc-step",
     ),
     pytest.param(
         ["compliance-loss", "--hand-stiffness", "1000"],
