@@ -173,3 +173,15 @@ def test_what_cannot_be_compiled_runs_in_python(robot):
     assert tr.meta["loop"] == "python" and len(tr.t) == 10
     tr = run_fast(Plant(robot), Controller(robot), _GlitchyHold(q0), 0.01)
     assert tr.meta["loop"] == "compiled" and len(tr.t) == 10
+
+
+def test_reference_sampled_as_arrays_is_the_trajectory_bit_for_bit():
+    """The array evaluation of a JointTrajectory (before its start, along it, after its end) equals sample()."""
+    from reflexarm.sim.compiled_loop import _sample_reference
+
+    for traj in (C.ee_collision_trajectory(), C.link_collision_trajectory()):
+        times = np.arange(-50, round(traj.duration * 1000) + 300) * 1e-3
+        got = [np.zeros((times.size, 7)) for _ in range(3)]
+        _sample_reference(traj, times, *got)
+        for g, want in zip(got, traj.sample_many(times), strict=True):
+            np.testing.assert_array_equal(g, want)
