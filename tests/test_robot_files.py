@@ -259,9 +259,11 @@ def test_mjcf_with_absent_meshes_loads_with_the_mesh_geoms_dropped(tmp_path: Pat
     path = _write(tmp_path, "mesh_arm.xml", MESH_ARM)
     with pytest.warns(RobotFileWarning, match=r"mesh_arm.xml': 2 mesh file\(s\) not found .*shell.stl.*the 2 geom"):
         robot = load_robot(path, ee_frame="tip")
-    assert len(robot.notes) == 1
+    # link2 lost its only contact geom: a box with its inertia stands in (link1 keeps its capsule)
+    assert len(robot.notes) == 2 and "1 body(ies) left without contact geometry (link2) touch" in robot.notes[1]
     plant = Plant(robot, noise=SensorNoise.none())
-    assert plant.model.nmesh == 0 and plant.model.ngeom >= 1  # the capsule stays
+    assert plant.model.nmesh == 0 and plant.model.ngeom == 2  # the capsule stays, link2's box added
+    assert plant.model.geom("link2_inertia_box").type == mujoco.mjtGeom.mjGEOM_BOX
     worst = check_agreement(robot, plant, n_states=20)
     assert max(worst.values()) <= ATOL, worst
 

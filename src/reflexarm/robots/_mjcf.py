@@ -7,7 +7,8 @@ with a note:
 
 - mesh assets whose file is absent are removed with the geoms that use them (meshes only shape
   collision and visual geometry; the dynamics come from ``<inertial>``). A body whose inertia MuJoCo
-  would derive from such a geom is refused: dropping the geom would change its mass silently.
+  would derive from such a geom is refused: dropping the geom would change its mass silently. A body
+  left without any contact geom that way gets a box with its mass and inertia, so scenes still touch it.
 - nothing else; removing the file's actuators is the plant's business (see ``sim/_builder.py``).
 """
 
@@ -20,6 +21,7 @@ import mujoco
 import numpy as np
 
 from reflexarm.errors import ModelError
+from reflexarm.robots._urdf import stand_in_half_sides
 
 __all__ = ["JointFacts", "RobotFileWarning", "compile_mjcf", "joint_facts", "load_mjcf_spec"]
 
@@ -107,6 +109,11 @@ def _drop_missing_meshes(spec: mujoco.MjSpec, path: Path) -> list[str]:
                 f"whose file is missing ({', '.join(str(missing[m]) for m in lost)}); provide the mesh files "
                 'or give the body an <inertial> element (and <compiler inertiafromgeom="auto"/>)'
             )
+    contact: dict[str, mujoco.MjsGeom] = {}  # body -> its first dropped geom that takes part in contacts
+    for g in dropped:
+        if (g.contype or g.conaffinity) and g.parent.name not in contact:
+            contact[g.parent.name] = g
+    templates = {body: {"condim": g.condim, "friction": g.friction.copy()} for body, g in contact.items()}
     for g in dropped:
         spec.delete(g)
     for mesh in list(spec.meshes):
@@ -114,11 +121,70 @@ def _drop_missing_meshes(spec: mujoco.MjSpec, path: Path) -> list[str]:
             spec.delete(mesh)
     files = sorted({str(p) for p in missing.values()})
     shown = ", ".join(files[:3]) + (f" and {len(files) - 3} more" if len(files) > 3 else "")
-    return [
+    notes = [
         f"robot file {str(path)!r}: {len(missing)} mesh file(s) not found ({shown}); the {len(dropped)} geom(s) "
         "using them were dropped (meshes only shape contact and visual geometry; masses and inertias come "
         "from the <inertial> elements)"
     ]
+    boxed = _inertia_boxes(spec, templates)
+    if boxed:
+        notes.append(
+            f"robot file {str(path)!r}: {len(boxed)} body(ies) left without contact geometry ({', '.join(boxed[:4])}"
+            f"{' ...' if len(boxed) > 4 else ''}) touch the scene through a box with the body's mass and inertia "
+            "(centred at its centre of mass, along its principal axes, no larger than the body's reach; no effect "
+            "on the dynamics)"
+        )
+    return notes
+
+
+#: Contact bits of the stand-in boxes: those of the plant's arm geoms (``sim/_builder.ARM_CONTYPE``/
+#: ``ARM_CONAFFINITY``), so they collide with the scene's objects and not with each other.
+STAND_IN_CONTYPE = 2
+STAND_IN_CONAFFINITY = 1
+
+
+def _inertia_boxes(spec: mujoco.MjSpec, templates: dict[str, dict[str, object]]) -> list[str]:
+    """Add a contact box of uniform density with the body's mass and inertia to each body of ``templates``
+    left without a contact geom, with that template's condim and friction; return the bodies that got one.
+
+    Its size: :func:`reflexarm.robots._urdf.stand_in_half_sides`, bounded by the body's reach (its origin and
+    its children's origins seen from the centre of mass). The body's explicit inertial keeps its dynamics
+    (MuJoCo ignores geoms for the inertia of a body with an <inertial> unless inertiafromgeom="true",
+    which is refused above).
+    """
+    if not templates:
+        return []
+    try:
+        mj = spec.compile()
+    except Exception:  # the caller's compile reports it with the file's name
+        return []
+    boxed = []
+    for name, attributes in templates.items():
+        body = spec.body(name)
+        if body is None or any(g.contype or g.conaffinity for g in body.geoms):
+            continue
+        b = mj.body(name).id
+        m, principal = float(mj.body_mass[b]), np.asarray(mj.body_inertia[b], dtype=float)
+        if not m > 0.0:
+            continue
+        com = np.asarray(mj.body_ipos[b], dtype=float)
+        ends = [np.zeros(3)] + [np.asarray(mj.body_pos[c]) for c in range(mj.nbody) if mj.body_parentid[c] == b]
+        reach = max(float(np.linalg.norm(com - e)) for e in ends)
+        geom = body.add_geom(
+            name=f"{name}_inertia_box",
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            size=stand_in_half_sides(m, principal, reach),
+            pos=np.array(mj.body_ipos[b]),
+            quat=np.array(mj.body_iquat[b]),
+            rgba=[0.6, 0.6, 0.65, 1.0],
+        )
+        for key, value in attributes.items():
+            setattr(geom, key, value)
+        # boxes overlap where the real shells do not: they touch the scene but never each other (the plant's
+        # arm convention, sim/_builder.py: contype 2, conaffinity 1; scene objects carry contype bit 1)
+        geom.contype, geom.conaffinity = STAND_IN_CONTYPE, STAND_IN_CONAFFINITY
+        boxed.append(name)
+    return boxed
 
 
 def joint_facts(mj: mujoco.MjModel, joint_names: list[str], path: Path) -> JointFacts:

@@ -9,7 +9,7 @@
   that cannot be found are dropped with their geoms and a note (meshes only shape contact and visuals;
   the dynamics come from ``<inertial>``). Pinocchio does not read meshes for the dynamics at all. A link
   left without any collision geometry that way gets, in the plant only, a box with its mass and inertia
-  (so scenes still touch the arm), with a note.
+  (no larger than the link's reach; so scenes still touch the arm), with a note.
 """
 
 from __future__ import annotations
@@ -28,8 +28,12 @@ __all__ = ["UrdfFile", "mujoco_urdf_text", "read_urdf", "resolve_mesh_uri"]
 
 #: How many folders above the robot file are searched for a ``package://`` package.
 PACKAGE_SEARCH_DEPTH = 4
-#: An inertia whose equivalent box has a side shorter than this [m] gets no stand-in collision box.
-MIN_BOX_SIDE = 1e-3
+#: Half sides [m] of a stand-in contact box: at least MIN_HALF_SIDE (a thin or point-like inertia still
+#: touches), at most the link's reach (farthest of its origin and its children's origins from the COM)
+#: plus REACH_MARGIN (published inertias are not always those of a compact solid: the Menagerie Panda's
+#: link1 inertia is that of a 1.3 m box).
+MIN_HALF_SIDE = 0.01
+REACH_MARGIN = 0.03
 
 
 @dataclass
@@ -158,7 +162,7 @@ def mujoco_urdf_text(urdf: UrdfFile) -> tuple[str, list[str]]:
         notes.append(
             f"{where}: in the plant, {len(boxed)} link(s) left without collision geometry ({', '.join(boxed[:4])}"
             f"{' ...' if len(boxed) > 4 else ''}) touch the scene through a box with the link's mass and inertia "
-            "(centred at its centre of mass, along its principal axes)"
+            "(centred at its centre of mass, along its principal axes, no larger than the link's reach)"
         )
     return ET.tostring(root, encoding="unicode"), notes
 
@@ -170,7 +174,7 @@ def _inertia_boxes(root: ET.Element, links: list[ET.Element]) -> list[str]:
     for link in links:
         if link.find("collision") is not None:
             continue
-        box = inertia_box(link)
+        box = inertia_box(link, _child_origins(root, str(link.get("name"))))
         if box is None:
             continue
         xyz, rpy, size = box
@@ -181,12 +185,40 @@ def _inertia_boxes(root: ET.Element, links: list[ET.Element]) -> list[str]:
     return named
 
 
-def inertia_box(link: ET.Element) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """(origin xyz, origin rpy, full side lengths) of the solid box with the ``<inertial>`` of a URDF link.
+def _child_origins(root: ET.Element, link: str) -> list[np.ndarray]:
+    out = []
+    for joint in root.findall("joint"):
+        parent, origin = joint.find("parent"), joint.find("origin")
+        if parent is not None and parent.get("link") == link:
+            try:
+                out.append(
+                    np.array(
+                        [float(v) for v in (origin.get("xyz", "0 0 0") if origin is not None else "0 0 0").split()]
+                    )
+                )
+            except ValueError:
+                continue
+    return out
 
-    For a box of sides a, b, c and mass m, I_a = m (b^2 + c^2) / 12 etc., so a^2 = 6 (I_b + I_c - I_a) / m
-    along the principal axes (the eigenvectors of the inertia about the centre of mass). ``None`` without a
-    positive mass or when the inertia does not fit a box (a side would be shorter than 1 mm).
+
+def stand_in_half_sides(mass: float, principal: np.ndarray, reach: float) -> np.ndarray:
+    """Half sides of the box of uniform density with principal inertias ``principal`` and ``mass``, each
+    kept within [MIN_HALF_SIDE, reach + REACH_MARGIN].
+
+    For a box of sides a, b, c and mass m, I_a = m (b^2 + c^2) / 12 etc., so a^2 = 6 (I_b + I_c - I_a) / m.
+    """
+    squares = np.maximum(6.0 * (principal.sum() - 2.0 * principal) / mass, 0.0)
+    return np.clip(0.5 * np.sqrt(squares), MIN_HALF_SIDE, max(MIN_HALF_SIDE, reach + REACH_MARGIN))
+
+
+def inertia_box(
+    link: ET.Element, child_origins: list[np.ndarray] | tuple[()] = ()
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(origin xyz, origin rpy, full side lengths) of a URDF link's stand-in contact box: the box with its
+    ``<inertial>`` (see :func:`stand_in_half_sides`), along the principal axes, at the centre of mass.
+
+    ``child_origins``: the origins of the joints to its children (link frame), which bound its size.
+    ``None`` without a positive mass.
     """
     inertial = link.find("inertial")
     mass = inertial.find("mass") if inertial is not None else None
@@ -207,11 +239,9 @@ def inertia_box(link: ET.Element) -> tuple[np.ndarray, np.ndarray, np.ndarray] |
     principal, axes = np.linalg.eigh(inertia)
     if np.linalg.det(axes) < 0:
         axes[:, 2] *= -1.0
-    squares = 6.0 * (principal.sum() - 2.0 * principal) / m
-    if np.any(squares < MIN_BOX_SIDE**2):
-        return None
+    reach = max(float(np.linalg.norm(xyz - c)) for c in [np.zeros(3), *child_origins])
     frame = _rpy_matrix(rpy) @ axes  # principal axes in the link frame
-    return xyz, _matrix_rpy(frame), np.sqrt(squares)
+    return xyz, _matrix_rpy(frame), 2.0 * stand_in_half_sides(m, principal, reach)
 
 
 def _rpy_matrix(rpy: np.ndarray) -> np.ndarray:
