@@ -274,7 +274,7 @@ def run_ee_collision(
     plant = Plant(robot, scene=scene, noise=noise, seed=seed)
     plant.reset(traj.sample(0.0).q_d)
     ctrl = setting.controller(ctrl_model)
-    trace = run_closed_loop(plant, ctrl, traj, traj.duration, progress=progress)
+    trace = run_fast(plant, ctrl, traj, traj.duration, progress=progress)  # compiled when it can
     trace.meta.update(
         {
             "experiment": "ee_collision",
@@ -324,7 +324,7 @@ def run_link_collision(
     plant = Plant(robot, scene=scene, noise=noise, seed=seed)
     plant.reset(traj.sample(0.0).q_d)
     ctrl = setting.controller(ctrl_model)
-    trace = run_closed_loop(plant, ctrl, traj, traj.duration, progress=progress)
+    trace = run_fast(plant, ctrl, traj, traj.duration, progress=progress)  # compiled when it can
     trace.meta.update(
         {
             "experiment": "link_collision",
