@@ -16,7 +16,7 @@ from reflexarm.errors import ConfigError, SimulationError
 from reflexarm.robots import load_robot
 from reflexarm.signals import Command, Measurement, Reference
 from reflexarm.sim import EndEffectorForce, Plant, SensorNoise, run_closed_loop
-from reflexarm.sim.run_observers import observing_runs
+from reflexarm.sim.run_observers import observers_active, observing_runs
 from reflexarm.sim.video import StillCapture, VideoRecorder, _import_imageio, frame_scene, save_still
 
 #: A still that is not blank has many distinct colours: a uniform background has 1, the corner text on
@@ -139,11 +139,14 @@ def test_observers_watch_every_run_in_the_block_only(robot):
 
         return observe
 
+    assert not observers_active()
     with observing_runs(factory):
+        assert observers_active()
         for _ in range(2):
             run_closed_loop(_plant(robot), HoldGravity(robot), Hold(robot.home), 0.01)
     run_closed_loop(_plant(robot), HoldGravity(robot), Hold(robot.home), 0.01)
     assert seen == [10, 10]  # one observer per run, every tick; none after the block
+    assert not observers_active()
 
 
 class _Terminal(io.StringIO):

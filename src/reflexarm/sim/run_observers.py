@@ -20,7 +20,7 @@ if TYPE_CHECKING:
     from reflexarm.signals import Command, Measurement
     from reflexarm.sim.plant import Plant
 
-__all__ = ["ObserverFactory", "attach_observers", "observing_runs"]
+__all__ = ["ObserverFactory", "attach_observers", "observers_active", "observing_runs"]
 
 #: ``factory(plant) -> callback(k, plant, measurement, command)``, called once per run.
 ObserverFactory = Callable[["Plant"], Callable[[int, "Plant", "Measurement", "Command"], Any]]
@@ -40,6 +40,12 @@ def observing_runs(factory: ObserverFactory) -> Iterator[None]:
         yield
     finally:
         _ACTIVE.reset(token)
+
+
+def observers_active() -> bool:
+    """True inside :func:`observing_runs`: a loop that cannot call Python per tick (the compiled loop) must
+    give way to :func:`~reflexarm.sim.run_closed_loop`, or the observers would silently see nothing."""
+    return bool(_ACTIVE.get())
 
 
 def attach_observers(
