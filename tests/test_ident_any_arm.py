@@ -19,6 +19,7 @@ from reflexarm.ident.excitation import FourierTrajectory
 from reflexarm.ident.friction_parameters import (
     ImplausibleFrictionWarning,
     check_friction_against_robot,
+    check_friction_plausibility,
 )
 from reflexarm.ident.joint_friction import FrictionPoint, fit_friction
 from reflexarm.robots.robot_model import RobotModel
@@ -106,3 +107,13 @@ def test_identify_dynamics_study_runs_on_a_six_joint_arm_without_atlas_wording(t
     study = json.loads((out / "study.json").read_text())
     assert study["compared_joints"] == [1, 2, 3, 4, 5, 6]
     assert len(study["friction_fits"]) == 6
+
+
+def test_a_negative_value_within_two_standard_deviations_or_round_off_of_zero_is_not_reported() -> None:
+    fr = FrictionParameters(np.array([-1e-12, -0.01, -0.05]), np.array([0.3, -0.02, 0.3]))
+    std = FrictionParameters(np.array([0.0, 0.01, 0.01]), np.array([0.0, 0.015, 0.0]))
+    with pytest.warns(ImplausibleFrictionWarning) as record:
+        issued = check_friction_plausibility(fr, std=std)
+    # -1e-12: round-off; -0.01 +- 0.01 and -0.02 +- 0.015: within 2 sigma; -0.05 +- 0.01: 5 sigma below 0
+    assert [(w.joint, w.parameter) for w in issued] == [(2, "viscous")]
+    assert "(5.0 standard deviations below 0)" in str(record[0].message)

@@ -101,3 +101,19 @@ def test_identify_dynamics_from_a_log_writes_a_robot_copy_with_the_same_model(tm
         np.testing.assert_allclose(from_copy.compute_gravity(q), from_model_file.compute_gravity(q), atol=ATOL)
     np.testing.assert_allclose(from_copy.friction.coulomb, from_model_file.friction.coulomb, rtol=1e-11)
     np.testing.assert_allclose(from_copy.friction.viscous, from_model_file.friction.viscous, rtol=1e-11)
+
+
+def test_a_cut_arm_is_stored_with_its_base_tip_and_locks_and_reloads_cut(tmp_path: Path) -> None:
+    from reflexarm.robots.example_arms import write_ur_like_arm
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the file's notes (ros2_control, gazebo, meshes)
+        robot = load_robot(write_ur_like_arm(tmp_path / "user"), tip="tool0")
+        res = identify_dynamics(robot, _exact_log(robot), method="combined", noise_variance=None)
+        save_identified_model(res, robot, tmp_path / "results" / "model.json")
+        doc = json.loads((tmp_path / "results" / "model.json").read_text())
+        assert doc["robot"]["source"] == "../user/ur_like_description/urdf/ur_like.urdf"
+        assert doc["robot"]["base"] == "base_link" and doc["robot"]["tip"] == "tool0"
+        assert doc["robot"]["locked"] == {"gripper_left_finger_joint": 0.0, "gripper_right_finger_joint": 0.0}
+        model = load_identified_model(tmp_path / "results" / "model.json")
+    assert model.cut is not None and model.cut.tip == "tool0" and model.joint_names == robot.joint_names

@@ -160,3 +160,31 @@ def test_relative_file_paths_still_resolve_from_the_copys_folder(tmp_path: Path)
     assert root.find("include").get("file") == "../../robot/parts/scene.xml"  # type: ignore[union-attr]
     assert root.find("asset/mesh").get("file") == "a.stl"  # type: ignore[union-attr]  # through meshdir
     assert root.find("asset/texture").get("file") == "../../robot/tex/t.png"  # type: ignore[union-attr]
+
+
+def test_an_arm_cut_from_its_file_keeps_the_locked_gripper_and_reloads_with_the_same_cut(tmp_path: Path) -> None:
+    from reflexarm.robots.example_arms import write_ur_like_arm
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the file's notes (ros2_control, gazebo, meshes)
+        true = load_robot(write_ur_like_arm(tmp_path / "user"), tip="tool0")
+    assert true.cut is not None and set(true.cut.locked) == {"gripper_left_finger_joint", "gripper_right_finger_joint"}
+    rng = np.random.default_rng(5)
+    a, b = 0.15 * rng.normal(size=(2, true.n, 5))
+    tr = FourierTrajectory(2 * np.pi * 0.1, a, b, np.zeros(true.n))
+    t = np.arange(0.0, 20.0, 1e-3)
+    q, dq, ddq = tr.evaluate(t)
+    tau = BatchRegressor(true).compute_regressor(q, dq, ddq) @ true.inertial_parameters()
+    res = identify_dynamics(true, RobotLog(t, q, dq, tau, ddq=ddq), method="combined", noise_variance=None)
+    out, notes = write_identified_robot(res, true, tmp_path / "out" / "identified.urdf")
+    assert any("links behind locked joints (gripper_left_finger, gripper_right_finger) keep" in n for n in notes)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        back = load_robot(out, **true.load_arguments())
+        plant = Plant(back, noise=SensorNoise.none())  # MuJoCo needs mass on the locked fingers' bodies
+    identified = with_consistent_links(res, true)[0].to_robot_model(true)
+    for qq, _ in _random_states(back, 20, seed=6):
+        np.testing.assert_allclose(back.compute_mass_matrix(qq), identified.compute_mass_matrix(qq), atol=ATOL)
+        np.testing.assert_allclose(back.compute_gravity(qq), identified.compute_gravity(qq), atol=ATOL)
+    worst = check_agreement(back, plant, n_states=10)
+    assert max(worst.values()) < ATOL, worst

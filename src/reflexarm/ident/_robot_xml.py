@@ -10,6 +10,8 @@ import os
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+import numpy as np
+
 from reflexarm.errors import ModelError
 
 #: MJCF elements whose ``file`` is looked up in a compiler directory (MuJoCo: meshdir for meshes, skins
@@ -72,3 +74,67 @@ def relocate_paths(root: ET.Element, fmt: str, src_dir: Path, dst_dir: Path) -> 
             continue  # resolved through the (moved) compiler directory
         move(el, "file")
     return count
+
+
+def _fmt(x: float) -> str:
+    return f"{x:.12g}"
+
+
+def find_element(root: ET.Element, tag: str, name: str, where: str) -> ET.Element:
+    """The ``<tag name=name>`` element; ModelError naming the file if there is none."""
+    for el in root.iter(tag):
+        if el.get("name") == name:
+            return el
+    raise ModelError(f"{where}: no <{tag} name={name!r}> found (included from another file?); cannot write it back")
+
+
+def set_inertial(fmt: str, el: ET.Element, mass: float, com: np.ndarray, inertia: np.ndarray) -> None:
+    """Replace the inertial of URDF link / MJCF body ``el``: mass [kg], COM [m] and inertia about the COM
+    [kg m^2] in the link's frame (URDF ``<inertial>`` with full ``<inertia>``, MJCF ``fullinertia``)."""
+    if fmt == "urdf":
+        for old in el.findall("inertial"):
+            el.remove(old)
+        new = ET.Element("inertial")
+        new.text, new.tail = "\n      ", el.text or "\n    "
+        ET.SubElement(new, "origin", xyz=" ".join(_fmt(x) for x in com), rpy="0 0 0").tail = "\n      "
+        ET.SubElement(new, "mass", value=_fmt(mass)).tail = "\n      "
+        names = (("ixx", 0, 0), ("ixy", 0, 1), ("ixz", 0, 2), ("iyy", 1, 1), ("iyz", 1, 2), ("izz", 2, 2))
+        ET.SubElement(new, "inertia", {k: _fmt(inertia[a, b]) for k, a, b in names}).tail = "\n    "
+        el.insert(0, new)
+        return
+    inertial = el.find("inertial")
+    if inertial is None:
+        inertial = ET.Element("inertial")
+        inertial.tail = el.text or "\n"
+        el.insert(0, inertial)
+    for key in list(inertial.attrib):
+        del inertial.attrib[key]
+    inertial.set("pos", " ".join(_fmt(x) for x in com))
+    inertial.set("mass", _fmt(mass))
+    full = (inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2])
+    inertial.set("fullinertia", " ".join(_fmt(x) for x in full))
+
+
+def behind_locked_joint(root: ET.Element, fmt: str, link: str, main: str, locked: set[str]) -> bool:
+    """True if a joint named in ``locked`` lies on the path from link/body ``main`` down to ``link``."""
+    if not locked:
+        return False
+    if fmt == "urdf":
+        parent = {}
+        for joint in root.iter("joint"):
+            p, c = joint.find("parent"), joint.find("child")
+            if p is not None and c is not None:
+                parent[c.get("link")] = (joint.get("name"), p.get("link"))
+        current = link
+        while current != main and current in parent:
+            joint_name, current = parent[current]  # type: ignore[assignment]
+            if joint_name in locked:
+                return True
+        return False
+    body_parent = {child: body for body in root.iter("body") for child in body.findall("body")}
+    body: ET.Element | None = next((b for b in root.iter("body") if b.get("name") == link), None)
+    while body is not None and body.get("name") != main:
+        if any(j.get("name") in locked for j in body.findall("joint")):
+            return True
+        body = body_parent.get(body)
+    return False

@@ -302,7 +302,8 @@ def _identify_dynamics(
     if est_offset:
         fr = replace(fr, offset=x[k : k + n])
     if method == "combined":
-        check_friction_against_robot(fr, robot, source="combined identification", stacklevel=4)
+        fr_std = FrictionParameters(std[nb : nb + n], std[nb + n : nb + 2 * n])
+        check_friction_against_robot(fr, robot, std=fr_std, source="combined identification", stacklevel=4)
     return DynamicsIdentification(
         method=method,
         robot_name=robot.name,

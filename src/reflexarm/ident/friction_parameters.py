@@ -121,6 +121,11 @@ class ImplausibleFrictionWarning(UserWarning):
 #: spend more than half of its motor's torque on Coulomb friction alone (the robot files shipped here have
 #: 1-16 %: Panda 0.15-0.64 Nm of 12-87 Nm, Atlas arm 0.1-10.3 Nm of 25-112 Nm).
 COULOMB_EFFORT_FRACTION = 0.5
+#: A negative coefficient within this many standard deviations of 0 (or above -:data:`ROUND_OFF` when no
+#: deviation is known) is not reported: it is 0 within the estimate's uncertainty (2: a ~95 % interval).
+NEGATIVE_SIGMAS = 2.0
+#: Coefficients above -this [Nm or Nms/rad] are round-off of 0 (noise-free data give ~1e-12).
+ROUND_OFF = 1e-9
 #: d_v times the velocity limit above this fraction of the effort limit is implausible: viscous friction
 #: alone would exceed the motor's torque before the joint reaches its velocity limit.
 VISCOUS_EFFORT_FRACTION = 1.0
@@ -133,6 +138,7 @@ def check_friction_plausibility(
     effort_limit: npt.ArrayLike | None = None,
     velocity_limit: npt.ArrayLike | None = None,
     joints: Sequence[int] | None = None,
+    std: FrictionParameters | None = None,
     source: str = "identified friction",
     stacklevel: int = 2,
 ) -> list[ImplausibleFrictionWarning]:
@@ -148,6 +154,8 @@ def check_friction_plausibility(
         joint_names: names for the messages (default ``joint <k>``).
         effort_limit, velocity_limit: per joint [Nm], [rad/s] (e.g. from the robot file).
         joints: 0-based joints to check (default all).
+        std: standard deviations of the estimates: a negative value within :data:`NEGATIVE_SIGMAS` of them
+            of 0 is not reported (without: values above -:data:`ROUND_OFF`).
         source: what the coefficients are, for the messages.
 
     Returns:
@@ -175,14 +183,16 @@ def check_friction_plausibility(
     for j in range(n) if joints is None else joints:
         mu, dv = float(friction.coulomb[j]), float(friction.viscous[j])
         for parameter, value in (("coulomb", mu), ("viscous", dv)):
-            if value < 0:
+            sigma = 0.0 if std is None else float(getattr(std, parameter)[j])
+            if value < -max(ROUND_OFF, NEGATIVE_SIGMAS * sigma):
+                spread = f" ({-value / sigma:.1f} standard deviations below 0)" if sigma > 0 else ""
                 warn(
                     j,
                     parameter,
                     value,
                     0.0,
-                    "is negative: friction cannot drive the joint (unmodelled effects, a torque offset or too "
-                    "little motion in one direction?); the controller's model clips it to 0",
+                    f"is negative{spread}: friction cannot drive the joint (unmodelled effects, a torque offset or "
+                    "too little motion in one direction?); the controller's model clips it to 0",
                 )
         ok_effort = np.isfinite(effort[j]) and effort[j] > 0
         if ok_effort and mu > COULOMB_EFFORT_FRACTION * effort[j]:
@@ -210,6 +220,7 @@ def check_friction_against_robot(
     robot: RobotModel,
     *,
     joints: Sequence[int] | None = None,
+    std: FrictionParameters | None = None,
     source: str = "identified friction",
     stacklevel: int = 2,
 ) -> list[ImplausibleFrictionWarning]:
@@ -220,6 +231,7 @@ def check_friction_against_robot(
         effort_limit=np.asarray(robot.pin_model.effortLimit, dtype=float),
         velocity_limit=robot.velocity_limit,
         joints=joints,
+        std=std,
         source=source,
         stacklevel=stacklevel + 1,
     )

@@ -256,11 +256,14 @@ def fit_friction(
     cov = s2 * np.linalg.inv(A.T @ A)
     j = points[0].joint
     n = robot.n if robot is not None else j + 1
-    fitted = FrictionParameters(np.where(np.arange(n) == j, x[0], 0.0), np.where(np.arange(n) == j, x[1], 0.0))
+    at_j = np.arange(n) == j
+    fitted = FrictionParameters(np.where(at_j, x[0], 0.0), np.where(at_j, x[1], 0.0))
+    spread = FrictionParameters(np.where(at_j, np.sqrt(cov[0, 0]), 0.0), np.where(at_j, np.sqrt(cov[1, 1]), 0.0))
+    where = "single-joint friction fit"
     if robot is not None:
-        check_friction_against_robot(fitted, robot, joints=[j], source="single-joint friction fit", stacklevel=2)
+        check_friction_against_robot(fitted, robot, joints=[j], std=spread, source=where, stacklevel=2)
     else:
-        check_friction_plausibility(fitted, joints=[j], source="single-joint friction fit", stacklevel=2)
+        check_friction_plausibility(fitted, joints=[j], std=spread, source=where, stacklevel=2)
     return FrictionFit(
         joint=points[0].joint,
         coulomb=float(x[1]),

@@ -67,13 +67,9 @@ def resolve_robot_source(source: str, model_path: str | os.PathLike[str]) -> str
 
 
 def _cut_description(robot: RobotModel) -> dict[str, Any]:
-    """``base``, ``tip``, ``locked`` of an arm cut out of its file (only the ones set)."""
-    out = {}
-    for key in _CUT_KEYS:
-        value = getattr(robot, key, None)
-        if value:
-            out[key] = dict(value) if isinstance(value, dict) else value
-    return out
+    """``base``, ``tip``, ``locked`` of an arm cut out of its file (none if it was not cut)."""
+    args = robot.load_arguments()
+    return {k: args[k] for k in _CUT_KEYS if args.get(k) is not None}
 
 
 def save_identified_model(

@@ -23,7 +23,11 @@ near) the file's values; every realisation gives the controller and the plant th
 
 Links fixed rigidly to a moving link (a URDF fixed joint, an MJCF body without joint) are lumped into it
 by the identification; in the copy their inertial is set to zero mass and the moving link carries the
-whole identified inertia, expressed in its own frame.
+whole identified inertia, expressed in its own frame. An arm cut out of a bigger file (``base``/``tip``/
+``locked``): links behind a locked joint (a gripper's fingers) keep the file's inertias, since the plant
+needs mass on the bodies of those joints; the moving link carries the identified inertia minus theirs
+at the locked positions (refused if that leaves it no physical inertia). The copy is loaded with the
+same ``base``/``tip``/``locked``.
 
 Friction: coefficients below 0 are written as 0 (as the controller's model clips them); offsets are not
 friction and are not written.
@@ -31,7 +35,9 @@ friction and are not written.
 
 from __future__ import annotations
 
+import copy
 import os
+import warnings
 import xml.etree.ElementTree as ET
 from dataclasses import replace
 from pathlib import Path
@@ -40,10 +46,17 @@ import numpy as np
 import pinocchio as pin
 
 from reflexarm.errors import ModelError
-from reflexarm.ident._robot_xml import read_xml, relocate_paths, write_xml
+from reflexarm.ident._robot_xml import (
+    behind_locked_joint,
+    find_element,
+    read_xml,
+    relocate_paths,
+    set_inertial,
+    write_xml,
+)
 from reflexarm.ident.consistency import project_physically_consistent, pseudo_inertia
 from reflexarm.ident.identification_result import DynamicsIdentification
-from reflexarm.robots.robot_model import RobotModel
+from reflexarm.robots.robot_model import RobotModel, load_robot
 
 __all__ = ["link_inertias", "with_consistent_links", "write_identified_robot"]
 
@@ -90,21 +103,27 @@ def _body_frames(robot: RobotModel, joint: int) -> list[pin.Frame]:
 
 
 def link_inertias(robot: RobotModel, pi: np.ndarray) -> dict[str, pin.Inertia]:
-    """Per moving link (by name), the inertia of ``pi`` expressed in that link's own frame."""
+    """Per moving link (by name), the inertia of ``pi`` (10 per joint, about each joint frame) expressed in
+    that link's own frame."""
     out = {}
+    for j, (main, _) in enumerate(_link_groups(robot), start=1):
+        inertia_joint = pin.Inertia.FromDynamicParameters(pi[10 * (j - 1) : 10 * j])
+        frame = robot.pin_model.frames[robot.pin_model.getFrameId(main, pin.FrameType.BODY)]
+        out[main] = frame.placement.actInv(inertia_joint)
+    return out
+
+
+def _link_groups(robot: RobotModel) -> list[tuple[str, list[str]]]:
+    """Per joint: the link it moves and the other links attached to that link (lumped into its inertia)."""
+    groups = []
     for j in range(1, robot.pin_model.njoints):
         frames = _body_frames(robot, j)
         if not frames:
             raise ModelError(
                 f"joint {robot.joint_names[j - 1]!r} moves no link of {robot.name!r}; cannot write it back"
             )
-        inertia_joint = pin.Inertia.FromDynamicParameters(pi[10 * (j - 1) : 10 * j])
-        out[frames[0].name] = frames[0].placement.actInv(inertia_joint)
-    return out
-
-
-def _lumped_links(robot: RobotModel) -> list[str]:
-    return [f.name for j in range(1, robot.pin_model.njoints) for f in _body_frames(robot, j)[1:]]
+        groups.append((frames[0].name, [f.name for f in frames[1:]]))
+    return groups
 
 
 def _fmt(x: float) -> str:
@@ -114,13 +133,6 @@ def _fmt(x: float) -> str:
 def _check_robot(robot: RobotModel) -> Path:
     if robot.source is None or not Path(robot.source).is_file():
         raise ModelError(f"robot {robot.name!r} has no robot file to copy (source {robot.source!r})")
-    cut = {k: getattr(robot, k, None) for k in ("base", "tip", "locked")}
-    if any(cut.values()):
-        raise ModelError(
-            f"robot {robot.name!r} was cut from its file ({', '.join(f'{k}={v!r}' for k, v in cut.items() if v)}); "
-            "writing identified inertias back into the whole file is not supported (the locked links are lumped "
-            "into the arm's): use the model file (model_<method>.json) with the same --base/--tip/--lock"
-        )
     return Path(robot.source)
 
 
@@ -158,7 +170,17 @@ def write_identified_robot(
         )
     result, how = with_consistent_links(result, robot)
     assert result.physical_parameters is not None  # set by with_consistent_links
-    inertias = link_inertias(robot, result.physical_parameters)
+    root = read_xml(src)
+    moved = relocate_paths(root, fmt, src.parent, dst.parent)
+    groups = _link_groups(robot)
+    locked = set(robot.cut.locked) if robot.cut is not None else set()
+    behind = {link for main, links in groups for link in links if behind_locked_joint(root, fmt, link, main, locked)}
+    lumped = [link for _, links in groups for link in links if link not in behind]
+    pi = np.asarray(result.physical_parameters, dtype=float)
+    if behind:  # the locked links keep the file's inertias: the moving links carry the rest
+        pi = pi - _locked_contributions(root, fmt, robot, groups, lumped, dst)
+        _check_remainder(pi, robot, groups, behind)
+    inertias = link_inertias(robot, pi)
     friction = result.friction
     notes = [how]
     clipped = [
@@ -171,105 +193,90 @@ def write_identified_robot(
         notes.append("negative friction written as 0: " + ", ".join(clipped))
     if friction.offset is not None:
         notes.append("torque offsets are not friction and are not in the file")
-    lumped = _lumped_links(robot)
     if lumped:
         notes.append(
             f"links fixed to a moving link ({', '.join(lumped)}) get zero mass; the moving link carries the whole "
             "identified inertia"
         )
-    root = read_xml(src)
-    moved = relocate_paths(root, fmt, src.parent, dst.parent)
+    if behind:
+        notes.append(
+            f"links behind locked joints ({', '.join(sorted(behind))}) keep the file's inertias; the moving links "
+            "carry the identified inertia minus theirs (at the locked positions)"
+        )
     if moved:
         notes.append(f"{moved} file path(s) rewritten to resolve from {dst.parent}")
     coulomb = np.maximum(friction.coulomb, 0.0)
     viscous = np.maximum(friction.viscous, 0.0)
-    if fmt == "urdf":
-        _write_urdf(root, robot, inertias, lumped, coulomb, viscous, src)
-    else:
-        notes += _write_mjcf(root, robot, inertias, lumped, coulomb, viscous, src)
+    _write_inertias(root, fmt, inertias, lumped, src)
+    notes += _write_friction(root, fmt, robot, coulomb, viscous, src)
     dst.parent.mkdir(parents=True, exist_ok=True)
     write_xml(root, dst)
     return dst, notes
 
 
-def _find(root: ET.Element, tag: str, name: str, src: Path) -> ET.Element:
-    for el in root.iter(tag):
-        if el.get("name") == name:
-            return el
-    raise ModelError(f"{src.name}: no <{tag} name={name!r}> found (included from another file?); cannot write it back")
+def _locked_contributions(
+    root: ET.Element, fmt: str, robot: RobotModel, groups: list[tuple[str, list[str]]], lumped: list[str], dst: Path
+) -> np.ndarray:
+    """(10 n,) inertial parameters the links behind locked joints add to each joint (about its frame), as
+    the cut model lumps them: the file with every other link of the arm made massless, loaded with the
+    same cut."""
+    probe = copy.deepcopy(root)
+    tag = "link" if fmt == "urdf" else "body"
+    for name in [main for main, _ in groups] + lumped:
+        set_inertial(fmt, find_element(probe, tag, name, dst.name), 0.0, np.zeros(3), np.zeros((3, 3)))
+    tmp = dst.parent / f".{dst.stem}.locked-links{dst.suffix}"
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    write_xml(probe, tmp)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the file's notes were given when the robot was loaded
+            only_locked = load_robot(tmp, **robot.load_arguments())
+    finally:
+        tmp.unlink(missing_ok=True)
+    return only_locked.inertial_parameters()
+
+
+def _check_remainder(pi: np.ndarray, robot: RobotModel, groups: list[tuple[str, list[str]]], behind: set[str]) -> None:
+    for j, (main, links) in enumerate(groups):
+        ev = np.linalg.eigvalsh(pseudo_inertia(pi[10 * j : 10 * j + 10]))
+        if ev[0] < -_CONSISTENCY_TOL * max(abs(ev[-1]), 1e-300):
+            held = [link for link in links if link in behind]
+            raise ModelError(
+                f"joint {j + 1} ({robot.joint_names[j]}): the identified inertia is lighter than the file's links "
+                f"behind locked joints ({', '.join(held)}) that hang on {main!r} (mass left for {main!r}: "
+                f"{pi[10 * j]:.4g} kg); the file cannot hold it without changing those links"
+            )
 
 
 def _com_inertia(inertia: pin.Inertia) -> tuple[float, np.ndarray, np.ndarray]:
     return float(inertia.mass), np.asarray(inertia.lever, dtype=float), np.asarray(inertia.inertia, dtype=float)
 
 
-def _write_urdf(
-    root: ET.Element,
-    robot: RobotModel,
-    inertias: dict[str, pin.Inertia],
-    lumped: list[str],
-    coulomb: np.ndarray,
-    viscous: np.ndarray,
-    src: Path,
-) -> None:
-    def set_inertial(link: ET.Element, m: float, c: np.ndarray, inertia: np.ndarray) -> None:
-        for old in link.findall("inertial"):
-            link.remove(old)
-        el = ET.Element("inertial")
-        el.text, el.tail = "\n      ", link.text or "\n    "
-        ET.SubElement(el, "origin", xyz=" ".join(_fmt(x) for x in c), rpy="0 0 0").tail = "\n      "
-        ET.SubElement(el, "mass", value=_fmt(m)).tail = "\n      "
-        names = (("ixx", 0, 0), ("ixy", 0, 1), ("ixz", 0, 2), ("iyy", 1, 1), ("iyz", 1, 2), ("izz", 2, 2))
-        ET.SubElement(el, "inertia", {k: _fmt(inertia[a, b]) for k, a, b in names}).tail = "\n    "
-        link.insert(0, el)
-
+def _write_inertias(root: ET.Element, fmt: str, inertias: dict[str, pin.Inertia], lumped: list[str], src: Path) -> None:
+    tag = "link" if fmt == "urdf" else "body"
     for name, inertia in inertias.items():
-        set_inertial(_find(root, "link", name, src), *_com_inertia(inertia))
+        set_inertial(fmt, find_element(root, tag, name, src.name), *_com_inertia(inertia))
     for name in lumped:
-        set_inertial(_find(root, "link", name, src), 0.0, np.zeros(3), np.zeros((3, 3)))
-    for j, jname in enumerate(robot.joint_names):
-        joint = _find(root, "joint", jname, src)
-        dyn = joint.find("dynamics")
-        if dyn is None:
-            dyn = ET.SubElement(joint, "dynamics")
-        dyn.set("friction", _fmt(coulomb[j]))
-        dyn.set("damping", _fmt(viscous[j]))
+        set_inertial(fmt, find_element(root, tag, name, src.name), 0.0, np.zeros(3), np.zeros((3, 3)))
 
 
-def _write_mjcf(
-    root: ET.Element,
-    robot: RobotModel,
-    inertias: dict[str, pin.Inertia],
-    lumped: list[str],
-    coulomb: np.ndarray,
-    viscous: np.ndarray,
-    src: Path,
+def _write_friction(
+    root: ET.Element, fmt: str, robot: RobotModel, coulomb: np.ndarray, viscous: np.ndarray, src: Path
 ) -> list[str]:
     notes = []
+    for j, jname in enumerate(robot.joint_names):
+        joint = find_element(root, "joint", jname, src.name)
+        if fmt == "urdf":
+            dyn = joint.find("dynamics")
+            if dyn is None:
+                dyn = ET.SubElement(joint, "dynamics")
+            dyn.set("friction", _fmt(coulomb[j]))
+            dyn.set("damping", _fmt(viscous[j]))
+        else:
+            joint.set("frictionloss", _fmt(coulomb[j]))
+            joint.set("damping", _fmt(viscous[j]))
     compiler = root.find("compiler")
-    if compiler is not None and compiler.get("inertiafromgeom") == "true":
+    if fmt == "mjcf" and compiler is not None and compiler.get("inertiafromgeom") == "true":
         compiler.set("inertiafromgeom", "auto")  # "true" would ignore the written <inertial> elements
         notes.append('compiler inertiafromgeom="true" changed to "auto" so that the written inertials count')
-
-    def set_inertial(body: ET.Element, m: float, c: np.ndarray, inertia: np.ndarray) -> None:
-        el = body.find("inertial")
-        if el is None:
-            el = ET.Element("inertial")
-            el.tail = body.text or "\n"
-            body.insert(0, el)
-        for key in list(el.attrib):
-            del el.attrib[key]
-        el.set("pos", " ".join(_fmt(x) for x in c))
-        el.set("mass", _fmt(m))
-        full = (inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2])
-        el.set("fullinertia", " ".join(_fmt(x) for x in full))
-
-    for name, inertia in inertias.items():
-        set_inertial(_find(root, "body", name, src), *_com_inertia(inertia))
-    for name in lumped:
-        set_inertial(_find(root, "body", name, src), 0.0, np.zeros(3), np.zeros((3, 3)))
-    for j, jname in enumerate(robot.joint_names):
-        joint = _find(root, "joint", jname, src)
-        joint.set("frictionloss", _fmt(coulomb[j]))
-        joint.set("damping", _fmt(viscous[j]))
     return notes
