@@ -34,16 +34,22 @@ missing signal is a :class:`~reflexarm.errors.DataError` naming what was looked 
 from __future__ import annotations
 
 import re
-import string
 from dataclasses import dataclass, field
 
 from reflexarm.errors import ConfigError, DataError
+from reflexarm.ident._joint_state_columns import (
+    _MEANING,
+    _STATE_FIELD,
+    JointStateLayout,
+    _find_layout,
+    _norm,
+    _use_layout,
+)
+from reflexarm.ident.column_mapping import JOINT_SIGNALS, check_column_mapping, parse_column_mapping
 from reflexarm.ident.robot_log import WRENCH_COLUMNS
 
 __all__ = ["JOINT_SIGNALS", "ColumnPlan", "JointStateLayout", "parse_column_mapping", "plan_columns"]
 
-#: Per-joint signals of a log: positions, velocities, measured torques (required), accelerations.
-JOINT_SIGNALS = ("q", "dq", "tau", "ddq")
 _REQUIRED = ("q", "dq", "tau")
 _WORDS = {
     "q": ("position", "pos", "q"),
@@ -51,8 +57,6 @@ _WORDS = {
     "tau": ("effort", "eff", "torque", "tau"),
     "ddq": ("acceleration", "acc", "ddq"),
 }
-_MEANING = {"q": "position", "dq": "velocity", "tau": "measured torque", "ddq": "acceleration"}
-_STATE_FIELD = {"q": "position", "dq": "velocity", "tau": "effort"}
 _ROS_AXES = ("force.x", "force.y", "force.z", "torque.x", "torque.y", "torque.z")
 _WRENCH_ALIASES = {
     a: (a, r, r.replace(".", "_"), f"{a[0]}_{a[1]}") + ((f"t{a[1]}",) if a[0] == "m" else ())
@@ -60,18 +64,6 @@ _WRENCH_ALIASES = {
 }
 _TIME_NAMES = ("t", "time", "timestamp", "stamp", "__time", "%time", "header.stamp", "field.header.stamp")
 _TIME_PAIRS = (("header.stamp.sec", "header.stamp.nanosec"), ("header.stamp.secs", "header.stamp.nsecs"))
-_ARRAY_RE = re.compile(r"^(?:.*\.)?(name|position|velocity|effort)\.?(\d+)$")
-_MAPPING_KEYS = ("t", *JOINT_SIGNALS, "wrench")
-_PLACEHOLDERS = {"t": (), "wrench": ("axis", "ros_axis"), **{s: ("joint", "i", "i0") for s in JOINT_SIGNALS}}
-
-
-@dataclass(frozen=True)
-class JointStateLayout:
-    """The JointState array layout: ``fields[signal][k]`` is the column of array element k; ``names[k]``
-    the column of the joint name of element k (empty: element k is joint k of the model)."""
-
-    names: tuple[str, ...]
-    fields: dict[str, tuple[str, ...]]
 
 
 @dataclass(frozen=True)
@@ -90,50 +82,6 @@ class ColumnPlan:
     wrench: tuple[str, ...] | None = None
     ignored: tuple[str, ...] = ()
     notes: tuple[str, ...] = field(default=())
-
-
-def parse_column_mapping(text: str | None) -> dict[str, str]:
-    """``"q=position_{joint},dq=velocity_{joint},t=stamp_ns"`` as a dict (the ``--columns`` option)."""
-    if text is None or not text.strip():
-        return {}
-    out: dict[str, str] = {}
-    for part in text.split(","):
-        if "=" not in part:
-            raise ConfigError(
-                f"column mapping entry {part.strip()!r} is not KEY=TEMPLATE (e.g. q=position_{{joint}}); "
-                f"keys: {', '.join(_MAPPING_KEYS)}"
-            )
-        key, template = (s.strip() for s in part.split("=", 1))
-        out[key] = template
-    check_column_mapping(out)
-    return out
-
-
-def check_column_mapping(mapping: dict[str, str]) -> None:
-    """Refuse unknown keys and placeholders (:class:`ConfigError` naming them and the choices)."""
-    for key, template in mapping.items():
-        if key not in _PLACEHOLDERS:
-            raise ConfigError(f"unknown column mapping key {key!r}; keys: {', '.join(_MAPPING_KEYS)}")
-        try:
-            names = [f for _, f, _, _ in string.Formatter().parse(template) if f is not None]
-        except ValueError as e:
-            raise ConfigError(f"column mapping {key}={template!r} is not a valid template: {e}") from e
-        allowed = _PLACEHOLDERS[key]
-        bad = [n for n in names if n not in allowed]
-        if bad:
-            choices = ", ".join("{" + a + "}" for a in allowed) or "none (a column name)"
-            raise ConfigError(
-                f"column mapping {key}={template!r}: unknown placeholder {{{bad[0]}}}; allowed: {choices}"
-            )
-        if allowed and not names and key != "t":
-            raise ConfigError(
-                f"column mapping {key}={template!r} names one column for all joints; use a placeholder: "
-                + ", ".join("{" + a + "}" for a in allowed)
-            )
-
-
-def _norm(name: str) -> str:
-    return re.sub(r"\[(\d+)\]", r".\1", name.strip().lower().replace("/", ".")).strip(".")
 
 
 class _Index:
@@ -274,28 +222,6 @@ def _find_time(
     )
 
 
-def _find_layout(columns: list[str]) -> JointStateLayout | None:
-    names: dict[int, str] = {}
-    fields: dict[str, dict[int, str]] = {}
-    for c in columns:
-        m = _ARRAY_RE.match(_norm(c))
-        if m is None:
-            continue
-        k = int(m.group(2))
-        if m.group(1) == "name":
-            names[k] = c
-        else:
-            sig = {v: s for s, v in _STATE_FIELD.items()}[m.group(1)]
-            fields.setdefault(sig, {})[k] = c
-    if "q" not in fields:
-        return None
-    size = max(max(f) for f in fields.values()) + 1
-    return JointStateLayout(
-        names=tuple(names[k] for k in sorted(names)) if names else (),
-        fields={s: tuple(f[k] for k in sorted(f)) for s, f in fields.items() if len(f) == size},
-    )
-
-
 def _schema_count(columns: list[str]) -> int | None:
     """Joint count of the schema's numbered position columns (q_1..q_n, or q_0..q_{n-1}), None if none."""
     numbers = [int(m.group(1)) for c in columns if (m := re.fullmatch(r"q_(\d+)", c.strip().lower()))]
@@ -392,34 +318,6 @@ def _missing(s: str, n: int, joint_names: tuple[str, ...] | None, columns: list[
         + (f" (for joint 1, {joint_names[0]!r}; likewise the others)" if joint_names else "")
         + f"; found: {', '.join(columns)}; a column mapping (--columns {s}=TEMPLATE) names them"
     )
-
-
-def _use_layout(
-    layout: JointStateLayout, signals: list[str], n: int, joint_names: tuple[str, ...] | None, where: str
-) -> tuple[JointStateLayout, str]:
-    size = len(layout.fields["q"])
-    for s in signals:
-        if len(layout.fields[s]) != size:
-            raise DataError(f"{where}: JointState {_STATE_FIELD[s]} columns have {len(layout.fields[s])} elements, "
-                            f"position has {size}")  # fmt: skip
-    fields = {s: layout.fields[s] for s in signals}
-    if layout.names:
-        if len(layout.names) != size:
-            raise DataError(f"{where}: {len(layout.names)} JointState name columns for {size} position columns")
-        note = (
-            f"{where}: {', '.join(_MEANING[s] for s in signals)} from the JointState layout "
-            f"({layout.fields['q'][0]}, ..., joint names in {layout.names[0]}, ...), mapped by name row by row"
-        )
-        return JointStateLayout(layout.names, fields), note
-    if size != n:
-        raise DataError(
-            f"{where}: the JointState columns hold {size} joints ({layout.fields['q'][0]} ..); the robot has {n}"
-        )
-    note = (
-        f"{where}: {', '.join(_MEANING[s] for s in signals)} from the JointState layout ({layout.fields['q'][0]}, ...) "
-        "without name columns: element k taken as joint k + 1 of the model"
-    )
-    return JointStateLayout((), fields), note
 
 
 def _find_wrench(idx: _Index, template: str | None, where: str) -> list[str] | None:
