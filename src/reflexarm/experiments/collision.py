@@ -42,8 +42,8 @@ from reflexarm.sim import (
     Plant,
     SensorNoise,
     Trace,
-    run_closed_loop,
 )
+from reflexarm.sim.compiled_loop import run_fast
 
 __all__ = [
     "DEFAULT_MODEL_ERROR",
