@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from reflexarm._cli.common import add_model_options, model_choice, model_error_line
+from reflexarm._cli.log_options import add_log_options, load_log_from_args
 from reflexarm._cli.robot_options import add_robot_options, load_robot_from_args
 
 _SWITCH = (0, 1)
@@ -34,7 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_model_options(
         p, default_error=0.0, seed_help="seed of --model-error (to replay a simulated arm's perturbed model)"
     )
-    _add_log_options(p)
+    add_log_options(p)
     g = p.add_argument_group("observer (the settings you run)")
     g.add_argument("--observer-gain", type=float, default=5.0, help="k_o [1/s] (default 5, the paper's)")
     g.add_argument(
@@ -71,22 +72,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_tune)
 
 
-def _add_log_options(p: argparse.ArgumentParser) -> None:
-    try:
-        from reflexarm._cli.log_options import add_log_options
-    except ImportError:  # pragma: no cover - the log options arrived with the log reader's column mapping
-        return
-    add_log_options(p)
-
-
 def _load(args: argparse.Namespace, path: str, robot: Any) -> Any:
     from reflexarm.tuning.replay import is_trace_file, load_free_motion_log
 
     if is_trace_file(path):
-        return load_free_motion_log(path, robot)
-    try:
-        from reflexarm._cli.log_options import load_log_from_args
-    except ImportError:  # pragma: no cover
         return load_free_motion_log(path, robot)
     return load_log_from_args(args, path, robot)
 

@@ -1,4 +1,4 @@
-"""Simulated free-motion logs for threshold tuning: what a real arm's logger records, on the built-in Atlas arm.
+"""Simulated free-motion logs for threshold tuning: what a real arm's logger records (default: the Atlas arm).
 
 The free-motion run of :func:`reflexarm.experiments.collision.free_motion_false_alarms` (the paper's
 sensor noise, the controller's model with +-10 % errors, no obstacle) with every *measurement* the
@@ -65,12 +65,14 @@ def record_free_motion_log(
     threshold: npt.ArrayLike = 11.0,
     observer_gain: float = 5.0,
     progress: bool = False,
+    robot: RobotModel | None = None,
 ) -> FreeMotionRun:
-    """Run free motion on the built-in Atlas arm and record the controller's measurements.
+    """Run free motion (default on the built-in Atlas arm) and record the controller's measurements.
 
     Args:
         duration: simulated time [s].
-        motion: "demo" or "hydraulic" (:data:`reflexarm.experiments.collision.FREE_MOTIONS`).
+        motion: a free motion of :func:`reflexarm.experiments.collision.free_motion_trajectory` ("demo",
+            "hydraulic" on Atlas; "demo" or "loaded" on another arm).
         model_error, model_seed, model: the controller's model, as in
             :func:`reflexarm.experiments.collision.controller_model` (default +-10 %, seed 0).
         seed: seed of the sensor noise (the paper's levels).
@@ -78,22 +80,18 @@ def record_free_motion_log(
             (reaction "none": detection does not change the motion).
         observer_gain: k_o [1/s].
         progress: show a progress bar.
+        robot: the plant's arm (default the built-in Atlas arm).
     """
     from reflexarm.control import Controller
-    from reflexarm.experiments.collision import (
-        EE_START,
-        ROBOT,
-        controller_model,
-        free_motion_trajectory,
-    )
+    from reflexarm.experiments.collision import ROBOT, controller_model, free_motion_trajectory
     from reflexarm.robots import load_robot
     from reflexarm.sim import PAPER_NOISE, Plant, stream_closed_loop
 
-    robot = load_robot(ROBOT)
+    robot = load_robot(ROBOT) if robot is None else robot
     ctrl_model, info = controller_model(robot, model_error, model_seed, model)
-    traj = free_motion_trajectory(duration, motion)
+    traj = free_motion_trajectory(duration, motion, robot)
     plant = Plant(robot, noise=PAPER_NOISE, seed=seed)
-    plant.reset(EE_START)
+    plant.reset(traj.sample(0.0).q_d)
     ctrl = Controller(ctrl_model, stiffness=300.0, observer_gain=observer_gain, threshold=threshold, reaction="none")
     n = robot.n
     size = int(round(duration / plant.control_period)) + 2
