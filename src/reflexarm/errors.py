@@ -32,7 +32,32 @@ class ConfigError(ReflexArmError, ValueError):
 
 
 class DataError(ReflexArmError, ValueError):
-    """A log or time series is malformed (missing columns, NaN/inf, time going backwards)."""
+    """A log or time series is malformed (missing columns, NaN/inf, time going backwards).
+
+    Attributes (None where they do not apply): ``source`` the log's name; ``column`` the column, field,
+    topic or array concerned (for a missing signal: the names looked for); ``row`` the 0-based data
+    row; ``joint`` the joint's name; ``value`` what was found; ``expected`` what was expected (a value,
+    a description or the valid choices).
+    """
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        source: str | None = None,
+        column: object = None,
+        row: int | None = None,
+        joint: str | None = None,
+        value: object = None,
+        expected: object = None,
+    ) -> None:
+        super().__init__(message)
+        self.source = source
+        self.column = column
+        self.row = row
+        self.joint = joint
+        self.value = value
+        self.expected = expected
 
 
 class IdentificationError(ReflexArmError):
