@@ -56,7 +56,7 @@ from reflexarm.experiments.any_arm import start_posture
 from reflexarm.experiments.metrics import msie
 from reflexarm.robots import CoulombViscousFriction, RobotModel, load_robot, perturb_model
 from reflexarm.signals import Reference
-from reflexarm.sim import PAPER_NOISE, EndEffectorForce, Plant, Scene, SensorNoise, Trace, run_closed_loop
+from reflexarm.sim import PAPER_NOISE, EndEffectorForce, Plant, Scene, SensorNoise, Trace
 from reflexarm.sim.compiled_loop import run_fast
 
 __all__ = [
