@@ -9,7 +9,9 @@ from __future__ import annotations
 import json
 import warnings
 from pathlib import Path
+from typing import Any
 
+import mujoco
 import numpy as np
 import pytest
 
@@ -20,10 +22,10 @@ from reflexarm.experiments.any_arm import (
     ee_swing_plan,
     is_paper_arm,
     link_body,
-    place_cinderblock,
     start_posture,
     work_posture,
 )
+from reflexarm.experiments.block_placement import place_cinderblock
 from reflexarm.experiments.collision import free_motion_trajectory
 from reflexarm.experiments.collision_summary import (
     CONTACT_FORCE_N,
@@ -33,7 +35,7 @@ from reflexarm.experiments.collision_summary import (
 )
 from reflexarm.robots import load_robot
 from reflexarm.robots.example_arms import UR_LIKE_TIP, write_ur_like_arm
-from reflexarm.sim import JointTrajectory, Plant, Trace, run_closed_loop
+from reflexarm.sim import Cinderblock, JointTrajectory, Plant, Trace, run_closed_loop
 
 IIWA = SHARED / "reference" / "menagerie" / "iiwa14.xml"
 ARMS = ("panda", "iiwa14", "ur_like")
@@ -52,7 +54,11 @@ def robot_args(arm: str, folder: Path) -> list[str]:
 
 def load(arm: str, folder: Path):
     args = robot_args(arm, folder)
-    kwargs = {"ee_frame": args[3]} if arm == "iiwa14" else {"tip": UR_LIKE_TIP} if arm == "ur_like" else {}
+    kwargs: dict[str, Any] = {}
+    if arm == "iiwa14":
+        kwargs["ee_frame"] = args[3]
+    elif arm == "ur_like":
+        kwargs["tip"] = UR_LIKE_TIP
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         return load_robot(args[1], **kwargs)
@@ -95,8 +101,9 @@ def test_link_collision_pushes_the_mid_chain_link_and_detects_it(arm, tmp_path):
     robot = load(arm, tmp_path)
     k = (robot.n + 1) // 2  # the default link: joint ceil(n/2)
     assert tr.meta["placement"]["link"] == k
-    # the stick pushes link k: joints after it see no external torque (the push acts on their parents)
-    assert np.abs(tr.tau_ext[:, k:]).max() < 1e-6 * np.abs(tr.tau_ext).max()
+    # the stick pushes link k: the joints after it see no torque of that push (it acts on their parent);
+    # the 0.6 m stick may graze the next link, hence half, not zero
+    assert np.abs(tr.tau_ext[:, k:]).max() < 0.5 * np.abs(tr.tau_ext[:, :k]).max()
 
 
 @pytest.mark.slow
@@ -143,21 +150,49 @@ def test_work_posture_of_an_arm_without_home_points_the_tool_down(tmp_path):
     np.testing.assert_array_equal(start_posture(robot), q)
 
 
-def test_the_block_stands_across_the_end_effector_path(tmp_path):
-    robot = load_robot("panda")
+#: The body that should meet the block first on each arm: the one beyond the wrist sensor.
+WRIST_BODY = {"panda": "tool", "iiwa14": "link7", "ur_like": "gripper_base_link"}
+
+
+@pytest.mark.parametrize("arm", ARMS)
+def test_the_block_stands_across_the_end_effector_path_and_the_wrist_meets_it_first(arm, tmp_path):
+    robot = load(arm, tmp_path)
     plan = ee_swing_plan(robot)
     traj = plan.trajectory()
     place = place_cinderblock(robot, traj, depth=0.12)
-    # the end effector at the contact time is on the block's padded face (half a block width + padding
-    # from its centre, horizontally along the path); the rest of the path is 0.12 m long
+    # the end effector at the contact time is half a block width + padding from the block's centre,
+    # horizontally along the path (the block's y axis)
     p = robot.compute_frame_pose(traj.sample(place["contact_time_s"]).q_d)[1]
     yaw = place["yaw"]
-    y_axis = np.array([-np.sin(yaw), np.cos(yaw)])  # the block's y axis: the path's direction there
+    y_axis = np.array([-np.sin(yaw), np.cos(yaw)])
     along = (np.asarray(place["position"]) - p[:2]) @ y_axis
-    sy, sz = place["size"][1], place["size"][2]
-    np.testing.assert_allclose(along, sy / 2 + place["padding"], atol=1e-9)
-    # ... at a height within the block's padded side
-    assert place["table_height"] < p[2] < place["table_height"] + sz + place["padding"]
+    np.testing.assert_allclose(along, place["size"][1] / 2 + place["padding"], atol=1e-9)
+    # the unobstructed reference, replayed kinematically (the plant reset at each sample): the first arm
+    # geom that touches the block or its table is on the wrist, beyond the force/torque sensor
+    kwargs = {k: v for k, v in place.items() if k not in ("contact_time_s", "depth", "ee_height_m")}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        plant = Plant(robot, scene=Cinderblock(**kwargs))
+    m, d = plant.model, plant.data
+    scene_bodies = {m.body("cinderblock").id, 0}  # the block, and the world that holds the table
+    first = None
+    for t in np.linspace(0.0, traj.duration, 600):
+        plant.reset(traj.sample(float(t)).q_d)
+        mujoco.mj_forward(m, d)
+        touching = []
+        for c in d.contact[: d.ncon]:
+            b1, b2 = int(m.geom_bodyid[c.geom1]), int(m.geom_bodyid[c.geom2])
+            if b1 in scene_bodies and b2 not in scene_bodies:
+                touching.append(m.body(b2).name)
+            elif b2 in scene_bodies and b1 not in scene_bodies:
+                touching.append(m.body(b1).name)
+        if touching:
+            first = (float(t), touching)
+            break
+    assert first is not None, "the arm never touches the block"
+    assert set(first[1]) == {WRIST_BODY[arm]}, first
+    # ... before the path would have run the whole depth into it
+    assert first[0] < traj.duration
 
 
 def test_free_motion_hydraulic_is_atlas_only(atlas):

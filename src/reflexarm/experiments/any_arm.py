@@ -11,9 +11,9 @@ stated in each function and nothing assumed about the number of joints, their na
   fastest horizontally swings it through ~:data:`SWING_PATH_M` at a peak speed of
   :data:`EE_PEAK_SPEED` (the paper's "moderate velocity"), inside the joint's range and below half
   its velocity limit;
-* the cinderblock (:func:`place_cinderblock`): the end effector's path is computed by forward
-  kinematics of that reference, and the block's padded face is put across the path where the rest of
-  the path would still run ``depth`` into the block;
+* the cinderblock (:func:`~reflexarm.experiments.block_placement.place_cinderblock`): the end
+  effector's path is computed by forward kinematics of that reference, and the block's padded face
+  is put across the path where the rest of the path would still run ``depth`` into the block;
 * the link push (:func:`link_push_plan`): the link of joint ``link`` (1-based; default mid-chain) is
   swung at ~:data:`LINK_SPEED` m/s by the proximal joint that moves it fastest; the stick approaches
   against the link's velocity (:class:`~reflexarm.sim.ElbowStick`'s default), i.e. the motion drives
@@ -46,8 +46,9 @@ __all__ = [
     "link_body",
     "link_push_plan",
     "loaded_joints",
-    "place_cinderblock",
+    "horizontal",
     "start_posture",
+    "up_direction",
     "work_posture",
 ]
 
@@ -120,7 +121,7 @@ def _keyframe(robot: RobotModel) -> np.ndarray | None:
 #: reach from the first joint's axis, horizontally [-] ...
 WORK_REACH_SHARE = 0.6
 #: ... and this share of the reach above the shoulder (the second joint's origin) [-].
-WORK_HEIGHT_SHARE = 0.0
+WORK_HEIGHT_SHARE = 0.3
 
 
 def start_posture(robot: RobotModel) -> np.ndarray:
@@ -144,17 +145,17 @@ def work_posture(robot: RobotModel, iterations: int = 200) -> np.ndarray:
     margin."""
     lo, hi = _finite_range(robot)
     q = 0.5 * (lo + hi)
-    up = _up(robot)
+    up = up_direction(robot)
     names = robot.frame_names
     shoulder_frame = robot.joint_names[1] if robot.n > 1 else robot.joint_names[0]
     shoulder = robot.compute_frame_pose(q, shoulder_frame)[1] if shoulder_frame in names else np.zeros(3)
     base = robot.compute_frame_pose(q, robot.joint_names[0])[1] if robot.joint_names[0] in names else np.zeros(3)
     p = robot.compute_frame_pose(q)[1]
     reach = float(np.linalg.norm(p - shoulder))
-    direction = _horizontal(p - base, up)
+    direction = horizontal(p - base, up)
     nd = float(np.linalg.norm(direction))
     direction = np.array([1.0, 0.0, 0.0]) if nd < 1e-6 else direction / nd
-    target = _horizontal(base, up) + direction * WORK_REACH_SHARE * reach
+    target = horizontal(base, up) + direction * WORK_REACH_SHARE * reach
     target = target + up * float((shoulder @ up) + WORK_HEIGHT_SHARE * reach)
     for _ in range(iterations):
         R, p = robot.compute_frame_pose(q)
@@ -176,11 +177,13 @@ def _tool_axis(robot: RobotModel, q: np.ndarray, R: np.ndarray, p: np.ndarray) -
     return axis / n if n > 1e-3 else R[:, 2].copy()
 
 
-def _horizontal(v: np.ndarray, up: np.ndarray) -> np.ndarray:
+def horizontal(v: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """The part of ``v`` perpendicular to the unit vector ``up``."""
     return np.asarray(v - (v @ up) * up)
 
 
-def _up(robot: RobotModel) -> np.ndarray:
+def up_direction(robot: RobotModel) -> np.ndarray:
+    """The unit vector against the robot's gravity (z without gravity)."""
     g = robot.gravity
     n = float(np.linalg.norm(g))
     return np.array([0.0, 0.0, 1.0]) if n == 0.0 else -g / n
@@ -210,8 +213,8 @@ def _driving_joint(robot: RobotModel, q: np.ndarray, frame: str, joints: range) 
     the horizontal speed weighted by its share of the speed (a swing that also lifts or lowers the frame
     ranks lower); radius: the horizontal speed per rad."""
     J = robot.compute_frame_jacobian(q, frame, world_aligned=True)[:3]
-    up = _up(robot)
-    speeds = [float(np.linalg.norm(_horizontal(J[:, j], up))) for j in joints]
+    up = up_direction(robot)
+    speeds = [float(np.linalg.norm(horizontal(J[:, j], up))) for j in joints]
     scores = [v * v / max(float(np.linalg.norm(J[:, j])), 1e-9) for v, j in zip(speeds, joints, strict=True)]
     best = int(np.argmax(scores))
     if speeds[best] < 1e-3:
@@ -254,150 +257,6 @@ def ee_swing_plan(robot: RobotModel, q0: np.ndarray | None = None) -> EeSwingPla
     joint, radius = _driving_joint(robot, q0, robot.ee_frame, range(max(1, math.ceil(robot.n / 2))))
     start, goal, t_move = _swing(robot, q0, joint, SWING_PATH_M, radius, EE_PEAK_SPEED, 1.0)
     return EeSwingPlan(start, goal, joint, t_move)
-
-
-#: Vertical clearance kept between the block's top and the links before the wrist (they pass above
-#: it), and between the table and every link [m].
-CLEARANCE_M = 0.02
-#: Spheres per collision geom in the swept check of :func:`place_cinderblock` [-].
-SPHERES_PER_GEOM = 7
-#: Share of the block's length that lies beyond the end effector's path, away from the arm's base [-].
-OUTSIDE_SHARE = 0.75
-
-
-def _arm_geoms_along(robot: RobotModel, qs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """For the arm's collision geoms at each posture of ``qs``: (centres (k, g, 3) and half-extents
-    (k, g, 3) of their world-aligned bounding boxes, distal mask (g,): the geom is on the wrist, i.e. the
-    last two links or a body beyond the wrist sensor)."""
-    import mujoco
-
-    from reflexarm.sim import Plant
-
-    plant = Plant(robot)
-    m, d = plant.model, plant.data
-    arm = set(int(b) for b in plant._arm_bodies)
-    distal = set(int(b) for b in plant._load_bodies)
-    wrist = int(m.jnt_bodyid[m.joint(robot.joint_names[max(0, robot.n - 2)]).id])
-    distal |= {b for b in range(m.nbody) if _descends(m, b, wrist)}
-    geoms = [g for g in range(m.ngeom) if int(m.geom_bodyid[g]) in arm and (m.geom_contype[g] or m.geom_conaffinity[g])]
-    # each geom as spheres along the longest axis of its local bounding box (a link is a long cylinder:
-    # its world-aligned box would overstate how low it reaches)
-    local_c = np.array(m.geom_aabb[geoms, :3])
-    local_h = np.array(m.geom_aabb[geoms, 3:])
-    points, radii, owner = [], [], []
-    for i in range(len(geoms)):
-        a = int(np.argmax(local_h[i]))
-        r = float(np.delete(local_h[i], a).max())
-        half = max(0.0, float(local_h[i, a]) - r)
-        for x in np.linspace(-half, half, SPHERES_PER_GEOM):
-            e = np.zeros(3)
-            e[a] = x
-            points.append(local_c[i] + e)
-            radii.append(r)
-            owner.append(i)
-    pts, own = np.array(points), np.array(owner)
-    centres = np.empty((len(qs), len(pts), 3))
-    for k, q in enumerate(qs):
-        d.qpos[plant._qadr_arr] = q
-        mujoco.mj_kinematics(m, d)
-        R = np.array(d.geom_xmat[geoms]).reshape(-1, 3, 3)[own]
-        centres[k] = d.geom_xpos[geoms][own] + np.einsum("gij,gj->gi", R, pts)
-    halves = np.broadcast_to(np.array(radii)[None, :, None], centres.shape).copy()
-    mask = np.array([int(m.geom_bodyid[geoms[i]]) in distal for i in own], dtype=bool)
-    return centres, halves, mask
-
-
-def _descends(m: Any, body: int, root: int) -> bool:
-    while body > 0:
-        if body == root:
-            return True
-        body = int(m.body_parentid[body])
-    return root == 0
-
-
-def place_cinderblock(
-    robot: RobotModel,
-    trajectory: JointTrajectory,
-    *,
-    depth: float = 0.12,
-    size: tuple[float, float, float] = (0.39, 0.19, 0.19),
-    padding: float = 0.03,
-    samples: int = 400,
-) -> dict[str, Any]:
-    """Keyword arguments of :class:`~reflexarm.sim.Cinderblock` that put the block on the end effector's path.
-
-    The path is the forward kinematics of ``trajectory`` (the end-effector frame). The block's padded
-    face is put across the path at the point from which the rest of the path is ``depth`` long [m] (so
-    the unobstructed end effector would run ``depth`` into the block), facing the path's horizontal
-    direction there with its long side, :data:`OUTSIDE_SHARE` of which lies beyond the path, away from
-    the base. Heights, from the arm's collision geometry swept along the path
-    (bounding spheres, over the block's footprint): the end effector meets the face at half the block's
-    height unless the links before the wrist (the last two links) pass lower, then the block's top
-    stays :data:`CLEARANCE_M` below them (so the wrist meets the block first, as the hand does on
-    Atlas); the table (the block's support) stays :data:`CLEARANCE_M` below every link; below 5 cm the
-    block stands on the floor and is as tall as the top requires (its core's height then differs from
-    ``size``). The block's core is ``size`` otherwise.
-
-    Raises:
-        ConfigError: the path is shorter than ``depth`` or does not move horizontally; the arm passes
-            above the block.
-    """
-    t = np.linspace(0.0, trajectory.duration, samples)
-    qs = np.array([trajectory.sample(float(ti)).q_d for ti in t])
-    P = np.array([robot.compute_frame_pose(q)[1] for q in qs])
-    seg = np.linalg.norm(np.diff(P, axis=0), axis=1)
-    s = np.concatenate([[0.0], np.cumsum(seg)])
-    if s[-1] <= depth:
-        raise ConfigError(f"the end effector's path is {s[-1]:.3f} m long; the block needs more than depth {depth} m")
-    i = int(np.searchsorted(s, s[-1] - depth))
-    i = min(max(i, 1), samples - 2)
-    up = _up(robot)
-    u = _horizontal(P[i + 1] - P[i - 1], up)
-    nu = float(np.linalg.norm(u))
-    if nu < 1e-9:
-        raise ConfigError("the end effector's path does not move horizontally where the block would stand")
-    u /= nu
-    sx, sy, sz = size
-    # the long side (x of the block) faces the path: the block's y axis is the path's direction; the
-    # block reaches OUTSIDE_SHARE of its length away from the base beyond the path point (the links
-    # nearer the base do not stand over it)
-    w = np.cross(up, u)
-    outward = 1.0 if float(w @ _horizontal(P[i], up)) >= 0.0 else -1.0
-    centre = P[i] + u * (padding + sy / 2.0) + w * outward * (OUTSIDE_SHARE - 0.5) * sx
-    # the arm's geoms (bounding boxes) over the block's padded footprint along the path
-    centres, halves, distal = _arm_geoms_along(robot, qs)
-    rel = centres - centre
-    over = (np.abs(rel @ u) < sy / 2 + padding + np.abs(halves) @ np.abs(u)) & (
-        np.abs(rel @ w) < sx / 2 + padding + np.abs(halves) @ np.abs(w)
-    )
-    bottoms = (centres @ up) - np.abs(halves) @ np.abs(up)
-    lowest = float(bottoms[over].min()) if over.any() else math.inf
-    prox = over & ~distal[None, :]
-    lowest_proximal = float(bottoms[prox].min()) if prox.any() else math.inf
-    height = float(P[i] @ up)
-    top = min(height + sz / 2.0 + padding, lowest_proximal - CLEARANCE_M)
-    bottom = min(top - padding - sz, lowest - CLEARANCE_M)
-    table = bottom if bottom >= 0.05 else 0.0
-    if table == 0.0:
-        sz = top - padding
-    block_top = table + sz + padding
-    if sz < 0.05 or (over.any() and block_top < float(bottoms[over & distal[None, :]].min(initial=math.inf))):
-        raise ConfigError(
-            f"the arm passes above the block (its top at {block_top:.3f} m, the wrist no lower than "
-            f"{float(bottoms[over & distal[None, :]].min()):.3f} m); choose another start posture"
-        )
-    yaw = math.atan2(u[1], u[0]) - math.pi / 2.0
-    return {
-        "position": (float(centre[0]), float(centre[1])),
-        "size": (sx, sy, sz),
-        "padding": padding,
-        "table_height": table,
-        "table_size": (sx + 0.1, sx + 0.1),
-        "yaw": yaw,
-        "contact_time_s": float(t[i]),
-        "depth": depth,
-        "ee_height_m": height,
-    }
 
 
 def _body_frame(robot: RobotModel, joint: int) -> str:

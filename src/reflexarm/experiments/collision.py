@@ -23,9 +23,9 @@ from reflexarm.experiments.any_arm import (
     is_paper_arm,
     link_push_plan,
     loaded_waypoints,
-    place_cinderblock,
     start_posture,
 )
+from reflexarm.experiments.block_placement import place_cinderblock
 from reflexarm.experiments.collision_summary import (
     PAPER,
     compare_with_paper,
@@ -263,9 +263,9 @@ def run_ee_collision(
     else:
         plan = ee_swing_plan(robot)
         traj = plan.trajectory()
-        variant = dict(_block(block))
-        variant.pop("position"), variant.pop("table_height")
-        size = tuple(variant.pop("size", (0.39, 0.19, 0.19)))  # type: ignore[call-overload]
+        # the variant's mass, friction and size; the position and table come from the placement
+        variant = {k: v for k, v in _block(block).items() if k not in ("position", "table_height", "size")}
+        size = tuple(float(x) for x in _block(block).get("size", (0.39, 0.19, 0.19)))  # type: ignore[attr-defined]
         placement = place_cinderblock(robot, traj, depth=depth, size=size)  # type: ignore[arg-type]
         kwargs = {k: v for k, v in placement.items() if k not in ("contact_time_s", "depth", "ee_height_m")}
         scene = Cinderblock(**kwargs, **variant)  # type: ignore[arg-type]

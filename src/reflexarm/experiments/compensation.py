@@ -219,11 +219,12 @@ def _load_kwargs(options: Sequence[Sequence[Any]]) -> dict[str, Any]:
 def true_robot(robot: str | CompensationSetup, options: Sequence[Sequence[Any]] = ()) -> RobotModel:
     """The true robot model of a setup (or of a robot name/file with ``load_robot`` ``options`` pairs),
     loaded once per process; callers get copies where they modify."""
+    name = robot if isinstance(robot, str) else robot.robot
     if isinstance(robot, CompensationSetup):
-        robot, options = robot.robot, robot.robot_options
-    key = f"{robot}|{tuple(tuple(o) for o in options)!r}"
+        options = robot.robot_options
+    key = f"{name}|{tuple(tuple(o) for o in options)!r}"
     if key not in _ROBOTS:
-        _ROBOTS[key] = load_robot(robot, **_load_kwargs(options))
+        _ROBOTS[key] = load_robot(name, **_load_kwargs(options))
     return _ROBOTS[key]
 
 

@@ -1,0 +1,175 @@
+"""The cinderblock placed on the end effector's path of any arm, from the arm's own kinematics and collision
+geometry (the end-effector collision of Sec. III-A on arms other than Atlas; see
+:mod:`reflexarm.experiments.any_arm` for the motion)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from reflexarm.errors import ConfigError
+from reflexarm.experiments.any_arm import horizontal, up_direction
+from reflexarm.robots import RobotModel
+from reflexarm.sim import JointTrajectory
+
+__all__ = ["CLEARANCE_M", "OUTSIDE_SHARE", "SPHERES_PER_GEOM", "place_cinderblock"]
+
+#: Vertical clearance kept between the block's top and the links before the wrist (they pass above
+#: it), and between the table and every link [m].
+CLEARANCE_M = 0.02
+#: Spheres per collision geom in the swept check of :func:`place_cinderblock` [-].
+SPHERES_PER_GEOM = 7
+#: Share of the block's length that lies beyond the end effector's path, away from the arm's base [-].
+OUTSIDE_SHARE = 0.75
+
+
+def _arm_geoms_along(robot: RobotModel, qs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The arm's collision geoms at each posture of ``qs`` as spheres: (centres (k, s, 3), radii as
+    half-extents (k, s, 3), masks (s,): on a body beyond the wrist sensor; on the wrist, i.e. the last
+    two links or beyond the sensor)."""
+    import mujoco
+
+    from reflexarm.sim import Plant
+
+    plant = Plant(robot)
+    m, d = plant.model, plant.data
+    arm = set(int(b) for b in plant._arm_bodies)
+    distal = set(int(b) for b in plant._load_bodies)
+    geoms = [g for g in range(m.ngeom) if int(m.geom_bodyid[g]) in arm and (m.geom_contype[g] or m.geom_conaffinity[g])]
+    # each geom as spheres along the longest axis of its local bounding box (a link is a long cylinder:
+    # its world-aligned box would overstate how low it reaches)
+    local_c = np.array(m.geom_aabb[geoms, :3])
+    local_h = np.array(m.geom_aabb[geoms, 3:])
+    points, radii, owner = [], [], []
+    for i in range(len(geoms)):
+        a = int(np.argmax(local_h[i]))
+        r = float(np.delete(local_h[i], a).max())
+        half = max(0.0, float(local_h[i, a]) - r)
+        for x in np.linspace(-half, half, SPHERES_PER_GEOM):
+            e = np.zeros(3)
+            e[a] = x
+            points.append(local_c[i] + e)
+            radii.append(r)
+            owner.append(i)
+    pts, own = np.array(points), np.array(owner)
+    centres = np.empty((len(qs), len(pts), 3))
+    for k, q in enumerate(qs):
+        d.qpos[plant._qadr_arr] = q
+        mujoco.mj_kinematics(m, d)
+        R = np.array(d.geom_xmat[geoms]).reshape(-1, 3, 3)[own]
+        centres[k] = d.geom_xpos[geoms][own] + np.einsum("gij,gj->gi", R, pts)
+    halves = np.broadcast_to(np.array(radii)[None, :, None], centres.shape).copy()
+    wrist_root = int(m.jnt_bodyid[m.joint(robot.joint_names[max(0, robot.n - 2)]).id])
+    bodies = [int(m.geom_bodyid[geoms[i]]) for i in own]
+    beyond = np.array([b in distal for b in bodies], dtype=bool)
+    wrist = np.array([_descends(m, b, wrist_root) for b in bodies], dtype=bool) | beyond
+    return centres, halves, beyond, wrist
+
+
+def _descends(m: Any, body: int, root: int) -> bool:
+    while body > 0:
+        if body == root:
+            return True
+        body = int(m.body_parentid[body])
+    return root == 0
+
+
+def place_cinderblock(
+    robot: RobotModel,
+    trajectory: JointTrajectory,
+    *,
+    depth: float = 0.12,
+    size: tuple[float, float, float] = (0.39, 0.19, 0.19),
+    padding: float = 0.03,
+    samples: int = 400,
+) -> dict[str, Any]:
+    """Keyword arguments of :class:`~reflexarm.sim.Cinderblock` that put the block on the end effector's path.
+
+    The path is the forward kinematics of ``trajectory`` (the end-effector frame). The block's padded
+    face is put across the path at the point from which the rest of the path is ``depth`` long [m] (so
+    the unobstructed end effector would run ``depth`` into the block), facing the path's horizontal
+    direction there with its long side, :data:`OUTSIDE_SHARE` of which lies beyond the path, away from
+    the base.
+
+    Heights come from the arm's collision geometry swept along the path (spheres along each geom,
+    :data:`SPHERES_PER_GEOM`): the end effector meets the face at half the block's height unless the
+    links before the wrist sensor pass lower over the block; then the block's top stays
+    :data:`CLEARANCE_M` below them, so that the bodies beyond the sensor meet the block first, as the
+    hand does on Atlas (if that leaves no room, the last two links may touch it too). The table (the
+    block's support, a square of side ``size[0] + 0.1`` m) stays :data:`CLEARANCE_M` below every link
+    over it; below 5 cm the block stands on the floor and is as tall as the top requires (its core's
+    height then differs from ``size``). The block's core is ``size`` otherwise.
+
+    Raises:
+        ConfigError: the path is shorter than ``depth`` or does not move horizontally; the arm passes
+            above the block.
+    """
+    t = np.linspace(0.0, trajectory.duration, samples)
+    qs = np.array([trajectory.sample(float(ti)).q_d for ti in t])
+    P = np.array([robot.compute_frame_pose(q)[1] for q in qs])
+    seg = np.linalg.norm(np.diff(P, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    if s[-1] <= depth:
+        raise ConfigError(f"the end effector's path is {s[-1]:.3f} m long; the block needs more than depth {depth} m")
+    i = int(np.searchsorted(s, s[-1] - depth))
+    i = min(max(i, 1), samples - 2)
+    up = up_direction(robot)
+    u = horizontal(P[i + 1] - P[i - 1], up)
+    nu = float(np.linalg.norm(u))
+    if nu < 1e-9:
+        raise ConfigError("the end effector's path does not move horizontally where the block would stand")
+    u /= nu
+    sx, sy, sz = size
+    # the long side (x of the block) faces the path: the block's y axis is the path's direction; the
+    # block reaches OUTSIDE_SHARE of its length away from the base beyond the path point (the links
+    # nearer the base do not stand over it)
+    w = np.cross(up, u)
+    outward = 1.0 if float(w @ horizontal(P[i], up)) >= 0.0 else -1.0
+    centre = P[i] + u * (padding + sy / 2.0) + w * outward * (OUTSIDE_SHARE - 0.5) * sx
+    # the arm's geoms (bounding boxes) over the block's padded footprint along the path
+    centres, halves, beyond, wrist = _arm_geoms_along(robot, qs)
+    rel = centres - centre
+    over = (np.abs(rel @ u) < sy / 2 + padding + np.abs(halves) @ np.abs(u)) & (
+        np.abs(rel @ w) < sx / 2 + padding + np.abs(halves) @ np.abs(w)
+    )
+    bottoms = (centres @ up) - np.abs(halves) @ np.abs(up)
+    # the table: a square of side sx + 0.1 m, world-aligned, centred under the block
+    table_half = (sx + 0.1) / 2.0
+    over_table = (np.abs(rel[..., 0]) < table_half + halves[..., 0]) & (
+        np.abs(rel[..., 1]) < table_half + halves[..., 1]
+    )
+    lowest = float(bottoms[over_table].min()) if over_table.any() else math.inf
+    height = float(P[i] @ up)
+    # first the bodies beyond the wrist sensor must meet the block first (as Atlas' hand); if the links
+    # before them hang too low for that, the last two links may as well
+    for distal in (beyond, wrist):
+        prox = over & ~distal[None, :]
+        lowest_proximal = float(bottoms[prox].min()) if prox.any() else math.inf
+        top = min(height + sz / 2.0 + padding, lowest_proximal - CLEARANCE_M)
+        bottom = min(top - padding - sz, lowest - CLEARANCE_M)
+        table = bottom if bottom >= 0.05 else 0.0
+        core = top - padding if table == 0.0 else sz
+        block_top = table + core + padding
+        lowest_distal = float(bottoms[over & distal[None, :]].min(initial=math.inf))
+        if core >= 0.05 and block_top > lowest_distal:
+            break
+    else:
+        raise ConfigError(
+            f"the arm passes above the block (its top at {block_top:.3f} m, the wrist no lower than "
+            f"{lowest_distal:.3f} m); choose another start posture"
+        )
+    sz = core
+    yaw = math.atan2(u[1], u[0]) - math.pi / 2.0
+    return {
+        "position": (float(centre[0]), float(centre[1])),
+        "size": (sx, sy, sz),
+        "padding": padding,
+        "table_height": table,
+        "table_size": (2.0 * table_half, 2.0 * table_half),
+        "yaw": yaw,
+        "contact_time_s": float(t[i]),
+        "depth": depth,
+        "ee_height_m": height,
+    }
