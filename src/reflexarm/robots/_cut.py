@@ -129,7 +129,8 @@ def cut_chain(
 
     ``locked`` positions override ``defaults`` (e.g. the file's "home" keyframe), which override 0; each
     is clipped to the joint's limits with a note. With ``tip=None`` the model must be serial apart from a
-    floating base (which is then fixed); ``base=None`` starts the arm at the root link.
+    floating base (which is then fixed) and the tip is its last link; ``base=None`` starts the arm at the
+    root link (or the link a floating base carries).
 
     Raises:
         ModelError: unknown link or joint, a tip not below the base, a lock on a chain joint, a tree
@@ -139,7 +140,7 @@ def cut_chain(
     if tip is None:
         free = [j for j in range(1, model.njoints) if model.nvs[j] != 1]
         serial = all(model.parents[j] == j - 1 for j in range(1, model.njoints))
-        if base is not None or not serial or len(free) != 1 or free[0] != 1:
+        if not serial or free not in ([], [1]):
             first = 0 if base is None else model.frames[_body_frame(model, base, "base", where)].parentJoint
             raise ModelError(
                 f"robot{where} is not a serial chain{'' if base is None else f' below {base!r}'}: name the arm's "
@@ -159,37 +160,7 @@ def cut_chain(
             f"joint(s) {on_chain} are on the arm from {base!r} to {tip!r}{where}; only joints off the chain can be "
             "locked"
         )
-    q_ref = pin.neutral(model)
-    values: dict[str, float] = {}
-    notes: list[str] = []
-    for j in range(1, model.njoints):
-        if j in chain:
-            continue
-        name = names[j]
-        if model.nqs[j] != 1:
-            if locked and name in locked:
-                raise ModelError(
-                    f"joint {name!r}{where} has {model.nqs[j]} coordinates; it cannot be locked at a value"
-                )
-            values[name] = float("nan")
-            notes.append(
-                f"robot{where}: the floating base joint {name!r} is fixed at the file's pose (the arm's base does "
-                "not move)"
-                if model.nvs[j] == 6
-                else f"robot{where}: joint {name!r} ({model.nvs[j]} DoF) is locked at its neutral position"
-            )
-            continue
-        iq = model.idx_qs[j]
-        wanted = float((locked or {}).get(name, defaults.get(name, 0.0)))
-        lo, hi = float(model.lowerPositionLimit[iq]), float(model.upperPositionLimit[iq])
-        value = float(np.clip(wanted, lo, hi))
-        if value != wanted:
-            notes.append(
-                f"robot{where}: joint {name!r} locked at {value:g} (its limit) instead of {wanted:g}; limits "
-                f"[{lo:g}, {hi:g}]"
-            )
-        q_ref[iq] = value
-        values[name] = value
+    q_ref, values, notes = _lock_values(model, chain, locked or {}, defaults, where)
     base_joint = model.frames[model.getFrameId(base, pin.FrameType.BODY)].parentJoint
     below_root = [names[j] for j in model.supports[base_joint] if j > 0 and model.nvs[j] == 1]
     if below_root:
@@ -203,6 +174,45 @@ def cut_chain(
     reduced = pin.buildReducedModel(model, lock_ids, q_ref) if lock_ids else model.copy()
     reduced.name = model.name
     return reduced, ChainCut(base, tip, values, tuple(notes)), chain
+
+
+def _lock_values(
+    model: pin.Model, chain: list[int], locked: Mapping[str, float], defaults: Mapping[str, float], where: str
+) -> tuple[np.ndarray, dict[str, float], list[str]]:
+    """The reference configuration of the reduction, the lock of each joint off the chain (``nan`` for a
+    free or ball joint, held at its neutral pose) and notes (clipped locks, fixed floating bases)."""
+    q_ref = pin.neutral(model)
+    values: dict[str, float] = {}
+    notes: list[str] = []
+    for j in range(1, model.njoints):
+        if j in chain:
+            continue
+        name = str(model.names[j])
+        if model.nqs[j] != 1:
+            if name in locked:
+                raise ModelError(
+                    f"joint {name!r}{where} has {model.nqs[j]} coordinates; it cannot be locked at a value"
+                )
+            values[name] = float("nan")
+            notes.append(
+                f"robot{where}: the floating base joint {name!r} is fixed at the file's pose (the arm's base does "
+                "not move)"
+                if model.nvs[j] == 6
+                else f"robot{where}: joint {name!r} ({model.nvs[j]} DoF) is locked at its neutral position"
+            )
+            continue
+        iq = model.idx_qs[j]
+        wanted = float(locked.get(name, defaults.get(name, 0.0)))
+        lo, hi = float(model.lowerPositionLimit[iq]), float(model.upperPositionLimit[iq])
+        value = float(np.clip(wanted, lo, hi))
+        if value != wanted:
+            notes.append(
+                f"robot{where}: joint {name!r} locked at {value:g} (its limit) instead of {wanted:g}; limits "
+                f"[{lo:g}, {hi:g}]"
+            )
+        q_ref[iq] = value
+        values[name] = value
+    return q_ref, values, notes
 
 
 # ---------------------------------------------------------------------- the plant's side
