@@ -348,6 +348,9 @@ def test_bad_cuts_are_named(ur_arm: Path) -> None:
         _quiet_load(ur_arm, tip=UR_LIKE_TIP, locked={"finger": 0.1})
     with pytest.raises(ModelError, match="no joint moves between base link 'flange' and tip link 'tool0'"):
         _quiet_load(ur_arm, base="flange", tip=UR_LIKE_TIP)
+    # a serial arm has nothing to lock: a lock names a joint of the arm itself
+    with pytest.raises(ModelError, match=r"joint\(s\) \['panda_joint1'\] are on the arm from 'panda_link0' to"):
+        load_robot("panda", locked={"panda_joint1": 0.1})
 
 
 def test_load_arguments_rebuild_the_same_robot(ur_arm: Path) -> None:
@@ -405,3 +408,12 @@ def test_robots_command_lists_the_frames_of_a_tree(ur_arm: Path, capsys: pytest.
     out = capsys.readouterr().out
     assert "base 'base_link', tip 'tool0'; locked joints: gripper_left_finger_joint=0.01" in out
     assert "1:shoulder_pan_joint, 2:shoulder_lift_joint" in out
+
+
+@pytest.mark.skipif(not MENAGERIE.is_dir(), reason=f"Menagerie files not available at {MENAGERIE}")
+def test_robots_command_lists_sites_of_a_serial_mjcf(capsys: pytest.CaptureFixture[str]) -> None:
+    """Without --ee-frame a serial MJCF arm is not refused: its links and sites are listed."""
+    assert main(["robots", str(MENAGERIE / "panda_nohand.xml")]) == 0
+    lines = {line.split()[0]: line for line in capsys.readouterr().out.splitlines()[2:] if line.startswith("  ")}
+    assert lines["attachment_site"].endswith("frame on link attachment")
+    assert lines["link7"].split()[1:3] == ["joint7", "7"]
