@@ -133,13 +133,10 @@ def _core_params(controller: Any, core: ModuleType) -> Any:
 def _tick_times(plant: Plant, N: int) -> np.ndarray:
     """MuJoCo's clock at each of the next N ticks (it adds ``opt.timestep`` once per physics step)."""
     h = float(plant.model.opt.timestep)
-    t = float(plant.data.time)
-    out = np.empty(N)
-    for k in range(N):
-        out[k] = t
-        for _ in range(plant.substeps):
-            t += h
-    return out
+    steps = np.full(N * plant.substeps + 1, h)
+    steps[0] = float(plant.data.time)
+    # add.accumulate adds left to right, one step at a time: the very sums MuJoCo's clock makes
+    return np.add.accumulate(steps)[: N * plant.substeps : plant.substeps].copy()
 
 
 def _sample_reference(
