@@ -118,8 +118,9 @@ def test_topic_choice_and_its_errors(tmp_path):
     assert "bag: geometry_msgs/msg/WrenchStamped topic(s) /ft not used (no wrench topic given)" in back.notes
     assert back.wrench is None
     topics = r"topics: /ft \(geometry_msgs/msg/WrenchStamped\), /joint_states \(sensor_msgs/msg/JointState\)"
-    with pytest.raises(DataError, match=r"bag: no topic '/joint' in the bag; " + topics):
+    with pytest.raises(DataError, match=r"bag: no topic '/joint' in the bag; " + topics) as info:
         load_log(p, joint_names=NAMES, joint_topic="/joint")
+    assert (info.value.column, info.value.expected) == ("/joint", ("/ft", "/joint_states"))
     with pytest.raises(DataError, match=r"bag: topic '/ft' carries geometry_msgs/msg/WrenchStamped, not sensor_msgs"):
         load_log(p, joint_names=NAMES, joint_topic="/ft")
     with pytest.raises(

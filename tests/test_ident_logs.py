@@ -72,8 +72,9 @@ def test_extra_columns_are_ignored_with_a_note_naming_them(tmp_path):
 
 def test_joint_count_must_match_the_robot(tmp_path):
     p = _write(tmp_path, _frame())
-    with pytest.raises(DataError, match=r"log\.csv: the log has 3 joints \(q_1\.\.q_3\); the robot has 7"):
+    with pytest.raises(DataError, match=r"log\.csv: the log has 3 joints \(q_1\.\.q_3\); the robot has 7") as info:
         load_log(p, n_joints=7)
+    assert (info.value.value, info.value.expected) == (3, 7)
 
 
 @pytest.mark.parametrize(("value", "word"), [(np.nan, "NaN"), (np.inf, r"\+inf"), (-np.inf, "-inf")])
@@ -81,8 +82,10 @@ def test_non_finite_value_names_column_and_row(tmp_path, value, word):
     df = _frame()
     df.loc[17, "dq_2"] = value
     p = _write(tmp_path, df)
-    with pytest.raises(DataError, match=rf"log\.csv: column 'dq_2' row 17 is {word}"):
+    with pytest.raises(DataError, match=rf"log\.csv: column 'dq_2' row 17 is {word}") as info:
         load_log(p)
+    assert (info.value.column, info.value.row) == ("dq_2", 17)
+    np.testing.assert_array_equal(info.value.value, value)
 
 
 def test_non_number_names_column_and_row(tmp_path):

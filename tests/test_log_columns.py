@@ -129,8 +129,10 @@ def test_a_missing_signal_names_what_was_looked_for(tmp_path):
     df.to_csv(p, index=False)
     with pytest.raises(DataError, match=r"m\.csv: no measured torque columns: looked for tau_1\.\.tau_3, "
                        r"tau_0\.\.tau_2, effort_shoulder_pan, .*effort\.0 \(JointState layout\) "
-                       r"\(for joint 1, 'shoulder_pan'; likewise the others\); found: t, "):  # fmt: skip
+                       r"\(for joint 1, 'shoulder_pan'; likewise the others\); found: t, ") as info:  # fmt: skip
         load_log(p, joint_names=NAMES)
+    assert info.value.column[:3] == ("tau_1..tau_3", "tau_0..tau_2", "effort_shoulder_pan")
+    assert info.value.expected == tuple(df.columns)
 
 
 def test_a_joint_missing_from_named_columns_is_named(tmp_path):
@@ -138,8 +140,9 @@ def test_a_joint_missing_from_named_columns_is_named(tmp_path):
     p = tmp_path / "m.csv"
     df.to_csv(p, index=False)
     with pytest.raises(DataError, match=r"m\.csv: velocity columns 'velocity_<joint>' found for 2 of the 3 joints; "
-                       r"missing for joint\(s\) 'elbow' \(looked for 'velocity_elbow'\)"):  # fmt: skip
+                       r"missing for joint\(s\) 'elbow' \(looked for 'velocity_elbow'\)") as info:  # fmt: skip
         load_log(p, joint_names=NAMES)
+    assert (info.value.source, info.value.joint, info.value.column) == ("m.csv", "elbow", "velocity_elbow")
 
 
 def test_two_columns_matching_one_name_are_refused(tmp_path):

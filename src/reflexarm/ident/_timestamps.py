@@ -74,13 +74,23 @@ def relative_seconds(
     if unit is not None and unit not in TIME_UNITS:
         raise DataError(
             f"{where}: unknown time unit {unit!r}; choose one of {', '.join(TIME_UNITS)}",
+            source=where,
+            value=unit,
+            expected=tuple(TIME_UNITS),
         )
     arr = np.asarray(raw)
     if arr.size == 0:
         raise DataError(f"{where}: the log has no samples")
     if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
         row = int(np.argmax(~np.isfinite(arr)))
-        raise DataError(f"{where}: column {column!r} row {row} is {arr[row]!r}; time stamps must be finite")
+        raise DataError(
+            f"{where}: column {column!r} row {row} is {arr[row]!r}; time stamps must be finite",
+            source=where,
+            column=column,
+            row=row,
+            value=float(arr[row]),
+            expected="a finite number",
+        )
     integer = arr.dtype.kind in "iu"
     if integer:
         offset_raw: float = float(arr[0])
@@ -166,7 +176,10 @@ def _infer_unit(first: float, rel: np.ndarray, whole: bool, where: str) -> tuple
     if not fits:
         raise DataError(
             f"{where}: cannot tell the time unit: the median step {step:.6g} is a sample period outside "
-            f"{lo:g}..{hi:g} s in every unit ({', '.join(TIME_UNITS)}); pass the time unit"
+            f"{lo:g}..{hi:g} s in every unit ({', '.join(TIME_UNITS)}); pass the time unit",
+            source=where,
+            value=step,
+            expected=tuple(TIME_UNITS),
         )
     for unit in fits:
         if EPOCH_RANGE_S[0] <= first * TIME_UNITS[unit] <= EPOCH_RANGE_S[1]:

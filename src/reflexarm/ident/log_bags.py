@@ -80,7 +80,10 @@ def read_bag(
                 raise DataError(
                     f"{where}: {what} {JOINT_STATE_TYPE} topics; "
                     + ("choose one with the joint topic (--joint-topic); " if candidates else "")
-                    + f"topics: {listing}"
+                    + f"topics: {listing}",
+                    source=where,
+                    column=tuple(candidates),
+                    expected=JOINT_STATE_TYPE,
                 )
             joint_topic = candidates[0]
             notes.append(f"{where}: joints from topic {joint_topic} ({JOINT_STATE_TYPE}, the bag's only one)")
@@ -117,9 +120,20 @@ def read_bag(
 
 def _check_topic(where: str, topics: dict[str, str], topic: str, msgtype: str, listing: str) -> None:
     if topic not in topics:
-        raise DataError(f"{where}: no topic {topic!r} in the bag; topics: {listing}")
+        raise DataError(
+            f"{where}: no topic {topic!r} in the bag; topics: {listing}",
+            source=where,
+            column=topic,
+            expected=tuple(sorted(topics)),
+        )
     if topics[topic] != msgtype:
-        raise DataError(f"{where}: topic {topic!r} carries {topics[topic]}, not {msgtype}; topics: {listing}")
+        raise DataError(
+            f"{where}: topic {topic!r} carries {topics[topic]}, not {msgtype}; topics: {listing}",
+            source=where,
+            column=topic,
+            value=topics[topic],
+            expected=msgtype,
+        )
 
 
 def _stamp(msg: Any) -> int:
@@ -171,7 +185,11 @@ def _map_joints(
         if n_joints is not None and len(joint_names) != n_joints:
             raise DataError(
                 f"{where}: the first {topic} message has {len(joint_names)} joints ({', '.join(joint_names)}); "
-                f"the robot has {n_joints}"
+                f"the robot has {n_joints}",
+                source=where,
+                column=topic,
+                value=len(joint_names),
+                expected=n_joints,
             )
     n = len(joint_names)
     orders: dict[tuple[str, ...], np.ndarray | None] = {}
@@ -188,7 +206,13 @@ def _map_joints(
                 missing = [j for j in joint_names if j not in where_is]
                 raise DataError(
                     f"{where}: {topic} message {r} holds joints {', '.join(names)}: the arm's joint(s) "
-                    f"{', '.join(map(repr, missing))} missing (a message must hold all of the arm's joints or none)"
+                    f"{', '.join(map(repr, missing))} missing (a message must hold all of the arm's joints or none)",
+                    source=where,
+                    column=topic,
+                    row=r,
+                    joint=missing[0],
+                    value=names,
+                    expected=joint_names,
                 )
             else:
                 orders[names] = np.array([where_is[j] for j in joint_names])
@@ -210,7 +234,12 @@ def _map_joints(
             if values.size != len(messages[r][2]):
                 raise DataError(
                     f"{where}: {topic} message {r} has {values.size} {field} values for {len(messages[r][2])} joints"
-                    + (f"; the arm's {field} is required" if values.size == 0 else "")
+                    + (f"; the arm's {field} is required" if values.size == 0 else ""),
+                    source=where,
+                    column=f"{topic} {field}",
+                    row=r,
+                    value=values.size,
+                    expected=len(messages[r][2]),
                 )
             out[i] = values[order]
         data[signal] = out

@@ -106,7 +106,10 @@ class _Index:
         if len(hits) > 1:
             raise DataError(
                 f"{self.where}: {len(hits)} columns match {name!r}: {', '.join(map(repr, hits))}; "
-                "name the one to use with a column mapping (--columns)"
+                "name the one to use with a column mapping (--columns)",
+                source=self.where,
+                column=tuple(hits),
+                expected=name,
             )
         return hits[0] if hits else None
 
@@ -145,8 +148,19 @@ def plan_columns(
         for s in _REQUIRED:  # a column missing among the log's own joints is named first
             for j in range(1, count + 1):
                 if idx.full.get(f"{s}_{j}") is None and idx.full.get(f"{s}_{j - 1}") is None:
-                    raise DataError(f"{where}: column '{s}_{j}' missing; found: {', '.join(columns)}")
-        raise DataError(f"{where}: the log has {count} joints (q_1..q_{count}); the robot has {n}")
+                    raise DataError(
+                        f"{where}: column '{s}_{j}' missing; found: {', '.join(columns)}",
+                        source=where,
+                        column=f"{s}_{j}",
+                        expected=tuple(columns),
+                    )
+        raise DataError(
+            f"{where}: the log has {count} joints (q_1..q_{count}); the robot has {n}",
+            source=where,
+            column="q",
+            value=count,
+            expected=n,
+        )
     joints: dict[str, tuple[str, ...]] = {}
     from_layout: list[str] = []
     for s in JOINT_SIGNALS:
@@ -157,9 +171,15 @@ def plan_columns(
             from_layout.append(s)
         elif s in _REQUIRED and count is not None:
             missing = next(f"{s}_{j}" for j in range(1, n + 1) if idx.full.get(f"{s}_{j}") is None)
-            raise DataError(f"{where}: column {missing!r} missing; found: {', '.join(columns)}")
+            raise DataError(
+                f"{where}: column {missing!r} missing; found: {', '.join(columns)}",
+                source=where,
+                column=missing,
+                expected=tuple(columns),
+            )
         elif s in _REQUIRED:
-            raise DataError(_missing(s, n, joint_names, columns, where))
+            looked, message = _missing(s, n, joint_names, columns, where)
+            raise DataError(message, source=where, column=looked, expected=tuple(columns))
     plan_layout = None
     if from_layout:
         assert layout is not None
@@ -198,7 +218,10 @@ def _find_time(
         c = idx.find(explicit)
         if c is None:
             raise DataError(
-                f"{where}: time column {explicit!r} (column mapping t=) missing; found: {', '.join(columns)}"
+                f"{where}: time column {explicit!r} (column mapping t=) missing; found: {', '.join(columns)}",
+                source=where,
+                column=explicit,
+                expected=tuple(columns),
             )
         return (c,), None
     if "t" in columns:
@@ -218,7 +241,10 @@ def _find_time(
     raise DataError(
         f"{where}: no time column: looked for {', '.join(_TIME_NAMES)} (optionally with a unit suffix such as "
         f"t_ns) and header.stamp.sec + header.stamp.nanosec; found: {', '.join(columns)}; name it with "
-        "a column mapping (--columns t=NAME)"
+        "a column mapping (--columns t=NAME)",
+        source=where,
+        column=_TIME_NAMES,
+        expected=tuple(columns),
     )
 
 
@@ -266,7 +292,10 @@ def _find_joint_signal(
         if missing:
             raise DataError(
                 f"{where}: column(s) {', '.join(map(repr, missing))} of the mapping {s}={template!r} missing; "
-                f"found: {', '.join(idx.full.values())}"
+                f"found: {', '.join(idx.full.values())}",
+                source=where,
+                column=tuple(missing),
+                expected=tuple(idx.full.values()),
             )
         notes.append(f"{where}: {_MEANING[s]} from columns {template!r} (mapping)")
         return tuple(f for f in found if f is not None)
@@ -294,7 +323,10 @@ def _find_joint_signal(
         raise DataError(
             f"{where}: {_MEANING[s]} columns {template_.format(joint='<joint>')!r} found for "
             f"{n - len(missing)} of the {n} joints; missing for joint(s) {', '.join(map(repr, missing))} "
-            f"(looked for {', '.join(repr(template_.format(joint=m)) for m in missing[:3])})"
+            f"(looked for {', '.join(repr(template_.format(joint=m)) for m in missing[:3])})",
+            source=where,
+            column=template_.format(joint=missing[0]),
+            joint=missing[0],
         )
     return None
 
@@ -306,14 +338,17 @@ def _name_templates(s: str) -> list[str]:
     return out
 
 
-def _missing(s: str, n: int, joint_names: tuple[str, ...] | None, columns: list[str], where: str) -> str:
+def _missing(
+    s: str, n: int, joint_names: tuple[str, ...] | None, columns: list[str], where: str
+) -> tuple[tuple[str, ...], str]:
+    """(the names looked for, the message) for a required signal found nowhere."""
     looked = [f"{s}_1..{s}_{n}", f"{s}_0..{s}_{n - 1}"]
     if joint_names is not None:
         j0 = joint_names[0]
         looked += [t.format(joint=j0) for t in _name_templates(s)]
     if s in _STATE_FIELD:
         looked.append(f"{_STATE_FIELD[s]}.0 (JointState layout)")
-    return (
+    return tuple(looked), (
         f"{where}: no {_MEANING[s]} columns: looked for {', '.join(looked)}"
         + (f" (for joint 1, {joint_names[0]!r}; likewise the others)" if joint_names else "")
         + f"; found: {', '.join(columns)}; a column mapping (--columns {s}=TEMPLATE) names them"
@@ -341,5 +376,9 @@ def _find_wrench(idx: _Index, template: str | None, where: str) -> list[str] | N
         return None
     if any(f is None for f in found):
         missing = [a for a, f in zip(WRENCH_COLUMNS, found, strict=True) if f is None]
-        raise DataError(f"{where}: wrench column(s) {', '.join(missing)} missing (give all six or none)")
+        raise DataError(
+            f"{where}: wrench column(s) {', '.join(missing)} missing (give all six or none)",
+            source=where,
+            column=tuple(missing),
+        )
     return [f for f in found if f is not None]

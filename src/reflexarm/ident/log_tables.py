@@ -69,7 +69,13 @@ def read_table(
                 r, j = (int(x) for x in np.argwhere(bad)[0])
                 raise DataError(
                     f"{where}: column {cols[int(element[r, j])]!r} row {int(kept[r])} is {_describe(arr[r, j])} "
-                    f"(joint {j + 1})"
+                    f"(joint {j + 1})",
+                    source=where,
+                    column=cols[int(element[r, j])],
+                    row=int(kept[r]),
+                    joint=plan.joint_names[j] if plan.joint_names else None,
+                    value=float(arr[r, j]),
+                    expected="a finite number",
                 )
             data[s] = arr
     if plan.wrench is not None:
@@ -105,13 +111,27 @@ def _values(df: Any, c: str, where: str, check: bool = True) -> np.ndarray:
         if not check and kind == "O" and bad is None:  # numbers with gaps (NaN) read as objects
             return np.asarray(col.to_numpy(dtype=float, na_value=np.nan), dtype=float)
         if kind in "OUS" and bad is not None:
-            raise DataError(f"{where}: column {c!r} row {bad}: {col.iloc[bad]!r} is not a number")
+            raise DataError(
+                f"{where}: column {c!r} row {bad}: {col.iloc[bad]!r} is not a number",
+                source=where,
+                column=c,
+                row=bad,
+                value=col.iloc[bad],
+                expected="a number",
+            )
         raise _refuse_dtype(where, f"column {c!r}", col.dtype, kind)
     values = np.asarray(col.to_numpy(dtype=float, na_value=np.nan), dtype=float)
     bad_cells = ~np.isfinite(values)
     if check and bad_cells.any():
         r = int(np.argmax(bad_cells))
-        raise DataError(f"{where}: column {c!r} row {r} is {_describe(values[r])}")
+        raise DataError(
+            f"{where}: column {c!r} row {r} is {_describe(values[r])}",
+            source=where,
+            column=c,
+            row=r,
+            value=float(values[r]),
+            expected="a finite number",
+        )
     return values
 
 
@@ -146,7 +166,12 @@ def _layout_rows(
                 missing = [joint_names[j] for j in range(n) if j not in have]
                 raise DataError(
                     f"{where}: row {r} names joints {', '.join(x for x in tup if x)}: the arm's joint(s) "
-                    f"{', '.join(map(repr, missing))} missing (a row must hold all of the arm's joints or none)"
+                    f"{', '.join(map(repr, missing))} missing (a row must hold all of the arm's joints or none)",
+                    source=where,
+                    row=r,
+                    joint=missing[0],
+                    value=tuple(x for x in tup if x),
+                    expected=joint_names,
                 )
             else:
                 lookup[tup] = np.array([position[name] for name in joint_names])

@@ -277,13 +277,26 @@ def _finish(
     if "wrench" in data and data["wrench"].shape != (N, 6):
         raise DataError(f"{where}: wrench must have shape ({N}, 6); got {data['wrench'].shape}")
     if n_joints is not None and n != n_joints:
-        raise DataError(f"{where}: the log has {n} joints (q_1..q_{n}); the robot has {n_joints}")
+        raise DataError(
+            f"{where}: the log has {n} joints (q_1..q_{n}); the robot has {n_joints}",
+            source=where,
+            column="q",
+            value=n,
+            expected=n_joints,
+        )
     for k, a in data.items():
         bad = ~np.isfinite(a)
         if bad.any():
             pos = np.argwhere(bad)[0]
             col = k if a.ndim == 1 else (WRENCH_COLUMNS[pos[1]] if k == "wrench" else f"{k}_{pos[1] + 1}")
-            raise DataError(f"{where}: column {col!r} row {pos[0]} is {_describe(a[tuple(pos)])}")
+            raise DataError(
+                f"{where}: column {col!r} row {pos[0]} is {_describe(a[tuple(pos)])}",
+                source=where,
+                column=col,
+                row=int(pos[0]),
+                value=float(a[tuple(pos)]),
+                expected="a finite number",
+            )
     check_absolute_bounds(where, t, {k: v for k, v in data.items() if k != "t"})
     if N < 2:
         raise DataError(f"{where}: a log needs at least 2 samples; got {N}")
@@ -293,7 +306,12 @@ def _finish(
         r = int(back[0]) + 1
         raise DataError(
             f"{where}: time goes backwards at row {r}: t = {t[r]:.9g} s after {t[r - 1]:.9g} s "
-            f"({back.size} such row(s))"
+            f"({back.size} such row(s))",
+            source=where,
+            column="t",
+            row=r,
+            value=float(t[r]),
+            expected=f">= {t[r - 1]:.9g} s",
         )
     notes_out: list[str] = list(notes)
     # exact repeats: every value but the time equals the previous row
