@@ -2,8 +2,8 @@
 
 References: the cut (reduced) Pinocchio model against (a) the whole file's Pinocchio model at the locked
 configuration (rows/columns of the chain) and (b) the MuJoCo plant built from the same file with the
-same joints frozen; the Atlas arm cut from the drcsim URDFs against the built-in ``atlas_v5_left_arm``;
-the written UR5-like arm opened by plain Pinocchio and plain MuJoCo.
+same joints frozen; the Atlas arm cut from the drcsim URDFs against the built-in ``atlas_v5_left_arm``.
+The written UR5-like arm itself is tested in test_ur_like_arm.py.
 """
 
 from __future__ import annotations
