@@ -28,6 +28,7 @@ from reflexarm.sim._plant_sensors import _NOISE_BLOCK
 from reflexarm.sim._playback import ScenePlay, event_ticks, playback
 from reflexarm.sim.plant import MAX_SPEED, Plant
 from reflexarm.sim.recording import _Recorder
+from reflexarm.sim.run_observers import observers_active
 from reflexarm.sim.runner import ControllerLike, TrajectoryLike, _check, run_closed_loop
 from reflexarm.sim.trace import Trace
 from reflexarm.sim.trajectory import JointTrajectory
@@ -73,10 +74,12 @@ def run_fast(
     plant: Plant, controller: ControllerLike, trajectory: TrajectoryLike, duration: float, **kwargs: Any
 ) -> Trace:
     """:func:`run_compiled` when :func:`compiled_reason` finds nothing against it, else :func:`run_closed_loop`
-    (same arguments; ``progress`` and ``callback`` always take the Python loop). ``trace.meta["loop"]`` says which."""
+    (same arguments; ``progress``, ``callback`` and active run observers always take the Python loop).
+    ``trace.meta["loop"]`` says which."""
     reset = bool(kwargs.get("reset_controller", True))
     if (
         kwargs.get("callback") is None
+        and not observers_active()  # stills and videos (reflexarm.sim.run_observers) watch every tick in Python
         and not kwargs.get("progress")
         and compiled_reason(plant, controller, reset_controller=reset) is None
     ):
