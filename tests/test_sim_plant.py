@@ -65,6 +65,33 @@ def test_coulomb_stiction_holds_below_mu_c(robot, plant, j):
     np.testing.assert_allclose(plant.q, q0, atol=1e-4, err_msg=f"joint {j} crept under 0.9 mu_C")
 
 
+
+@pytest.mark.parametrize("j", HYDRAULIC)
+def test_coulomb_stiction_with_one_1ms_step(robot, j):
+    """The stiction test re-derived for one 1 ms physics step per tick instead of two 0.5 ms substeps.
+
+    The friction-loss constraint's time constant is 2 x timestep (the plant's choice, MuJoCo's floor), and
+    the creep under a sub-Coulomb load grows with it: measured over 1 s at 0.9 mu_C, ely creeps 5.6e-5 rad
+    with 0.5 ms and 1.1e-4 rad with 1 ms (the 0.5 ms test's 1e-4 bound fails). Bound here: twice that
+    test's, 2e-4 rad, still below the paper's position noise (3.4e-4 rad). A joint that slipped would move
+    by ~0.1 rad in this second; the second part checks that 1.1 mu_C does move it.
+    """
+    plant = Plant(robot, noise=SensorNoise.none(), timestep=1e-3)
+    assert plant.substeps == 1
+    mu = plant.true_friction.coulomb[j]
+    for ratio, moves in ((0.9, False), (1.1, True)):
+        plant.reset(robot.home)
+        q0 = plant.q
+        for _ in range(1000):
+            tau = robot.compute_gravity(plant.q)
+            tau[j] += ratio * mu
+            plant.step(tau)
+        creep = abs(plant.q[j] - q0[j])
+        if moves:
+            assert creep > 1e-2, f"joint {j} did not move at 1.1 mu_C ({creep:.2g} rad)"
+        else:
+            assert creep < 2e-4, f"joint {j} crept {creep:.2g} rad under 0.9 mu_C with a 1 ms step"
+
 @pytest.mark.parametrize("j", HYDRAULIC)
 def test_steady_velocity_above_mu_c_is_coulomb_viscous(robot, plant, j):
     """tau_j = mu_C + d_v v*: v* = (tau_j - mu_C) / d_v is the joint's steady velocity (eq. (1), Table I).
