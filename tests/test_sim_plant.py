@@ -65,7 +65,6 @@ def test_coulomb_stiction_holds_below_mu_c(robot, plant, j):
     np.testing.assert_allclose(plant.q, q0, atol=1e-4, err_msg=f"joint {j} crept under 0.9 mu_C")
 
 
-
 @pytest.mark.parametrize("j", HYDRAULIC)
 def test_coulomb_stiction_with_one_1ms_step(robot, j):
     """The stiction test re-derived for one 1 ms physics step per tick instead of two 0.5 ms substeps.
@@ -91,6 +90,7 @@ def test_coulomb_stiction_with_one_1ms_step(robot, j):
             assert creep > 1e-2, f"joint {j} did not move at 1.1 mu_C ({creep:.2g} rad)"
         else:
             assert creep < 2e-4, f"joint {j} crept {creep:.2g} rad under 0.9 mu_C with a 1 ms step"
+
 
 @pytest.mark.parametrize("j", HYDRAULIC)
 def test_steady_velocity_above_mu_c_is_coulomb_viscous(robot, plant, j):
