@@ -196,6 +196,25 @@ def test_preprocess_differentiates_a_sinusoid_and_fills_gaps():
     np.testing.assert_allclose(proc.tau_raw[keep][inner], tau[keep][inner], atol=1e-9)
 
 
+def test_resampled_states_span_every_sample_of_a_jittery_log():
+    """Host jitter below the re-timing tolerance is resampled; the grid spans the log from its first to its
+    last sample, so a validation half (--split) lies inside the states (it ended up to a period short)."""
+    rng = np.random.default_rng(0)
+    t, q, dq, tau = _clean(3000)
+    t = t + np.r_[0.0, rng.uniform(-1e-4, 1e-4, t.size - 1)]  # +-0.1 ms on 1 ms steps
+    q, dq = np.sin(np.outer(t, [3.1, 5.0, 6.9])), np.cos(np.outer(t, [3.1, 5.0, 6.9])) * [3.1, 5.0, 6.9]
+    log = RobotLog.from_arrays(t, q, dq, tau)
+    assert not log.is_uniform and log.notes == ()
+    states = preprocess_log(log)
+    _, val = log.split(0.6)
+    assert states.t[0] == log.t[0]
+    # float rounding of t0 + T_seg * (k - 1) only: far below the 1e-9 s validate_model allows
+    assert abs(states.t[-1] - val.t[-1]) < 1e-12
+    # the span over a whole number of the log's median periods: within half a period over the 3 s span
+    assert states.period == pytest.approx(log.period, rel=0.5 / 3000)
+    assert "each segment's grid spans it from its first to its last sample" in states.notes[0]
+
+
 def test_preprocess_rejects_cutoff_above_nyquist():
     t, q, dq, tau = _clean(100)
     with pytest.raises(DataError, match=r"s: filter cutoff 600 Hz must be between 0 and the Nyquist frequency 500 Hz"):

@@ -93,7 +93,21 @@ def preprocess_log(
     edges = np.r_[0, cuts, len(log)]
     spans = [(int(i0), int(i1)) for i0, i1 in zip(edges[:-1], edges[1:], strict=True)]
     # grid sizes, checked before anything is allocated
-    sizes = [(int(np.floor((log.t[i1 - 1] - log.t[i0]) / T + 1e-6)) + 1) if resample else i1 - i0 for i0, i1 in spans]
+    # With the log's own period, each segment's grid spans the segment exactly (its period is the span over
+    # the nearest whole number of periods): a grid that stopped short of the last sample would leave the
+    # samples after it outside the states (validation of a jittery log, --split). A period the caller gives
+    # is kept as given.
+    fit = resample and period is None
+    sizes = [
+        (
+            (max(int(round((log.t[i1 - 1] - log.t[i0]) / T)), 1) + 1)
+            if fit
+            else (int(np.floor((log.t[i1 - 1] - log.t[i0]) / T + 1e-6)) + 1)
+        )
+        if resample
+        else i1 - i0
+        for i0, i1 in spans
+    ]
     total = sum(sizes)
     if total > MAX_GRID_FACTOR * len(log):
         raise DataError(
@@ -121,15 +135,30 @@ def preprocess_log(
         warnings.warn(msg, LogRepairWarning, stacklevel=2)
         notes.append(msg)
     parts = [
-        _preprocess_segment(log.select(slice(i0, i1)), T, k, resample, filt, filter_torque) for (i0, i1), k in kept
+        _preprocess_segment(
+            log.select(slice(i0, i1)),
+            (log.t[i1 - 1] - log.t[i0]) / (k - 1) if fit else T,
+            k,
+            resample,
+            filt,
+            filter_torque,
+        )
+        for (i0, i1), k in kept
     ]
     if resample:
         n_in = sum(i1 - i0 for (i0, i1), _ in kept)
         filled = sum(p[-1] for p in parts)
+        periods = [(log.t[i1 - 1] - log.t[i0]) / (k - 1) for (i0, i1), k in kept] if fit else [T]
         notes.append(
             f"resampled {n_in:,} samples to a uniform {T * 1e3:.4g} ms grid of {sum(k for _, k in kept):,} samples "
-            f"(q cubic Hermite with dq as slopes, dq cubic spline, other signals linear; "
-            f"{filled:,} grid points filled)"
+            + (
+                f"(each segment's grid spans it from its first to its last sample: period {min(periods) * 1e3:.6g}"
+                f"..{max(periods) * 1e3:.6g} ms) "
+                if fit
+                else ""
+            )
+            + "(q cubic Hermite with dq as slopes, dq cubic spline, other signals linear; "
+            + f"{filled:,} grid points filled)"
         )
     if cutoff_hz is not None:
         notes.append(
