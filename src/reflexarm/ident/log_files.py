@@ -17,6 +17,12 @@ column (CSV, Parquet)   meaning                                                 
 An ``.npz`` file holds arrays instead of columns: ``t`` (N,), ``q``, ``dq``, ``tau`` (N, n), optional
 ``ddq`` (N, n) and ``wrench`` (N, 6).
 
+Logs as robots export them load too (:func:`load_log`): columns named after the joints, the ROS 2
+JointState layout, numbered from 0, or named by a column mapping (:mod:`reflexarm.ident.log_columns`;
+other columns are left out with a note); time stamps in s, ms, us or ns, from any origin (the Unix
+epoch included), always made relative to the log's first sample (:mod:`reflexarm.ident._timestamps`);
+rosbag2 and MCAP bags (:mod:`reflexarm.ident.log_bags`). :func:`save_log` writes the schema.
+
 Loading validates and repairs as :class:`~reflexarm.ident.robot_log.RobotLog` does (see
 :mod:`reflexarm.ident.robot_log`).
 """
