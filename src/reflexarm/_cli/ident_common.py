@@ -101,7 +101,7 @@ def for_controller(result: Any, robot: Any, nominal: Any, args: argparse.Namespa
 
     if getattr(args, "no_projection", False):
         return result
-    consistent, how = with_consistent_links(result, nominal)
+    consistent, how = with_consistent_links(result, nominal, threads=None)  # the command sets --threads
     if consistent.beta_b is not result.beta_b:
         print(f"{result.method}: the model file and robot copy hold {how}")
     return consistent
@@ -122,7 +122,7 @@ def write_robot_copy(result: Any, robot: Any, out: Path, args: argparse.Namespac
     source = getattr(robot, "source", None)
     suffix = ".urdf" if source is not None and Path(source).suffix.lower() == ".urdf" else ".xml"
     try:
-        path, notes = write_identified_robot(result, robot, out / f"robot_{result.method}{suffix}")
+        path, notes = write_identified_robot(result, robot, out / f"robot_{result.method}{suffix}", threads=None)
     except ModelError as e:
         print(f"{result.method}: no robot file copy written: {e}")
         return None

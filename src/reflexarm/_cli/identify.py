@@ -150,6 +150,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     d.add_argument("--maxiter", type=int, default=100, help="excitation optimizer iterations (simulation)")
     d.add_argument("--jobs", type=int, default=1, help="single-joint runs in parallel (simulation)")
+    d.add_argument(
+        "--threads",
+        type=int,
+        default=1,
+        help="BLAS threads of the identification (Gram products, QR, solves, projection; default 1: many threads "
+        "lose badly when another process keeps a core busy); 0: as BLAS is configured",
+    )
     add_log_options(d)
     add_common(d, default_out="results/identify")
     d.set_defaults(func=identify_dynamics_command)

@@ -56,9 +56,21 @@ def _noise_variance(text: str) -> Any:
 
 
 def identify_dynamics_command(args: argparse.Namespace) -> int:
-    """From ``--log`` files; without them, the simulated study (:func:`dynamics_study_command`)."""
-    if not args.log:
-        return dynamics_study_command(args)
+    """From ``--log`` files; without them, the simulated study (:func:`dynamics_study_command`).
+
+    BLAS runs on ``--threads`` threads throughout (default 1; 0: as configured).
+    """
+    from reflexarm.ident._blas_threads import blas_threads
+
+    threads = getattr(args, "threads", 1)
+    with blas_threads(None if threads == 0 else threads):
+        if not args.log:
+            return dynamics_study_command(args)
+        return _identify_from_logs(args)
+
+
+def _identify_from_logs(args: argparse.Namespace) -> int:
+    """``identify dynamics --log ...``: identify, project if needed, validate, then write."""
     from reflexarm.ident import (
         compute_base_parameters,
         identify_dynamics,
@@ -107,6 +119,7 @@ def identify_dynamics_command(args: argparse.Namespace) -> int:
             noise_variance=_noise_variance(args.noise_variance),
             min_speed=0.0 if args.min_speed is None else args.min_speed,
             progress=not args.quiet,
+            threads=None,  # set for the whole command by --threads
         )
         results[m] = for_controller(estimate, robot, robot, args)
     # what can still fail on the logs (validation times against the states) runs before anything is written
@@ -201,6 +214,7 @@ def dynamics_study_command(args: argparse.Namespace) -> int:
         maxiter=args.maxiter,
         n_jobs=args.jobs,
         progress=not args.quiet,
+        threads=None,  # set for the whole command by --threads
     )
     base = st.results["sequential"].base
     print(f"{robot.name}: {base.n_base} base parameters of {base.n_standard}")

@@ -51,6 +51,7 @@ from reflexarm.ident import (
     project_physically_consistent,
     validate_model,
 )
+from reflexarm.ident._blas_threads import DEFAULT_BLAS_THREADS, blas_threads
 from reflexarm.ident.consistency import is_physically_consistent
 from reflexarm.ident.write_back import with_consistent_links
 from reflexarm.robots.perturbation import perturb_model
@@ -237,8 +238,8 @@ def consistent_result(result: DynamicsIdentification, robot: RobotModel, nominal
     of them is consistent (same beta_b), else the projection onto consistent parameters (see
     :func:`~reflexarm.ident.write_back.with_consistent_links`; what the model file and robot copy hold)."""
     if not is_physically_consistent(result, robot):
-        return project_physically_consistent(result, nominal)
-    return with_consistent_links(result, nominal)[0]
+        return project_physically_consistent(result, nominal, threads=None)  # the caller sets the threads
+    return with_consistent_links(result, nominal, threads=None)[0]  # the caller sets the threads
 
 
 def run_identification_study(
@@ -256,6 +257,7 @@ def run_identification_study(
     maxiter: int = 100,
     n_jobs: int = 1,
     progress: bool = False,
+    threads: int | None = DEFAULT_BLAS_THREADS,
 ) -> IdentificationStudy:
     """Friction runs, excitation run and validation run on the plant; combined vs sequential.
 
@@ -280,6 +282,7 @@ def run_identification_study(
             seed, seed + 2).
         n_jobs: parallel single-joint runs.
         progress: progress bars.
+        threads: BLAS threads of the identifications and projections (default 1; None: as configured).
     """
     robot = load_robot(robot) if isinstance(robot, str) else robot
     extra = scenario_extra(robot, scenario)
@@ -324,10 +327,12 @@ def run_identification_study(
             friction=fr.friction if m == "sequential" else None,
             base=base,
             min_speed=min_speed,
+            threads=threads,
         )
         for m in METHODS
     }
-    results = {m: consistent_result(r, robot, nominal) if project else r for m, r in estimates.items()}
+    with blas_threads(threads):
+        results = {m: consistent_result(r, robot, nominal) if project else r for m, r in estimates.items()}
     projected = [m for m in METHODS if results[m].beta_b is not estimates[m].beta_b]
     validations = {m: validate_model(r, robot, valid, label=m) for m, r in results.items()}
     return IdentificationStudy(

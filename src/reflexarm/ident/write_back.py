@@ -46,6 +46,7 @@ import numpy as np
 import pinocchio as pin
 
 from reflexarm.errors import ModelError
+from reflexarm.ident._blas_threads import DEFAULT_BLAS_THREADS
 from reflexarm.ident._robot_xml import (
     behind_locked_joint,
     find_element,
@@ -73,14 +74,16 @@ def _links_consistent(pi: np.ndarray) -> bool:
     return True
 
 
-def with_consistent_links(result: DynamicsIdentification, robot: RobotModel) -> tuple[DynamicsIdentification, str]:
+def with_consistent_links(
+    result: DynamicsIdentification, robot: RobotModel, *, threads: int | None = DEFAULT_BLAS_THREADS
+) -> tuple[DynamicsIdentification, str]:
     """``result`` with :attr:`~DynamicsIdentification.physical_parameters` set, and how they were chosen.
 
     See the module docstring: the result's own physically consistent parameters, else the realisation
     nearest to the file's inertias if every link of it is consistent (beta_b unchanged), else the
     projection onto consistent parameters (which moves beta_b; the note says how much the fit worsens).
     Save the model file from the returned result too, so that the model file and the written robot
-    file are the same model.
+    file are the same model. ``threads``: BLAS threads of the projection (None: as configured).
     """
     if result.physical_parameters is not None:
         return result, "the identification's physically consistent link parameters (projection of the estimate)"
@@ -90,7 +93,7 @@ def with_consistent_links(result: DynamicsIdentification, robot: RobotModel) -> 
             "the link parameters realising the identified base parameters nearest to the file's own inertias "
             "(every link physically consistent); combinations the data cannot split keep the file's split"
         )
-    projected = project_physically_consistent(result, robot)
+    projected = project_physically_consistent(result, robot, threads=threads)
     return projected, (
         "the nearest physically consistent link parameters (the realisation nearest to the file's inertias has a "
         f"link with no physical mass distribution); {projected.notes[-1]}"
@@ -140,6 +143,8 @@ def write_identified_robot(
     result: DynamicsIdentification,
     robot: RobotModel,
     path: str | os.PathLike[str],
+    *,
+    threads: int | None = DEFAULT_BLAS_THREADS,
 ) -> tuple[Path, list[str]]:
     """Write a copy of ``robot``'s file with the identified inertias and friction (see the module docstring).
 
@@ -147,6 +152,7 @@ def write_identified_robot(
         result: the identification (its friction and base parameters).
         robot: the robot it was identified for, loaded from its URDF or MJCF file.
         path: the copy (same format as the source: ``.urdf`` or ``.xml``).
+        threads: BLAS threads of a projection, if one is needed (None: as configured).
 
     Returns:
         The path written and notes on what was done (how the link parameters were chosen, lumped links,
@@ -168,7 +174,7 @@ def write_identified_robot(
             f"identification of joints {list(result.joint_names)} does not fit robot {robot.name!r} "
             f"({robot.joint_names})"
         )
-    result, how = with_consistent_links(result, robot)
+    result, how = with_consistent_links(result, robot, threads=threads)
     assert result.physical_parameters is not None  # set by with_consistent_links
     root = read_xml(src)
     moved = relocate_paths(root, fmt, src.parent, dst.parent)
