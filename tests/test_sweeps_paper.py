@@ -45,6 +45,7 @@ def runs(res):
 def test_model_error_sweep_outputs(model_error):
     out, res = model_error
     assert len(res.sweep.table) == 2 * 2 * TRIALS and set(res.sweep.table["status"]) == {"ok"}
+    assert set(res.sweep.table["loop"]) == {"compiled"}  # the Fig. 12 runs of the sweep use the C++ loop
     for f in res.files.values():
         assert Path(f).exists()
     assert (out / "reference.npz").exists()

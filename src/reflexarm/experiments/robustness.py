@@ -168,6 +168,7 @@ def run_paper_task(task: SweepTask, context: PaperSweepContext) -> dict[str, Any
     return {
         "msie": float(per_joint.mean()),
         "status": "ok",
+        "loop": str(trace.meta.get("loop", "python")),  # compiled (C++) or python: the same numbers either way
         **{f"msie_j{i + 1}": float(v) for i, v in enumerate(per_joint)},
         "residual1_load_Nm": float(window_mean(trace.t, trace.residual[:, 0], lo, hi)),
         "residual1_load_std_Nm": float(r1.std()),
