@@ -208,13 +208,31 @@ def _swing(
     return start, goal, float(t_move)
 
 
-def _driving_joint(robot: RobotModel, q: np.ndarray, frame: str, joints: range) -> tuple[int, float]:
+def _driving_joint(
+    robot: RobotModel,
+    q: np.ndarray,
+    frame: str,
+    joints: range,
+    *,
+    tangential: bool = False,
+    point: np.ndarray | None = None,
+) -> tuple[int, float]:
     """(joint, radius [m]): among ``joints`` the one whose rotation moves ``frame`` fastest horizontally,
     the horizontal speed weighted by its share of the speed (a swing that also lifts or lowers the frame
-    ranks lower); radius: the horizontal speed per rad."""
-    J = robot.compute_frame_jacobian(q, frame, world_aligned=True)[:3]
+    ranks lower); ``tangential``: only the horizontal speed across the radius from the first joint
+    counts (a swing about the base, so that an object met on the way lies beside the arm, not behind
+    it); radius: that speed per rad. ``point``: a world point fixed to ``frame`` moved instead of the
+    frame's origin."""
+    p = robot.compute_frame_pose(q, frame)[1] if point is None else np.asarray(point, dtype=float)
+    J = _point_jacobian(robot, q, frame, p)
     up = up_direction(robot)
-    speeds = [float(np.linalg.norm(horizontal(J[:, j], up))) for j in joints]
+    lateral = np.eye(3)
+    if tangential:
+        radial = horizontal(p - _base_point(robot, q), up)
+        nr = float(np.linalg.norm(radial))
+        if nr > 1e-6:
+            lateral = np.eye(3) - np.outer(radial, radial) / nr**2
+    speeds = [float(np.linalg.norm(lateral @ horizontal(J[:, j], up))) for j in joints]
     scores = [v * v / max(float(np.linalg.norm(J[:, j])), 1e-9) for v, j in zip(speeds, joints, strict=True)]
     best = int(np.argmax(scores))
     if speeds[best] < 1e-3:
@@ -259,6 +277,20 @@ def ee_swing_plan(robot: RobotModel, q0: np.ndarray | None = None) -> EeSwingPla
     return EeSwingPlan(start, goal, joint, t_move)
 
 
+def _point_jacobian(robot: RobotModel, q: np.ndarray, frame: str, point: np.ndarray) -> np.ndarray:
+    """3 x n Jacobian of the world ``point`` fixed to ``frame``: v_p = v + w x (p - origin)."""
+    J6 = robot.compute_frame_jacobian(q, frame, world_aligned=True)
+    r = np.asarray(point, dtype=float) - robot.compute_frame_pose(q, frame)[1]
+    skew = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+    return np.asarray(J6[:3] - skew @ J6[3:])
+
+
+def _base_point(robot: RobotModel, q: np.ndarray) -> np.ndarray:
+    """The first joint's origin (world) [m]."""
+    name = robot.joint_names[0]
+    return robot.compute_frame_pose(q, name)[1] if name in robot.frame_names else np.zeros(3)
+
+
 def _body_frame(robot: RobotModel, joint: int) -> str:
     m = robot.pin_model
     for f in m.frames:
@@ -299,19 +331,67 @@ class LinkPushPlan:
     link_joint: int  # 0-based joint whose link is pushed
     t_start: float
     info: dict[str, Any] = field(default_factory=dict)
+    standoff: float = 0.10  # stick tip to the target point at t_start [m] (ElbowStick's standoff)
 
 
 def link_push_plan(robot: RobotModel, link: int | str | None = None) -> LinkPushPlan:
-    """Swing the link of ``link`` (default :func:`default_link`) at ~:data:`LINK_SPEED`; the stick
-    appears 40 % into the move (Atlas: 5 s into the 1 + 10 s)."""
+    """Swing the link of ``link`` (default :func:`default_link`) at ~:data:`LINK_SPEED` about the base
+    (the joint that moves it fastest across its radius, so the stick, coming against the motion, lies
+    beside the arm); the stick appears 40 % into the move (Atlas: 5 s into the 1 + 10 s)."""
     link_joint, body = link_body(robot, default_link(robot) if link is None else link)
     q0 = start_posture(robot)
-    joint, radius = _driving_joint(robot, q0, body, range(link_joint + 1))
+    # the link's middle: between its origin and the next link's (or the end effector)
+    after = robot.compute_frame_pose(q0, link_body(robot, link_joint + 2)[1] if link_joint + 1 < robot.n else None)[1]
+    middle = 0.5 * (robot.compute_frame_pose(q0, body)[1] + after)
+    joint, radius = _driving_joint(robot, q0, body, range(link_joint + 1), tangential=True, point=middle)
     start, goal, t_move = _swing(robot, q0, joint, LINK_PATH_M, radius, LINK_SPEED, 0.8)
     w = np.array([start, start, goal, goal])
     traj = JointTrajectory(w, np.array([1.0, t_move, 2.0]))
-    info = {"link": link_joint + 1, "body": body, "swing_joint": joint + 1, "move_time_s": t_move}
-    return LinkPushPlan(traj, body, joint, link_joint, 1.0 + 0.4 * t_move, info)
+    t_start = 1.0 + 0.4 * t_move
+    standoff = STICK_GAP_M + _extent_along_motion(robot, traj.sample(t_start).q_d, body, joint, goal - start)
+    info = {
+        "link": link_joint + 1,
+        "body": body,
+        "swing_joint": joint + 1,
+        "move_time_s": t_move,
+        "stick_standoff_m": standoff,
+    }
+    return LinkPushPlan(traj, body, joint, link_joint, t_start, info, standoff)
+
+
+#: Gap between the link's surface and the stick's tip when the stick appears [m] (on Atlas' forearm the
+#: paper setting's 0.10 m standoff leaves ~5 cm).
+STICK_GAP_M = 0.05
+
+
+def _extent_along_motion(robot: RobotModel, q: np.ndarray, body: str, joint: int, delta: np.ndarray) -> float:
+    """How far the collision geoms of ``body`` reach from the stick's target point (the centre of its
+    first collision geom, :class:`~reflexarm.sim.ElbowStick`) in the direction it moves at ``q`` when
+    ``joint`` moves by ``delta`` [m] (the geoms' own bounding boxes)."""
+    import mujoco
+
+    from reflexarm.sim import Plant
+
+    plant = Plant(robot)
+    m, d = plant.model, plant.data
+    d.qpos[plant._qadr_arr] = q
+    mujoco.mj_kinematics(m, d)
+    bid = m.body(body).id
+    geoms = [g for g in range(m.ngeom) if m.geom_bodyid[g] == bid and (m.geom_contype[g] or m.geom_conaffinity[g])]
+    if not geoms:
+        return 0.0
+    p = np.array(d.geom_xpos[geoms[0]])
+    v = _point_jacobian(robot, q, body, p)[:, joint] * float(np.sign(delta[joint]))
+    nv = float(np.linalg.norm(v))
+    if nv < 1e-9:
+        return 0.0
+    v /= nv
+    reach = []
+    for g in geoms:  # each geom's bounding box (in its own frame) projected on v
+        R = np.array(d.geom_xmat[g]).reshape(3, 3)
+        centre = np.array(d.geom_xpos[g]) + R @ m.geom_aabb[g, :3]
+        reach.append(float((centre - p) @ v + np.abs(R.T @ v) @ m.geom_aabb[g, 3:]))
+    return max(reach)
 
 
 def loaded_joints(robot: RobotModel, q: np.ndarray, count: int = 4) -> list[int]:

@@ -319,7 +319,7 @@ def run_link_collision(
     else:
         plan = link_push_plan(robot, link)
         traj = plan.trajectory
-        scene = ElbowStick(body=plan.body, t_start=plan.t_start)
+        scene = ElbowStick(body=plan.body, t_start=plan.t_start, standoff=plan.standoff)
         placement = dict(plan.info)
     plant = Plant(robot, scene=scene, noise=noise, seed=seed)
     plant.reset(traj.sample(0.0).q_d)
