@@ -205,6 +205,11 @@ def _excite(args: argparse.Namespace) -> int:
         {"robot": robot.name, "n_base": base.n_base, "base_parameters": base.explain(), **design.to_dict()},
     )
     fig = plot_excitation(design, out / "excitation.png", joint_names=robot.joint_names)
+    tr = design.trajectory
+    print(
+        f"excitation: base frequency {tr.base_frequency_hz:g} Hz (period {tr.period:g} s), {tr.n_harmonics} harmonics "
+        f"up to {tr.n_harmonics * tr.base_frequency_hz:g} Hz; excitation.json stores base_frequency_hz"
+    )
     print(f"base parameters: {base.n_base} of {base.n_standard}")
     print(base.explain())
     print(
