@@ -2,10 +2,12 @@
 //
 // The model crosses the language boundary as text (pin.Model.saveToString() in Python, Boost
 // serialization): the Python `pin.Model` is a Boost.Python object that nanobind cannot take directly.
-// Inputs are float64 C-contiguous vectors (anything else raises TypeError instead of being copied
-// silently: the caller converts once). update() returns the compiled kernel's status encoding (negative fault code, else
-// n_over + (n_saturated << 8)); the command lives in buffers sized once, read through numpy views.
+// Inputs are float64 C-contiguous vectors read through the buffer protocol (anything else raises TypeError
+// instead of being copied silently: the caller converts once). update() returns a status (negative fault code,
+// else n_over + (n_saturated << 8)); the command lives in buffers sized once, read through numpy views.
 #include <cmath>
+#include <cstring>
+#include <initializer_list>
 #include <string>
 
 #include <nanobind/eigen/dense.h>
@@ -22,7 +24,6 @@ using namespace nb::literals;
 
 namespace
 {
-  using In = nb::ndarray<const double, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
   using Map = Eigen::Map<const Eigen::VectorXd>;
   template<typename T>
   using View = nb::ndarray<nb::numpy, const T, nb::ndim<1>>;
@@ -34,12 +35,10 @@ namespace
   {
     reflexarm::Controller ctrl;
     reflexarm::Command cmd;
+    // step(): the Python Command type and the constant parts of a plain command, made once
+    nb::object command_type, empty_tuple, empty_str, zero, tau_copy, residual_copy;
+    nb::object mode_names[5];
   };
-
-  Map asMap(const In & a)
-  {
-    return Map(a.data(), static_cast<Eigen::Index>(a.shape(0)));
-  }
 
   reflexarm::Reaction reactionFromName(const std::string & name)
   {
@@ -52,11 +51,60 @@ namespace
     throw reflexarm::ConfigError("unknown reaction '" + name + "'; choose one of: gravity, compliant, none");
   }
 
-  int tick(PyController & c, double t, double period, const In & q, const In & dq, const In & tau_m,
-           const In & wrench, const In & gravity, const In & q_d, const In & dq_d, const In & ddq_d)
+  /// The eight input vectors of a tick, read through the buffer protocol: C-contiguous, one dimension, native
+  /// float64 ("d"), read-only accepted, never copied. Anything else raises TypeError (the Python Controller then
+  /// converts once). Cheaper than nanobind's ndarray caster, which builds a DLPack tensor per argument.
+  class InputBuffers
   {
-    const Map mq = asMap(q), mdq = asMap(dq), mtau = asMap(tau_m), mw = asMap(wrench), mg = asMap(gravity);
-    const Map mqd = asMap(q_d), mdqd = asMap(dq_d), mddqd = asMap(ddq_d);
+  public:
+    InputBuffers(std::initializer_list<nb::handle> objects)
+    {
+      for (nb::handle h : objects)
+      {
+        Py_buffer & v = views_[count_];
+        if (PyObject_GetBuffer(h.ptr(), &v, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) != 0)
+        {
+          PyErr_Clear();
+          fail();
+        }
+        ++count_;
+        const bool ok = v.ndim == 1 && v.itemsize == 8 && v.format != nullptr
+                        && (std::strcmp(v.format, "d") == 0 || std::strcmp(v.format, "=d") == 0);
+        if (!ok)
+          fail();
+      }
+    }
+    ~InputBuffers() { release(); }
+    InputBuffers(const InputBuffers &) = delete;
+    InputBuffers & operator=(const InputBuffers &) = delete;
+    Map operator[](int i) const
+    {
+      return Map(static_cast<const double *>(views_[i].buf), static_cast<Eigen::Index>(views_[i].shape[0]));
+    }
+
+  private:
+    void release() noexcept
+    {
+      for (int i = 0; i < count_; ++i)
+        PyBuffer_Release(&views_[i]);
+      count_ = 0;
+    }
+    [[noreturn]] void fail()
+    {
+      release(); // a throwing constructor runs no destructor
+      throw nb::type_error("tick inputs must be C-contiguous float64 vectors");
+    }
+
+    Py_buffer views_[8];
+    int count_ = 0;
+  };
+
+  int tick(PyController & c, double t, double period, nb::handle q, nb::handle dq, nb::handle tau_m,
+           nb::handle wrench, nb::handle gravity, nb::handle q_d, nb::handle dq_d, nb::handle ddq_d)
+  {
+    const InputBuffers in{q, dq, tau_m, wrench, gravity, q_d, dq_d, ddq_d};
+    const Map mq = in[0], mdq = in[1], mtau = in[2], mw = in[3], mg = in[4], mqd = in[5], mdqd = in[6],
+              mddqd = in[7];
     const reflexarm::State s{mq, mdq, mtau, mw, mg};
     const reflexarm::Reference r{mqd, mdqd, mddqd};
     const auto code = c.ctrl.update(t, period, s, r, c.cmd);
@@ -131,24 +179,73 @@ NB_MODULE(_core, m)
       "Configure from a Pinocchio model given as text (pin.Model.saveToString()) and the parameters.")
     .def(
       "update",
-      [](PyController & c, double t, const In & q, const In & dq, const In & tau_m, const In & wrench,
-         const In & gravity, const In & q_d, const In & dq_d, const In & ddq_d) {
+      [](PyController & c, double t, nb::handle q, nb::handle dq, nb::handle tau_m, nb::handle wrench,
+         nb::handle gravity, nb::handle q_d, nb::handle dq_d, nb::handle ddq_d) {
         return tick(c, t, 0.0, q, dq, tau_m, wrench, gravity, q_d, dq_d, ddq_d);
       },
-      "t"_a.noconvert(), "q"_a.noconvert(), "dq"_a.noconvert(), "tau_m"_a.noconvert(), "wrench"_a.noconvert(),
-      "gravity"_a.noconvert(), "q_d"_a.noconvert(), "dq_d"_a.noconvert(), "ddq_d"_a.noconvert(),
+      "t"_a.noconvert(), "q"_a, "dq"_a, "tau_m"_a, "wrench"_a, "gravity"_a, "q_d"_a, "dq_d"_a, "ddq_d"_a,
       "One tick, the period measured from the time stamps (t must be a float); returns a negative fault code, "
       "else n_collided + (n_saturated << SAT_SHIFT).")
     .def(
       "update_with_period",
-      [](PyController & c, double t, double period, const In & q, const In & dq, const In & tau_m,
-         const In & wrench, const In & gravity, const In & q_d, const In & dq_d, const In & ddq_d) {
+      [](PyController & c, double t, double period, nb::handle q, nb::handle dq, nb::handle tau_m,
+         nb::handle wrench, nb::handle gravity, nb::handle q_d, nb::handle dq_d, nb::handle ddq_d) {
         return tick(c, t, period, q, dq, tau_m, wrench, gravity, q_d, dq_d, ddq_d);
       },
-      "t"_a, "period"_a, "q"_a.noconvert(), "dq"_a.noconvert(), "tau_m"_a.noconvert(), "wrench"_a.noconvert(),
-      "gravity"_a.noconvert(), "q_d"_a.noconvert(), "dq_d"_a.noconvert(), "ddq_d"_a.noconvert(),
+      "t"_a, "period"_a, "q"_a, "dq"_a, "tau_m"_a, "wrench"_a, "gravity"_a, "q_d"_a, "dq_d"_a, "ddq_d"_a,
       "One tick with ros2_control's measured period [s] (0: from the time stamps); returns as update().")
-    .def("reset", [](PyController & c) { c.ctrl.reset(); })
+    .def(
+      "set_command_type",
+      [](nb::handle_t<PyController> h, nb::object type) {
+        auto & c = nb::cast<PyController &>(h);
+        c.command_type = type;
+        c.empty_tuple = nb::steal(PyTuple_New(0));
+        c.empty_str = nb::str("");
+        c.zero = nb::int_(0);
+        // views without an owner (they live inside this object; an owner would be a reference cycle), and
+        // their bound copy methods
+        const auto policy = nb::rv_policy::reference;
+        c.tau_copy = nb::cast(View<double>(c.cmd.tau.data(), {static_cast<size_t>(c.cmd.tau.size())}), policy)
+                       .attr("copy");
+        c.residual_copy =
+          nb::cast(View<double>(c.cmd.residual.data(), {static_cast<size_t>(c.cmd.residual.size())}), policy)
+            .attr("copy");
+        for (int m = 0; m < 5; ++m)
+          c.mode_names[m] = nb::str(reflexarm::modeName(static_cast<reflexarm::Mode>(m)));
+      },
+      "command_type"_a, "The tuple subclass step() returns (reflexarm.signals.Command).")
+    .def(
+      "step",
+      [](PyController & c, double t, nb::handle q, nb::handle dq, nb::handle tau_m, nb::handle wrench,
+         nb::handle gravity, nb::handle q_d, nb::handle dq_d, nb::handle ddq_d) -> nb::object {
+        const int status = tick(c, t, 0.0, q, dq, tau_m, wrench, gravity, q_d, dq_d, ddq_d);
+        if (status != 0 || !c.command_type.is_valid())
+          return nb::int_(status);
+        // the plain command (no threshold crossing, nothing bounded): built here, the copies by numpy
+        nb::object tau = c.tau_copy(), residual = c.residual_copy();
+        PyObject * items = PyTuple_New(8);
+        if (!items)
+          throw nb::python_error();
+        PyObject * fields[8] = {tau.release().ptr(), residual.release().ptr(),
+                                nb::bool_(c.cmd.collision).release().ptr(), c.empty_tuple.inc_ref().ptr(),
+                                c.mode_names[static_cast<int>(c.cmd.mode)].inc_ref().ptr(),
+                                c.empty_str.inc_ref().ptr(), c.empty_tuple.inc_ref().ptr(), c.zero.inc_ref().ptr()};
+        for (int i = 0; i < 8; ++i)
+          PyTuple_SET_ITEM(items, i, fields[i]);
+        nb::object args = nb::make_tuple(nb::steal(items)); // tuple.__new__(Command, (items,))
+        PyObject * out = PyTuple_Type.tp_new(reinterpret_cast<PyTypeObject *>(c.command_type.ptr()), args.ptr(), nullptr);
+        if (!out)
+          throw nb::python_error();
+        return nb::steal(out);
+      },
+      "t"_a.noconvert(), "q"_a, "dq"_a, "tau_m"_a, "wrench"_a, "gravity"_a, "q_d"_a, "dq_d"_a, "ddq_d"_a,
+      "One tick as update(); returns the Command (of set_command_type) of an accepted tick without events, "
+      "else the status int of update().")
+    .def("reset", [](PyController & c) {
+      c.ctrl.reset();
+      c.cmd.fault_code = reflexarm::FaultCode::None; // the last command's fault text is cleared as well
+      c.cmd.fault_text[0] = '\0';
+    })
     .def(
       "set_switches",
       [](PyController & c, int kappa_f, int kappa_eps, int kappa_ext) {

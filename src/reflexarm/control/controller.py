@@ -198,10 +198,11 @@ class Controller:
             self.detection_observer = MomentumObserver(n, gain, self.dt, _state=views[3:])
         self.impedance.damping = c.damping  # read-only live view of the damping matrix the tick uses
         self._update = c.update
+        c.set_command_type(Command)
+        self._step = c.step  # returns the Command of a plain tick, else the status
         self._tau, self._residual, self._saturated, self._collided = c.tau, c.residual, c.saturated, c.collided
         self._sat_shift = int(core.SAT_SHIFT)
         self._g_norm = float(np.linalg.norm(self.robot.pin_model.gravity.linear))
-        self.last_fault = ""
         self._mode: str = c.mode
 
     # ------------------------------------------------------------------ run-time switches and facts
@@ -270,6 +271,11 @@ class Controller:
         return np.array(self._core.observer_arrays)
 
     @property
+    def last_fault(self) -> str:
+        """The fault text of the last tick ("" after an accepted tick and after :meth:`reset`)."""
+        return str(self._core.fault)
+
+    @property
     def observer_invalid(self) -> bool:
         """True once the observer state became invalid (latched until :meth:`reset`)."""
         return bool(self._core.observer_invalid)
@@ -281,7 +287,6 @@ class Controller:
         After a ``"compliant"`` reaction the kappa_eps active before it is restored.
         """
         self._core.reset()
-        self.last_fault = ""
         if self.detector is not None:
             self.detector.reset()
         self.impedance.reset()
@@ -301,16 +306,12 @@ class Controller:
             q_d, dq_d, ddq_d = reference
             if t.__class__ is not float:
                 t = _as_time(t)
-            status = self._update(t, q, dq, tau_m, wrench, gravity, q_d, dq_d, ddq_d)
+            out = self._step(t, q, dq, tau_m, wrench, gravity, q_d, dq_d, ddq_d)
         except (TypeError, ValueError):  # not contiguous float64 vectors (or not unpackable): convert or raise
             return self._step_converted(measurement, reference)
-        if status == 0:
-            self.last_fault = ""
-            det = self.detector
-            return Command(
-                self._tau.copy(), self._residual.copy(), det.detected if det is not None else False, (), self._mode, ""
-            )
-        return self._finish(status, t)
+        if out.__class__ is int:  # threshold crossings, a bounded torque or a fault
+            return self._finish(out, t)
+        return out  # type: ignore[no-any-return]
 
     def _step_converted(self, measurement: Measurement, reference: Reference) -> Command:
         """The tick for inputs that are not all contiguous float64 arrays: convert them once (or raise
@@ -334,7 +335,6 @@ class Controller:
                 self.detector.record(collided, float(t))
                 self._mode = self._core.mode  # the reaction may have switched it
             detected = self.detector.detected
-        self.last_fault = ""
         return Command(self._tau.copy(), self._residual.copy(), detected, collided, self._mode, "", saturated)
 
     def _reject(self, code: int) -> Command:
@@ -344,6 +344,5 @@ class Controller:
             signal, _, received, _, expected = c.fault_info
             raise shape_error(signal, int(received), int(expected))
         fault = c.fault
-        self.last_fault = fault
         saturated = tuple(np.flatnonzero(self._saturated).tolist())
         return Command(self._tau.copy(), self._residual.copy(), bool(c.collision), (), "fault", fault, saturated, code)
