@@ -147,3 +147,38 @@ def test_inputs_of_another_dtype_or_shape_are_refused(atlas):
     assert ctrl.update(0.001, np.zeros(n + 1), z, z, np.zeros(6), g, z, z, z) == _k.BAD_SHAPE
     assert ctrl.fault_info[:3] == (_k.SIG_Q, -1, n + 1)
     assert ctrl.fault == f"measurement q must be a real vector of shape ({n},); got shape ({n + 1},)"
+
+
+def test_the_period_argument_integrates_like_the_time_stamps(atlas):
+    """ros2_control semantics: the observer integrates the periods given since the last accepted tick (rejected
+    calls included); with period = 0 the time-stamp difference. Jittery stamps with period 0 and regular stamps
+    with the jittery periods give the same commands."""
+    o = Oracle(atlas, kappa_eps=1, observer_gain=20.0)
+    by_stamps, by_period = core_controller(core, atlas, o), core_controller(core, atlas, o)
+    rng = np.random.default_rng(3)
+    t = 0.0
+    for k, (_, *rest) in ticks(atlas, faults=False):
+        h = 7 * DT if k in (50, 120) else rng.uniform(0.3, 1.4) * DT  # some periods outside the band
+        t += h
+        if k == 100:
+            rest[0] = rest[0].copy()
+            rest[0][2] = np.nan  # a rejected call: its period still counts towards the next accepted tick
+        a = by_stamps.update(t, *rest)
+        b = by_period.update_with_period((k + 1) * DT, h, *rest)
+        assert a == b, f"tick {k}"
+        np.testing.assert_allclose(by_period.tau, by_stamps.tau, rtol=0, atol=ATOL, err_msg=f"tick {k}")
+        np.testing.assert_allclose(by_period.residual, by_stamps.residual, rtol=0, atol=ATOL, err_msg=f"tick {k}")
+    n_a, sum_a, *_, clipped_a, _, _ = by_stamps.timing
+    n_b, sum_b, *_, clipped_b, _, _ = by_period.timing
+    assert (n_a, clipped_a) == (n_b, clipped_b) and clipped_a > 10
+    assert sum_b == pytest.approx(sum_a, rel=1e-12)  # tolerance: round-off of the summed stamps
+    # a negative or non-finite period is a fault on its own signal, and changes nothing
+    before = np.array(by_period.observer_residual)
+    z = np.zeros(atlas.n)
+    g = np.array([0.0, 0.0, -9.81])
+    code = by_period.update_with_period(10.0, -1e-3, atlas.home, z, z, np.zeros(6), g, atlas.home, z, z)
+    assert code == _k.OUT_OF_BOUNDS and by_period.fault_info[0] == _k.SIG_PERIOD
+    assert by_period.fault.startswith("update period = -0.001 s outside the plausible [0, inf] s")
+    code = by_period.update_with_period(10.0, np.nan, atlas.home, z, z, np.zeros(6), g, atlas.home, z, z)
+    assert code == _k.NON_FINITE and by_period.fault == "non-finite update period = nan"
+    np.testing.assert_array_equal(by_period.observer_residual, before)
