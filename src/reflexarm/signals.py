@@ -58,7 +58,8 @@ class Command(NamedTuple):
         collision: True once a collision has been detected (latched until ``reset``); also True in every
             command while the observer state is invalid (detection off, ``fault`` says so), never False
             from an invalid residual.
-        collided_joints: indices of joints whose |residual| exceeded the threshold this tick.
+        collided_joints: 0-based indices (the model's joint order) of joints whose |residual| exceeded the
+            threshold this tick; command-line outputs and flags number joints from 1.
         mode: active control mode name (see :mod:`reflexarm.control.modes`).
         fault: non-empty when the tick's inputs broke the controller's contract (or its observer is
             invalid) and the safe command was sent: names the signal, the component, the value and the bound.
