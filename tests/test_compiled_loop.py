@@ -185,3 +185,26 @@ def test_reference_sampled_as_arrays_is_the_trajectory_bit_for_bit():
         _sample_reference(traj, times, *got)
         for g, want in zip(got, traj.sample_many(times), strict=True):
             np.testing.assert_array_equal(g, want)
+
+
+def test_continues_from_the_plants_state_with_a_force_applied_before(robot):
+    """Two runs back to back without reset, a force applied by the user in between: as the Python loop."""
+    from reflexarm.control import Controller
+
+    q0 = robot.home
+    traces = []
+    for run in (run_closed_loop, run_compiled):
+        plant = Plant(robot, noise=PAPER_NOISE, seed=5)
+        plant.reset(q0)
+        first = run(plant, Controller(robot), _GlitchyHold(q0), 0.05)
+        plant.apply_external_force([0.0, 0.0, -30.0])
+        second = run(plant, Controller(robot), _GlitchyHold(q0), 0.3)
+        traces.append((first, second, plant.q))
+    (a1, a2, qa), (b1, b2, qb) = traces
+    assert b2.t[0] == a2.t[0] > 0.0
+    for f in FIELDS:
+        np.testing.assert_allclose(getattr(b1, f), getattr(a1, f), rtol=0, atol=TOL, err_msg=f)
+        np.testing.assert_allclose(getattr(b2, f), getattr(a2, f), rtol=0, atol=TOL, err_msg=f)
+    # the force is seen by both loops from the first physics step after it was applied (sensor latency)
+    assert np.abs(a2.f_ext_ee[1:, 2] + 30.0).max() < 1e-6 and a2.f_ext_ee[0, 2] == 0.0
+    np.testing.assert_allclose(qb, qa, rtol=0, atol=TOL)
