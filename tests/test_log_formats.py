@@ -24,7 +24,7 @@ TIME_ATOL = 1e-14
 #: times equal to TIME_ATOL. The least-squares estimate moves by about cond(W) * 1e-16 relative (cond of
 #: the base regressor ~1e2 here), the consistency projection's optimizer stops at its own tolerance from
 #: the same start: 1e-6 relative on the base parameters bounds both with margin, far below what a wrong
-#: joint mapping or time scale does (O(1) relative changes).
+#: joint mapping or time scale does (O(1) relative changes). Measured here: identical to the last bit.
 MODEL_RTOL = 1e-6
 
 

@@ -183,10 +183,10 @@ def _infer_unit(first: float, rel: np.ndarray, whole: bool, where: str) -> tuple
         )
     for unit in fits:
         if EPOCH_RANGE_S[0] <= first * TIME_UNITS[unit] <= EPOCH_RANGE_S[1]:
-            period = step * TIME_UNITS[unit] * 1e3
+            period = step * TIME_UNITS[unit] * 1e3  # the median step: quantized for float epoch stamps
             return (
                 unit,
-                f"inferred: the first stamp {first:.6g} is a Unix epoch time in {unit}, period {period:.4g} ms",
+                f"inferred: the first stamp {first:.6g} is a Unix epoch time in {unit}, period {period:.3g} ms",
                 [],
             )
     best = min(fits, key=lambda u: abs(math.log10(step * TIME_UNITS[u] / 1e-3)))
