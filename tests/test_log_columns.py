@@ -181,3 +181,23 @@ def test_cli_reads_joint_named_columns_with_a_mapping_and_prints_the_notes(tmp_p
     doc = json.loads((out / "friction.json").read_text())
     # exact data: the same fit as the schema log gives in test_ident_cli (2.0 Nm, 1.3 Nms/rad)
     assert doc["coulomb"][0] == pytest.approx(2.0, rel=0.01) and doc["viscous"][0] == pytest.approx(1.3, rel=0.01)
+
+
+def test_ros1_rostopic_export_layout(tmp_path):
+    """``rostopic echo -p``: %time (receive time, ns), field.header.stamp (ns), field.name0, field.position0 ..."""
+    log = _log()
+    stamps = 1_795_435_200_000_000_000 + np.round(log.t * 1e9).astype(np.int64)
+    cols: dict[str, object] = {"%time": stamps + 250_000, "field.header.seq": np.arange(len(log))}
+    cols |= {"field.header.stamp": stamps, "field.header.frame_id": "base"}
+    cols |= {f"field.name{k}": name for k, name in enumerate(NAMES)}
+    for field, arr in (("position", log.q), ("velocity", log.dq), ("effort", log.tau)):
+        cols |= {f"field.{field}{k}": arr[:, k] for k in range(3)}
+    p = tmp_path / "ros1.csv"
+    pd.DataFrame(cols).to_csv(p, index=False, float_format="%.17g")
+    back = load_log(p, joint_names=NAMES)
+    _same(back, log)
+    np.testing.assert_allclose(back.t, log.t, rtol=0, atol=1e-15)  # integer ns made relative
+    assert "ros1.csv: time from column 'field.header.stamp'" in back.notes  # the header stamp, not %time
+    assert any(
+        "ignored 3 column(s) no signal needs: %time, field.header.seq, field.header.frame_id" in n for n in back.notes
+    )
