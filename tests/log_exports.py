@@ -63,12 +63,14 @@ def write_bag(
     start_ns: int = EPOCH_NS,
     receive_delay_ns: int = 300_000,
     effort: bool = True,
+    sample_order: np.ndarray | None = None,
 ) -> Path:
     """A rosbag2 bag (``storage`` "sqlite3" or "mcap") of ``log`` as sensor_msgs/JointState messages
     (header stamps = the log's times from ``start_ns``; bag receive times ``receive_delay_ns`` later),
     the joint order rotated from message to message, and (``gripper``) a gripper's own JointState
-    message every 10th sample; with ``wrench_topic`` the log's wrench as WrenchStamped at the same stamps;
-    ``effort=False`` leaves the arm's effort arrays empty."""
+    message before every 10th sample; with ``wrench_topic`` the log's wrench as WrenchStamped at the same stamps;
+    ``effort=False`` leaves the arm's effort arrays empty; ``sample_order`` writes the samples in that
+    order (receive times still increasing: a recorder that got them out of order)."""
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
 
@@ -87,7 +89,10 @@ def write_bag(
         wconn = None
         if wrench_topic is not None:
             wconn = writer.add_connection(wrench_topic, "geometry_msgs/msg/WrenchStamped", typestore=store)
-        for i, stamp in enumerate(stamps_ns(log, start_ns)):
+        stamps = stamps_ns(log, start_ns)
+        for w_i, i in enumerate(range(len(log)) if sample_order is None else sample_order):
+            stamp = stamps[i]
+            received = stamps[w_i] + receive_delay_ns
             order = np.roll(np.arange(n), i % n)
             msg = JointState(
                 header=header(stamp),
@@ -96,7 +101,6 @@ def write_bag(
                 velocity=np.ascontiguousarray(log.dq[i, order], dtype=np.float64),
                 effort=np.ascontiguousarray(log.measured_torque[i, order] if effort else [], dtype=np.float64),
             )
-            writer.write(conn, stamp + receive_delay_ns, store.serialize_cdr(msg, JointState.__msgtype__))
             if gripper and i % 10 == 0:
                 grip = JointState(
                     header=header(stamp),
@@ -105,7 +109,8 @@ def write_bag(
                     velocity=np.zeros(0),
                     effort=np.zeros(0),
                 )
-                writer.write(conn, stamp + receive_delay_ns + 1, store.serialize_cdr(grip, JointState.__msgtype__))
+                writer.write(conn, received - 1, store.serialize_cdr(grip, JointState.__msgtype__))
+            writer.write(conn, received, store.serialize_cdr(msg, JointState.__msgtype__))
             if wconn is not None:
                 assert log.wrench is not None
                 w = log.wrench[i]
@@ -116,5 +121,5 @@ def write_bag(
                     header=header(stamp, "ft_sensor"),
                     wrench=Wrench(force=Vector3(x=w[0], y=w[1], z=w[2]), torque=Vector3(x=w[3], y=w[4], z=w[5])),
                 )
-                writer.write(wconn, stamp + receive_delay_ns + 2, store.serialize_cdr(ws, WrenchStamped.__msgtype__))
+                writer.write(wconn, received + 2, store.serialize_cdr(ws, WrenchStamped.__msgtype__))
     return path

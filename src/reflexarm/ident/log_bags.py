@@ -5,9 +5,11 @@
   hold none of the arm's joints (e.g. a gripper's own messages) are left out with a note naming their
   joints; a message with some but not all of the arm's joints is an error. Without joint names the
   first message's order is the model's (said so). Position, velocity and effort are required.
-* **Time**: the messages' header stamps (when the robot sampled), unless they are unset (zero) or do not
-  increase, then the bag's receive times (when the recorder got the message; they carry transport
-  jitter), said so in a note. Times are relative to the first joint sample, in seconds.
+* **Time**: the messages' header stamps (when the robot sampled), unless they are unset (zero), then the
+  bag's receive times (when the recorder got the message; they carry transport jitter), said so in a
+  note. Messages recorded out of stamp order are sorted by stamp (counted in a note); equal stamps are
+  left to the log's repairs (exact repeats dropped, the rest re-timed). Times are relative to the first
+  joint sample, in seconds.
 * **Wrist wrench** (optional, ``wrench_topic``: ``geometry_msgs/msg/WrenchStamped``, force [N] and
   torque [Nm] in the message's frame): interpolated linearly, per component, at the joint samples'
   times on the same clock (header stamps or receive times, as chosen for the joints). Joint samples
@@ -100,6 +102,13 @@ def read_bag(
     notes += order_notes
     header, received = data.pop("header"), data.pop("received")
     stamps, clock = _choose_clock(header, received, joint_topic, where, notes)
+    if np.any(np.diff(stamps) < 0):  # recorded out of order: the stamps give the sampling order
+        order = np.argsort(stamps, kind="stable")
+        moved = int(np.sum(order != np.arange(order.size)))
+        stamps = stamps[order]
+        for k in ("q", "dq", "tau"):
+            data[k] = data[k][order]
+        notes.append(f"{where}: {moved:,} {joint_topic} message(s) were recorded out of stamp order; sorted by stamp")
     if wrench is not None:
         w_stamps = wrench["header"] if clock == "header" else wrench["received"]
         keep, data["wrench"], note = _align_wrench(stamps, w_stamps, wrench, wrench_topic or "", where)
@@ -180,8 +189,10 @@ def _map_joints(
         raise DataError(f"{where}: topic {topic} has no messages")
     notes: list[str] = []
     if joint_names is None:
-        joint_names = messages[0][2]
-        notes.append(f"{where}: joint order taken from the first message: {', '.join(joint_names)}")
+        first = next((m[2] for m in messages if n_joints is None or len(m[2]) == n_joints), messages[0][2])
+        joint_names = first
+        which = "first message" if first == messages[0][2] else f"first message with {n_joints} joints"
+        notes.append(f"{where}: joint order taken from the {which}: {', '.join(joint_names)}")
         if n_joints is not None and len(joint_names) != n_joints:
             raise DataError(
                 f"{where}: the first {topic} message has {len(joint_names)} joints ({', '.join(joint_names)}); "
@@ -258,13 +269,14 @@ def _map_joints(
 def _choose_clock(
     header: np.ndarray, received: np.ndarray, topic: str, where: str, notes: list[str]
 ) -> tuple[np.ndarray, str]:
-    if np.all(header > 0) and np.all(np.diff(header) > 0):
+    if np.all(header > 0):
         notes.append(
             f"{where}: times from the {topic} header stamps (when the robot sampled), not the bag's receive times"
         )
         return header, "header"
-    why = "unset (zero)" if np.any(header <= 0) else "not increasing"
-    notes.append(f"{where}: the {topic} header stamps are {why}; times from the bag's receive times (transport jitter)")
+    notes.append(
+        f"{where}: the {topic} header stamps are unset (zero); times from the bag's receive times (transport jitter)"
+    )
     return received, "receive"
 
 
