@@ -201,3 +201,28 @@ def test_ros1_rostopic_export_layout(tmp_path):
     assert any(
         "ignored 3 column(s) no signal needs: %time, field.header.seq, field.header.frame_id" in n for n in back.notes
     )
+
+
+def test_parquet_array_columns_of_a_bag_to_dataframe_export(tmp_path):
+    """One row per JointState message with ``name``/``position``/.. as arrays (Parquet lists), the header
+    stamp as sec + nanosec; a gripper's shorter messages in between."""
+    log = _log()
+    stamps = 1_795_435_200_000_000_000 + np.round(log.t * 1e9).astype(np.int64)
+    rows = []
+    for i in range(len(log)):
+        order = [2, 0, 1] if i % 3 else [0, 1, 2]
+        if i % 50 == 0:
+            rows.append({"header.stamp.sec": int(stamps[i] // 10**9), "header.stamp.nanosec": int(stamps[i] % 10**9),
+                         "name": ["finger"], "position": np.array([0.04]), "velocity": np.zeros(0),
+                         "effort": np.zeros(0)})  # fmt: skip
+        rows.append({"header.stamp.sec": int(stamps[i] // 10**9), "header.stamp.nanosec": int(stamps[i] % 10**9),
+                     "name": [NAMES[j] for j in order], "position": log.q[i, order], "velocity": log.dq[i, order],
+                     "effort": log.tau[i, order]})  # fmt: skip
+    p = tmp_path / "df.parquet"
+    pd.DataFrame(rows).to_parquet(p)
+    back = load_log(p, joint_names=NAMES)
+    _same(back, log)
+    np.testing.assert_allclose(back.t, log.t, rtol=0, atol=1e-15)
+    text = "\n".join(back.notes)
+    assert "df.parquet: array column(s) name, position, velocity, effort expanded to one column per element" in text
+    assert "left out 6 row(s) that hold none of the arm's joints (joints finger: not in the arm)" in text

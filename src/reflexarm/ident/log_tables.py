@@ -39,8 +39,14 @@ def read_table(
     dup = sorted({c for c in names if names.count(c) > 1})
     if dup:
         raise DataError(f"{where}: duplicated column(s) {', '.join(map(repr, dup))}")
+    df, expanded = _expand_arrays(df)
+    names = [str(c) for c in df.columns]
     plan = plan_columns(names, where=where, n_joints=n_joints, joint_names=joint_names, mapping=columns)
     notes = list(plan.notes)
+    if expanded:
+        notes.insert(
+            0, f"{where}: array column(s) {', '.join(expanded)} expanded to one column per element (c.0, c.1, ..)"
+        )
     keep = np.ones(len(df), dtype=bool)
     rows_of: np.ndarray | None = None
     if plan.layout is not None and plan.layout.names:
@@ -81,6 +87,31 @@ def read_table(
     if plan.wrench is not None:
         data["wrench"] = np.column_stack([_values(df, c, where) for c in plan.wrench])[keep]
     return data, notes
+
+
+def _expand_arrays(df: Any) -> tuple[Any, list[str]]:
+    """Columns whose cells are arrays (Parquet lists, e.g. a JointState's ``name`` / ``position`` as a
+    bag-to-dataframe export stores them) become one column per element, ``c.0``, ``c.1``, ..."""
+    import pandas as pd
+
+    expanded = []
+    parts = []
+    for c in df.columns:
+        col = df[c]
+        first = col.iloc[0] if len(col) else None
+        if str(col.dtype) == "object" and isinstance(first, (list, tuple, np.ndarray)):
+            width = max((len(v) for v in col if isinstance(v, (list, tuple, np.ndarray))), default=0)
+            text = any(isinstance(x, str) for v in col[:100] if isinstance(v, (list, tuple, np.ndarray)) for x in v)
+            pad: object = "" if text else np.nan
+            cells = [
+                list(v) + [pad] * (width - len(v)) if isinstance(v, (list, tuple, np.ndarray)) else [pad] * width
+                for v in col
+            ]
+            parts.append(pd.DataFrame(cells, columns=[f"{c}.{k}" for k in range(width)], index=df.index))
+            expanded.append(str(c))
+        else:
+            parts.append(col.to_frame())
+    return (pd.concat(parts, axis=1) if expanded else df), expanded
 
 
 def _time_stamps(df: Any, plan: ColumnPlan, where: str) -> np.ndarray:
