@@ -18,7 +18,8 @@ optional. :func:`plan_columns` finds them, in this order for each signal:
    ``position[0]`` / ``position0`` (velocity, effort likewise) with the joint names in ``name.0`` ..;
    joints are then mapped by name row by row (the order may change between rows; rows that hold none
    of the robot's joints, e.g. a gripper's, are left out with a note); without name columns the array
-   index is the model's joint order (said so).
+   index is the model's joint order (said so). Array columns (Parquet lists, one JointState message per
+   row) are first expanded to ``position.0``, ... by :mod:`reflexarm.ident.log_tables`.
 
 Names are compared without case and with ``/``, ``.`` and ``[i]`` alike, and a column also matches by
 any tail after a ``/`` or ``.`` (so ``/joint_states/shz/position`` matches ``shz/position``). Time:
