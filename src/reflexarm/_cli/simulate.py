@@ -187,10 +187,17 @@ def _demo(args: argparse.Namespace) -> int:
                 ("detection_delay_s", "delay [s]", "{:.3f}"),
                 ("block_displacement_m", "block moved [m]", "{:.3f}"),
                 ("block_tipped", "tipped", "{}"),
-                ("final_q1_error_rad", "|q1 err| end [rad]", "{:.3f}"),
+                ("final_swing_error_rad", f"|q{rows[0].get('swing_joint', 1)} err| end [rad]", "{:.3f}"),
             ],
         )
     )
+    for r in rows:
+        if r["first_contact_s"] is None and r.get("first_contact_any_s") is not None:
+            print(
+                f"[{r['run']}] contact on links before the wrist sensor from t = {r['first_contact_any_s']:.3f} s "
+                f"(peak external joint torque {r['peak_external_torque_Nm']:.1f} Nm); the forces above count only "
+                "the bodies beyond the sensor"
+            )
     print("\nthe paper (Sec. III-A, Figs. 7-8) beside this run:")
     print(format_table(compare_with_paper(rows), _PAPER_COLUMNS))
     print(f"\nwrote {out}/ (traces *.npz, ee_collision_summary.json, {fig.name})")

@@ -14,6 +14,7 @@ from reflexarm.sim import Trace
 
 __all__ = [
     "CONTACT_FORCE_N",
+    "CONTACT_TORQUE_NM",
     "PAPER",
     "QUASI_STATIC_WINDOW_S",
     "compare_with_paper",
@@ -47,6 +48,11 @@ QUASI_STATIC_WINDOW_S = 0.5
 CONTACT_FORCE_N = 5.0
 
 
+#: A contact anywhere on the arm is counted when the true external torque of a joint exceeds this [Nm]
+#: (the link collision's contact start; well below the 11 Nm threshold).
+CONTACT_TORQUE_NM = 1.0
+
+
 def _first_index(mask: np.ndarray) -> int | None:
     idx = np.flatnonzero(mask)
     return int(idx[0]) if idx.size else None
@@ -70,7 +76,10 @@ def summarize_ee_collision(trace: Trace) -> dict[str, object]:
     Works on any :class:`Trace` (e.g. a user's own run): what the experiment's metadata would add is
     None when absent (block displacement and tipping, the run's name falls back to :func:`run_name`);
     ``final_swing_error_rad`` is |q_d - q| at the end on the swing joint (``meta["swing_joint"]``,
-    1-based, default 1; ``final_q1_error_rad`` on joint 1).
+    1-based, default 1; ``final_q1_error_rad`` on joint 1). The forces are those on the bodies beyond
+    the wrist sensor (``Trace.f_ext_ee``); ``first_contact_any_s`` and ``peak_external_torque_Nm`` count a
+    contact anywhere on the arm (true external joint torque above :data:`CONTACT_TORQUE_NM`), e.g. on an
+    arm whose hand has no collision geometry.
     """
     if trace.t.size < 2:
         raise DataError(f"summarize_ee_collision needs a trace of at least 2 samples; got {trace.t.size}")
@@ -82,6 +91,8 @@ def summarize_ee_collision(trace: Trace) -> dict[str, object]:
     t_contact = None if i_contact is None else float(trace.t[i_contact])
     t_det = None if i_det is None else float(trace.t[i_det])
     i_peak = int(np.argmax(f))
+    tau_ext = np.abs(trace.tau_ext).max(axis=1)
+    i_any = _first_index(tau_ext > CONTACT_TORQUE_NM)
     tail = trace.t >= trace.t[-1] - 1.0
     disp = trace.meta.get("block_displacement")
     swing = int(trace.meta.get("swing_joint", 1))
@@ -95,6 +106,8 @@ def summarize_ee_collision(trace: Trace) -> dict[str, object]:
         "quasi_static_force_N": float(f_quasi_static.max()),
         "final_force_N": float(f[tail].mean()),
         "first_contact_s": t_contact,
+        "first_contact_any_s": None if i_any is None else float(trace.t[i_any]),
+        "peak_external_torque_Nm": float(tau_ext.max()),
         "detection_s": t_det,
         "detection_delay_s": None if (t_det is None or t_contact is None) else t_det - t_contact,
         "detected_joints": list(np.flatnonzero(trace.collided[i_det]).tolist()) if i_det is not None else [],
@@ -161,7 +174,7 @@ def summarize_link_collision(trace: Trace) -> dict[str, object]:
 
     Works on any :class:`Trace` (no experiment metadata needed)."""
     tau_ext = np.abs(trace.tau_ext).max(axis=1)
-    i_contact = _first_index(tau_ext > 1.0)
+    i_contact = _first_index(tau_ext > CONTACT_TORQUE_NM)
     i_det = _first_index(trace.collision)
     t_contact = None if i_contact is None else float(trace.t[i_contact])
     t_det = None if i_det is None else float(trace.t[i_det])
