@@ -19,9 +19,13 @@ from conftest import SHARED
 from reflexarm.cli import main
 from reflexarm.errors import ConfigError
 from reflexarm.experiments.any_arm import (
+    EE_PEAK_SPEED,
+    STICK_GAP_M,
+    VELOCITY_SHARE,
     ee_swing_plan,
     is_paper_arm,
     link_body,
+    link_push_plan,
     start_posture,
     work_posture,
 )
@@ -33,6 +37,8 @@ from reflexarm.experiments.collision_summary import (
     summarize_link_collision,
     write_outputs,
 )
+from reflexarm.experiments.compensation import CompensationSetup, held_posture, robot_options, true_robot
+from reflexarm.experiments.velocity_tracking import VelocityTrackingSetup
 from reflexarm.robots import load_robot
 from reflexarm.robots.example_arms import UR_LIKE_TIP, write_ur_like_arm
 from reflexarm.sim import Cinderblock, JointTrajectory, Plant, Trace, run_closed_loop
@@ -233,3 +239,57 @@ def test_summaries_of_a_users_own_trace_without_experiment_metadata(tmp_path):
     assert (tmp_path / "mine_run1.npz").is_file()
     tr.meta["name"] = "my run"
     assert summarize_ee_collision(tr)["run"] == "my run"
+
+
+@pytest.mark.parametrize("arm", ARMS)
+def test_derived_motions_stay_inside_the_arms_limits(arm, tmp_path):
+    robot = load(arm, tmp_path)
+    lo, hi, vmax = robot.lower_limit, robot.upper_limit, robot.velocity_limit
+    vmax = np.where(np.isfinite(vmax), vmax, np.inf)
+    plan = ee_swing_plan(robot)
+    link = link_push_plan(robot)
+    setup = VelocityTrackingSetup.for_robot(robot)
+    motion = setup.motion()
+    for name, traj, duration in (
+        ("ee swing", plan.trajectory(), plan.trajectory().duration),
+        ("link push", link.trajectory, link.trajectory.duration),
+        ("velocity tracking", motion, motion.duration),
+    ):
+        samples = [traj.sample(float(t)) for t in np.linspace(0.0, duration, 300)]
+        q = np.array([s.q_d for s in samples])
+        dq = np.array([s.dq_d for s in samples])
+        assert np.all(q >= lo - 1e-9) and np.all(q <= hi + 1e-9), name
+        # at most half the velocity limit (VELOCITY_SHARE); 1e-9 for the sampled quintic's round-off
+        assert np.all(np.abs(dq) <= VELOCITY_SHARE * vmax + 1e-9), name
+    # the swing's end effector peaks at the paper's moderate speed unless a velocity limit slows it
+    traj = plan.trajectory()
+    ts = np.linspace(0.0, traj.duration, 2000)
+    P = np.array([robot.compute_frame_pose(traj.sample(float(t)).q_d)[1] for t in ts])
+    peak = float(np.max(np.linalg.norm(np.diff(P, axis=0), axis=1) / np.diff(ts)))
+    assert peak <= EE_PEAK_SPEED * 1.01  # 1 %: finite differences of the sampled path
+    assert peak >= 0.5 * EE_PEAK_SPEED
+
+
+def test_velocity_tracking_keeps_the_papers_setup_on_atlas(atlas):
+    assert VelocityTrackingSetup.for_robot(atlas) == VelocityTrackingSetup()
+    assert VelocityTrackingSetup.for_robot(atlas, 1).joint == 1
+    with pytest.raises(ConfigError, match=r"joint must be in 1..7 \(1-based\); got 8"):
+        VelocityTrackingSetup.for_robot(atlas, 7)
+
+
+def test_a_link_chosen_on_atlas_uses_the_derived_push(atlas):
+    plan = link_push_plan(atlas, 4)
+    assert plan.body == "l_larm" and plan.link_joint == 3
+    assert plan.standoff > STICK_GAP_M  # the gap plus the link's own extent along its motion
+
+
+def test_compensation_setup_loads_the_users_arm_with_its_options(tmp_path):
+    path = write_ur_like_arm(tmp_path)
+    options = robot_options({"tip": UR_LIKE_TIP, "ee_frame": None, "locked": {"b": 0.0, "a": 0.1}})
+    assert options == (("locked", (("a", 0.1), ("b", 0.0))), ("tip", UR_LIKE_TIP))
+    setup = CompensationSetup(robot=str(path), robot_options=robot_options({"tip": UR_LIKE_TIP}))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        robot = true_robot(setup)
+    assert robot.n == 6 and robot.ee_frame == UR_LIKE_TIP
+    np.testing.assert_array_equal(held_posture(setup, robot), start_posture(robot))

@@ -31,7 +31,7 @@ import pinocchio as pin
 
 from reflexarm.errors import ConfigError
 from reflexarm.robots import RobotModel
-from reflexarm.sim import JointTrajectory
+from reflexarm.sim import JointTrajectory, Plant
 
 __all__ = [
     "EE_PEAK_SPEED",
@@ -277,6 +277,19 @@ def ee_swing_plan(robot: RobotModel, q0: np.ndarray | None = None) -> EeSwingPla
     return EeSwingPlan(start, goal, joint, t_move)
 
 
+def geometry_plant(robot: RobotModel) -> Plant:
+    """A scene-less plant of ``robot`` to read its collision geometry (the file's notes are not warned
+    again: the experiment's own plant warns them)."""
+    import warnings
+
+    from reflexarm.robots import RobotFileWarning
+    from reflexarm.sim import Plant
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RobotFileWarning)
+        return Plant(robot)
+
+
 def _point_jacobian(robot: RobotModel, q: np.ndarray, frame: str, point: np.ndarray) -> np.ndarray:
     """3 x n Jacobian of the world ``point`` fixed to ``frame``: v_p = v + w x (p - origin)."""
     J6 = robot.compute_frame_jacobian(q, frame, world_aligned=True)
@@ -370,9 +383,7 @@ def _extent_along_motion(robot: RobotModel, q: np.ndarray, body: str, joint: int
     ``joint`` moves by ``delta`` [m] (the geoms' own bounding boxes)."""
     import mujoco
 
-    from reflexarm.sim import Plant
-
-    plant = Plant(robot)
+    plant = geometry_plant(robot)
     m, d = plant.model, plant.data
     d.qpos[plant._qadr_arr] = q
     mujoco.mj_kinematics(m, d)

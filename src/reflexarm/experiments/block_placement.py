@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from reflexarm.errors import ConfigError
-from reflexarm.experiments.any_arm import horizontal, up_direction
+from reflexarm.experiments.any_arm import geometry_plant, horizontal, up_direction
 from reflexarm.robots import RobotModel
 from reflexarm.sim import JointTrajectory
 
@@ -31,9 +31,7 @@ def _arm_geoms_along(robot: RobotModel, qs: np.ndarray) -> tuple[np.ndarray, np.
     two links or beyond the sensor)."""
     import mujoco
 
-    from reflexarm.sim import Plant
-
-    plant = Plant(robot)
+    plant = geometry_plant(robot)
     m, d = plant.model, plant.data
     arm = set(int(b) for b in plant._arm_bodies)
     distal = set(int(b) for b in plant._load_bodies)
