@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 from reflexarm._cli.common import (
     add_common,
@@ -172,6 +173,7 @@ def _demo(args: argparse.Namespace) -> int:
         traces.append(tr)
         rows.append(number_joints(summarize_ee_collision(tr), robot.joint_names))
     write_outputs(out, "ee_collision", traces, rows)
+    _print_placement(traces[0].meta.get("placement"))
     pictures = scene.finish([s.name for s in EE_SETTINGS], summary=out / "ee_collision_summary.json")
     fig = plot_fig8(traces, out / "fig8_ee_collision.png")
     print(
@@ -205,6 +207,29 @@ def _demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _print_placement(placement: dict[str, Any] | None) -> None:
+    """Where the scene placed itself on an arm other than Atlas (stored in each trace's meta too)."""
+    if not placement:
+        return
+    p = placement
+    if "position" in p:
+        x, y = p["position"]
+        core = tuple(round(float(v), 3) for v in p["size"])
+        print(
+            f"scene placed from the arm's kinematics: joint {p['swing_joint']} swings the end effector in "
+            f"{p['move_time_s']:.1f} s; cinderblock at ({x:.3f}, {y:.3f}) m, yaw {p['yaw']:.2f} rad, core {core} m, "
+            f"table {p['table_height']:.3f} m high; the unobstructed path would run {p['depth']:g} m into it from "
+            f"t = {p['contact_time_s']:.2f} s",
+            file=sys.stderr,
+        )
+    else:
+        print(
+            f"scene placed from the arm's kinematics: the stick pushes link {p['link']} ({p['body']}) while joint "
+            f"{p['swing_joint']} swings it in {p['move_time_s']:.1f} s",
+            file=sys.stderr,
+        )
+
+
 def _link(args: argparse.Namespace) -> int:
     from reflexarm.experiments.collision import (
         compare_with_paper,
@@ -228,6 +253,7 @@ def _link(args: argparse.Namespace) -> int:
     tr.meta["controller_model"] = choice.describe()
     row = number_joints(summarize_link_collision(tr), robot.joint_names)
     write_outputs(out, "link_collision", [tr], [row])
+    _print_placement(tr.meta.get("placement"))
     pictures = scene.finish(["link collision"], summary=out / "link_collision_summary.json")
     # tau_mdl of Fig. 10 is the controller's model torque
     fig = plot_fig10(tr, model_torque(tr, model), out / "fig10_link_collision.png")
