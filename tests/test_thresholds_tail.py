@@ -25,9 +25,9 @@ def _exceedance_probability(rate_per_hour: float) -> float:
     return (1.0 - math.sqrt(1.0 - 4.0 * c)) / 2.0
 
 
-#: Relative tolerance of a recovered level: the 400 clusters above u give the PWM scale a standard error of
-#: ~5 %, which moves a level a few times sigma above u by about 2 %; 3 % allows for it.
-LEVEL_RTOL = 0.03
+#: Relative tolerance of a recovered level: the fit uses the top 30 clusters (TAIL_CLUSTERS), whose PWM
+#: scale has a standard error of ~20 %; levels within a few scales of u then move by ~3 %; 5 % allows for it.
+LEVEL_RTOL = 0.05
 
 
 @pytest.mark.parametrize("rate", [1.0, 0.2, 0.1])
@@ -41,7 +41,9 @@ def test_exponential_tail_level_is_recovered(rate):
     np.testing.assert_allclose(level, truth, rtol=LEVEL_RTOL, err_msg="GPD level of an exponential tail")
     lo, hi = fit.level_interval(rate)
     assert lo <= truth <= hi, f"the 90 % interval [{lo:.3f}, {hi:.3f}] misses the true level {truth:.3f}"
-    assert abs(fit.xi) < 0.1, f"an exponential tail has shape 0; fitted {fit.xi:.3f}"
+    # the shape from 400 clusters (standard error ~0.05): 0 for an exponential tail
+    wide = fit_tail(x, DT, gap_s=0.0, tail_clusters=400)
+    assert abs(wide.xi) < 0.1, f"an exponential tail has shape 0; fitted {wide.xi:.3f}"
     # the rate at the level is the asked one (the two functions are inverse to each other)
     np.testing.assert_allclose(fit.rate(level), rate, rtol=1e-9)
 
@@ -59,14 +61,12 @@ def test_gaussian_tail_level_is_recovered(rate):
 def test_bounded_tail_gives_level_below_its_end_and_the_exponential_method_is_conservative():
     rng = np.random.default_rng(3)
     x = rng.uniform(0.0, 1.0, N)  # P(X > z) = 1 - z: a tail ending at 1
-    rate = 0.2
-    truth = 1.0 - _exceedance_probability(rate)
+    rate = 0.02  # a return period of 50 h: beyond the top 30 clusters (0.27/h), inside the 111 h of data
     gpd = fit_tail(x, DT, gap_s=0.0)
     expo = fit_tail(x, DT, gap_s=0.0, method="exponential")
-    # a level within 1e-4 of the end: the distance to the end is p = 5.6e-5, recovered to ~50 %
-    assert gpd.level(rate) <= 1.0 + 1e-4
-    np.testing.assert_allclose(gpd.level(rate), truth, atol=1e-4, err_msg="level of a uniform tail")
-    assert expo.level(rate) > gpd.level(rate), "xi = 0 extrapolates a bounded tail upwards (conservative)"
+    assert gpd.xi < -0.3, f"a uniform tail has shape -1; fitted {gpd.xi:.3f}"
+    assert gpd.u < gpd.level(rate) <= 1.0, "the level of a bounded tail lies between u and the tail's end"
+    assert expo.level(rate) > 1.0, "xi = 0 extrapolates a bounded tail beyond its end (conservative)"
 
 
 def test_an_excursion_is_counted_once_however_long():

@@ -20,7 +20,7 @@ _SWITCH = (0, 1)
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``tune-thresholds`` to the top-level parser."""
-    from reflexarm.tuning import DEFAULT_CONTACT_RATE, DEFAULT_RATE, METHODS
+    from reflexarm.tuning import DEFAULT_CONTACT_RATE, DEFAULT_METHOD, DEFAULT_RATE, METHODS
 
     p = sub.add_parser(
         "tune-thresholds",
@@ -62,7 +62,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="also: delay of a force step [N] at the end effector along the base axes (J^T F at the logs' median "
         "posture)",
     )  # fmt: skip
-    t.add_argument("--method", choices=METHODS, default="gpd", help="tail model (default gpd; exponential: xi = 0)")
+    t.add_argument(
+        "--method",
+        choices=METHODS,
+        default=DEFAULT_METHOD,
+        help=f"tail model: exponential (xi = 0) or gpd (generalized Pareto, shape fitted) (default {DEFAULT_METHOD})",
+    )
     t.add_argument("--gap", type=float, default=None, metavar="S", help="declustering gap [s] (default 5 / k_o)")
     t.add_argument(
         "--allow-extrapolation", action="store_true", help="warn instead of refusing when the logs are too short"

@@ -18,6 +18,7 @@ from reflexarm.tuning.replay import (
 )
 from reflexarm.tuning.study import (
     DEFAULT_CONTACT_RATE,
+    DEFAULT_METHOD,
     DEFAULT_RATE,
     MAX_EXTRAPOLATION,
     JointThresholds,
@@ -29,6 +30,7 @@ from reflexarm.tuning.tail import METHODS, TailFit, cluster_maxima, fit_tail
 
 __all__ = [
     "DEFAULT_CONTACT_RATE",
+    "DEFAULT_METHOD",
     "DEFAULT_RATE",
     "FORCE_DIRECTIONS",
     "MAX_EXTRAPOLATION",

@@ -36,6 +36,7 @@ from reflexarm.errors import ConfigError, DataError
 __all__ = [
     "METHODS",
     "MIN_TAIL_CLUSTERS",
+    "TAIL_CLUSTERS",
     "TAIL_QUANTILES",
     "TailFit",
     "cluster_maxima",
@@ -47,8 +48,13 @@ METHODS = ("gpd", "exponential")
 #: Fewest exceedance clusters above u a fit is made from: with fewer, the PWM estimate of the shape has a
 #: standard error above ~0.2 (Hosking & Wallis 1987, Table 3 at n = 20), as large as the shapes that matter.
 MIN_TAIL_CLUSTERS = 20
-#: Quantiles of |r| tried for u, highest first: the highest with at least MIN_TAIL_CLUSTERS clusters is
-#: used (a high u keeps the fit in the tail; enough clusters keep it stable).
+#: Clusters above u the fit uses: u is placed below the TAIL_CLUSTERS largest cluster maxima. Few enough that
+#: the fit describes the top of the tail (a residual's largest excursions often come from another mechanism
+#: than its bulk: a motion's reversal, a wrist joint's inertial coupling), enough for a stable shape (the
+#: PWM shape's standard error is ~0.15 at n = 30, Hosking & Wallis 1987, Table 3).
+TAIL_CLUSTERS = 30
+#: Quantiles of |r| tried as the base level the clusters are first counted at, highest first: the highest
+#: with at least MIN_TAIL_CLUSTERS clusters above it is used.
 TAIL_QUANTILES = (0.999, 0.995, 0.99, 0.98, 0.95, 0.9, 0.8, 0.7, 0.5)
 #: PWM estimates exist for xi < 1/2 only (the GPD's variance is finite); shapes are clipped to this range.
 _XI_RANGE = (-1.0, 0.45)
@@ -100,8 +106,8 @@ class TailFit:
     """The fitted tail of one joint's |residual| (see the module docstring for the model).
 
     Attributes:
-        u: fit threshold [Nm] (a quantile of |r|, see :data:`TAIL_QUANTILES`).
-        quantile: which quantile u is.
+        u: fit threshold [Nm] (below the :data:`TAIL_CLUSTERS` largest cluster maxima).
+        quantile: the fraction of the samples at or below u.
         rate_u: clusters above u per hour in the log [1/h].
         sigma: GPD scale [Nm]; xi: GPD shape [-] (0 for the exponential method).
         n_clusters: clusters above u; duration_h: the log's span [h]; gap_s: declustering gap [s].
@@ -199,12 +205,14 @@ def fit_tail(
     gap_s: float,
     method: str = "gpd",
     min_clusters: int = MIN_TAIL_CLUSTERS,
+    tail_clusters: int = TAIL_CLUSTERS,
 ) -> TailFit:
     """Fit the tail of the cluster maxima of ``x`` (|residual| of one joint, samples ``dt`` s apart).
 
     ``x`` may be a list of arrays (several logs): clusters are counted in each and pooled, the durations
-    added. u is the highest of :data:`TAIL_QUANTILES` of the pooled samples with at least ``min_clusters``
-    clusters above it.
+    added. The clusters are first counted above the highest of :data:`TAIL_QUANTILES` of the pooled samples
+    with at least ``min_clusters`` clusters above it; u is then placed between the ``tail_clusters``-th and
+    the next largest cluster maximum (when there are more), so the fit sees the top of the tail.
 
     Raises:
         ConfigError: unknown method, non-positive dt or negative gap.
@@ -244,6 +252,11 @@ def fit_tail(
             f"fit threshold; found {found} quantile (a longer log, more varied motion, or a shorter gap_s={gap_s:g} s)"
         )
     qu, u, m = best
+    if m.size > tail_clusters:
+        top = np.sort(m)[::-1]
+        u = float(0.5 * (top[tail_clusters - 1] + top[tail_clusters]))
+        m = maxima(u)
+        qu = float(np.mean(pooled <= u))
     excess = m - u
     sigma, xi = _fit(excess, method)
     # counted cluster rates below u, for levels that a rate above lambda_u asks for (interpolation)

@@ -1,0 +1,52 @@
+"""The plain-text report of a threshold study (:meth:`reflexarm.tuning.ThresholdProposal.report`)."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from reflexarm.tuning.study import ThresholdProposal
+
+__all__ = ["format_report"]
+
+
+def format_report(proposal: ThresholdProposal) -> str:
+    """The method, then one line per joint (1-based) with both levels, their intervals and delays."""
+
+    def sec(v: object) -> str:
+        return "never" if v is None else f"{v:.3f}"
+
+    st, n = proposal.settings, len(proposal.joints)
+    head = (
+        f"{len(proposal.sources)} log(s), {proposal.duration_s / 60:.1f} min; "
+        f"observer k_o = {st.detection_gain:g} 1/s, "
+        f"kappa_f = {st.kappa_f}, EFC = {st.kappa_ext}; {proposal.fault_ticks} rejected samples\n"
+        f"collision level: {proposal.rate_per_hour:g} false alarms/h for the arm "
+        f"({proposal.rate_per_hour / n:.3g}/h per joint); contact level: {proposal.contact_rate_per_hour:g}/h\n"
+        f"tail: {proposal.method} fit of the declustered |residual| above u (90 % bootstrap interval in brackets); "
+        f"delay of a {proposal.step_torque:g} Nm step: t_d = -T_o ln(1 - (zeta - b)/s), "
+        f"T_o = {proposal.time_constant:.4f} s, b = 0 / b = -q95 (unfavourable)\n"
+    )
+    lines = [
+        f"{'joint':>5} {'name':>12} {'max|r|':>7} {'collision [Nm]':>23} {'contact [Nm]':>23} "
+        f"{'delay coll. [s]':>15} {'delay cont. [s]':>15}"
+    ]
+    for jt in proposal.joints:
+        d = jt.delays
+        lines.append(
+            f"{jt.joint + 1:>5} {jt.name[-12:]:>12} {jt.fit.x_max:7.3f} "
+            f"{jt.collision:8.3f} [{jt.collision_interval[0]:6.3f}, {jt.collision_interval[1]:6.3f}] "
+            f"{jt.contact:8.3f} [{jt.contact_interval[0]:6.3f}, {jt.contact_interval[1]:6.3f}] "
+            f"{sec(d['collision_delay_s']):>7}/{sec(d['collision_delay_unfavourable_s']):>7} "
+            f"{sec(d['contact_delay_s']):>7}/{sec(d['contact_delay_unfavourable_s']):>7}"
+        )
+    for level, rows in proposal.force_steps.items():
+        cells = ", ".join(
+            f"{r['direction']} {sec(r['delay_s'])} s (joint {r['first_joint']})"
+            if r["first_joint"] is not None
+            else f"{r['direction']} never"
+            for r in rows
+        )
+        lines.append(f"{proposal.step_force:g} N at the end effector, {level} level: {cells}")
+    tail = "".join(f"\nnote: {x}" for x in proposal.notes)
+    return head + "\n".join(lines) + tail
