@@ -293,3 +293,12 @@ def test_compensation_setup_loads_the_users_arm_with_its_options(tmp_path):
         robot = true_robot(setup)
     assert robot.n == 6 and robot.ee_frame == UR_LIKE_TIP
     np.testing.assert_array_equal(held_posture(setup, robot), start_posture(robot))
+
+
+def test_block_depth_is_checked():
+    panda = load_robot("panda")
+    traj = ee_swing_plan(panda).trajectory()
+    with pytest.raises(ConfigError, match=r"depth must be a positive distance \[m\]; got -0.1"):
+        place_cinderblock(panda, traj, depth=-0.1)
+    with pytest.raises(ConfigError, match=r"path is 0.\d+ m long; the block needs more than depth 5"):
+        place_cinderblock(panda, traj, depth=5.0)

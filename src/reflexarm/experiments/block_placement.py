@@ -101,9 +101,11 @@ def place_cinderblock(
     height then differs from ``size``). The block's core is ``size`` otherwise.
 
     Raises:
-        ConfigError: the path is shorter than ``depth`` or does not move horizontally; the arm passes
-            above the block.
+        ConfigError: a non-positive ``depth``; the path is shorter than ``depth`` or does not move
+            horizontally; the arm passes above the block.
     """
+    if not (math.isfinite(depth) and depth > 0.0):
+        raise ConfigError(f"depth must be a positive distance [m]; got {depth!r}")
     t = np.linspace(0.0, trajectory.duration, samples)
     qs = np.array([trajectory.sample(float(ti)).q_d for ti in t])
     P = np.array([robot.compute_frame_pose(q)[1] for q in qs])
