@@ -1,8 +1,9 @@
 """Collision thresholds from the user's own free-motion logs: two levels per joint and what they imply.
 
 :func:`tune_thresholds` replays the observer on the logs (:func:`~reflexarm.tuning.replay_residual`),
-fits the tail of each joint's |residual| (:mod:`reflexarm.tuning.tail`) and proposes, as libfranka
-does, two levels per joint:
+fits the tail of each joint's |residual| (:mod:`reflexarm.tuning.tail`: excursions declustered with a gap
+of 5 / k_o, the 30 largest above u, an exponential tail by default, :data:`DEFAULT_METHOD`) and proposes,
+as libfranka does, two levels per joint:
 
 * **collision** zeta_j: false alarms at the user's rate R [1/h] for the whole arm;
 * **contact** level: a lower one at the rate R_c [1/h] (default 60, one per minute), for logging or a soft
@@ -20,7 +21,9 @@ observer's first-order response (8), r(t) = b + s (1 - exp(-t / T_o)) with T_o =
     t_d = -T_o ln(1 - (zeta - b) / s)     (never if s <= zeta - b),
 
 given for b = 0 ("nominal") and b = -q95 ("unfavourable": the residual's 95th percentile of |r| in the
-logs, e.g. friction, pointing against the step).
+logs, e.g. friction, pointing against the step); :func:`~reflexarm.tuning.force_step_delays` does the same
+for a force at the end effector. Each level is checked against the logs: crossed more often than its
+rate allows (:data:`CONSISTENCY_QUANTILE` of the Poisson count), it is flagged with a warning.
 """
 
 from __future__ import annotations
