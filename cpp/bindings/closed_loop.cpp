@@ -87,8 +87,7 @@ NB_MODULE(_closed_loop, m)
       {
         for (long i = 0; i < n; ++i)
           dd->qfrc_applied[adr[i]] = t[k * n + i];
-        for (int s = 0; s < substeps; ++s)
-          mj_step(mm, dd);
+        reflexarm::stepSensingLast(mm, dd, substeps); // as both loops step
       }
     },
     "model_address"_a, "data_address"_a, "tau"_a, "vadr"_a, "substeps"_a,

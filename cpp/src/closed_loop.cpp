@@ -23,6 +23,19 @@ namespace reflexarm
     }
   } // namespace
 
+  void stepSensingLast(const mjModel * m, mjData * d, int steps) noexcept
+  {
+    // the plant's model is the caller's; its disable flags are restored before returning (as
+    // reflexarm.sim._plant_sensors.step_sensing_last does in the Python loop)
+    auto * mm = const_cast<mjModel *>(m);
+    const int flags = mm->opt.disableflags;
+    mm->opt.disableflags = flags | mjDSBL_SENSOR;
+    for (int s = 0; s < steps - 1; ++s)
+      mj_step(mm, d);
+    mm->opt.disableflags = flags;
+    mj_step(mm, d);
+  }
+
   void ClosedLoop::configure(const mjModel * model, mjData * data, const PlantLayout & layout,
                              const pinocchio::Model & controller_model, const ControllerParams & params)
   {
@@ -248,8 +261,7 @@ namespace reflexarm
     }
     const double period = lay_.substeps * m_->opt.timestep;
     const double t_end = d_->time + period;
-    for (int s = 0; s < lay_.substeps; ++s)
-      mj_step(m_, d_);
+    stepSensingLast(m_, d_, lay_.substeps);
     double vv = 0.0;
     for (int i = 0; i < m_->nv; ++i)
       vv += d_->qvel[i] * d_->qvel[i];

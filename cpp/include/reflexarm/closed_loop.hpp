@@ -93,6 +93,11 @@ namespace reflexarm
     TimeMismatch = 2  ///< MuJoCo's clock did not advance by one control period
   };
 
+  /// `steps` physics steps with the sensors (and the post-constraint pass they trigger) evaluated on the last
+  /// one only: they feed nothing in the dynamics, and the loop reads them after the last step, so the state
+  /// and the readings are the same to the bit. The model's disable flags are restored.
+  void stepSensingLast(const mjModel * m, mjData * d, int steps) noexcept;
+
   class ClosedLoop
   {
   public:

@@ -13,6 +13,23 @@ from reflexarm.sim import _kernels
 #: Noise samples are drawn in blocks of this many ticks (one ``Generator.uniform`` call per block).
 _NOISE_BLOCK = 1024
 
+_NO_SENSORS = int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
+
+
+def step_sensing_last(m: mujoco.MjModel, d: mujoco.MjData, steps: int) -> None:
+    """``steps`` physics steps with the sensors (and the post-constraint pass they need for cacc, cfrc_int,
+    cfrc_ext) evaluated on the last one only: the plant reads them once per tick, after its last substep,
+    and they feed nothing in the dynamics, so the state and the readings are the same to the bit; saves
+    ~5 % of a 2-substep tick. The compiled loop (cpp/src/closed_loop.cpp) steps the same way."""
+    if steps > 1:
+        flags = int(m.opt.disableflags)
+        m.opt.disableflags = flags | _NO_SENSORS
+        try:
+            mujoco.mj_step(m, d, steps - 1)
+        finally:
+            m.opt.disableflags = flags
+    mujoco.mj_step(m, d)
+
 
 class _PlantSensors:
     """What :class:`~reflexarm.sim.plant.Plant` reports: :meth:`measure`, :meth:`true_wrench`,

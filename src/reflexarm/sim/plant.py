@@ -17,7 +17,7 @@ from reflexarm.robots.robot_model import RobotModel, load_robot
 from reflexarm.sim import _kernels
 from reflexarm.sim._builder import SENSOR_FORCE, SENSOR_TORQUE, build_robot_spec
 from reflexarm.sim._plant_forces import _AppliedForce, _PlantForces
-from reflexarm.sim._plant_sensors import _PlantSensors
+from reflexarm.sim._plant_sensors import _PlantSensors, step_sensing_last
 from reflexarm.sim.noise import PAPER_NOISE, SensorNoise
 from reflexarm.sim.scene import Scene
 
@@ -324,7 +324,7 @@ class Plant(_PlantSensors, _PlantForces):
         m, d = self._model, self._data
         t_end = d.time + self.control_period
         if self._extra is None:
-            mujoco.mj_step(m, d, self.substeps)
+            step_sensing_last(m, d, self.substeps)
         else:
             for _ in range(self.substeps):
                 extra = np.asarray(self._extra(self.q, self.dq, float(d.time)), dtype=float)
