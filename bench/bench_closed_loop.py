@@ -114,8 +114,9 @@ def main() -> dict[str, float]:
         print(f"{label:28s}{two[key]:14.3f}{one[key]:14.3f}")
     print(
         f"Python loop (2 x 0.5 ms): {two['python_x_realtime']:.1f}x real time; compiled loop "
-        f"{two['compiled_vs_python']:.2f}x faster ({two['compiled_vs_python_cpu']:.2f}x in CPU time) (targets: compiled >= 50x real time, >= 0.7x MuJoCo alone)"
+        f"{two['compiled_vs_python']:.2f}x faster ({two['compiled_vs_python_cpu']:.2f}x in CPU time)"
     )
+    print("targets: compiled >= 50x real time, >= 0.7x MuJoCo alone")
     return res
 
 
