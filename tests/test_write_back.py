@@ -10,6 +10,7 @@ a COM not moved to the link frame or a lumped link counted twice shows up at 1e-
 from __future__ import annotations
 
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -188,3 +189,20 @@ def test_an_arm_cut_from_its_file_keeps_the_locked_gripper_and_reloads_with_the_
         np.testing.assert_allclose(back.compute_gravity(qq), identified.compute_gravity(qq), atol=ATOL)
     worst = check_agreement(back, plant, n_states=10)
     assert max(worst.values()) < ATOL, worst
+    # an estimate whose last link, without the locked fingers, has no physical inertia (two base
+    # parameters of wrist_3 moved by 0.02 kg m^2, far beyond its own 0.01): projected with the fingers
+    # held at the file's inertias, and the copy is still the projected model
+    beta = res.beta_b.copy()
+    moved = [i for i, name in enumerate(res.base.base_names()) if name in ("Iyz_wrist_3_joint", "Ixy_wrist_3_joint")]
+    assert len(moved) == 2
+    beta[moved] += 0.02
+    off = replace(res, beta_b=beta)
+    projected, how = with_consistent_links(off, true)
+    assert how.startswith("the nearest physically consistent link parameters")
+    out, _ = write_identified_robot(off, true, tmp_path / "out" / "projected.urdf")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        back = load_robot(out, **true.load_arguments())
+    identified = projected.to_robot_model(true)
+    for qq, _ in _random_states(back, 20, seed=7):
+        np.testing.assert_allclose(back.compute_mass_matrix(qq), identified.compute_mass_matrix(qq), atol=ATOL)

@@ -82,6 +82,7 @@ def project_physically_consistent(
     *,
     max_nfev: int = 3000,
     threads: int | None = DEFAULT_BLAS_THREADS,
+    fixed_parameters: np.ndarray | None = None,
 ) -> DynamicsIdentification:
     """The nearest physically consistent identification (see the module docstring).
 
@@ -90,6 +91,9 @@ def project_physically_consistent(
         robot: the robot; its nominal inertias start the search (made strictly consistent if needed).
         max_nfev: evaluation budget of the solver.
         threads: BLAS threads (default 1, as :func:`~reflexarm.ident.identify_dynamics`); None: as configured.
+        fixed_parameters: (10 n,) a known part of each joint's lumped link parameters that is not changed
+            (e.g. a locked gripper's links, whose inertias stay the file's): the pseudo-inertia constraint
+            applies to the rest, pi - fixed_parameters, and the returned physical parameters include it.
 
     Returns:
         A copy of ``result`` with the projected beta_b (and, for the combined method, the friction moved
@@ -119,7 +123,7 @@ def project_physically_consistent(
             )
     try:
         with blas_threads(threads):
-            return _project(result, robot, max_nfev)
+            return _project(result, robot, max_nfev, fixed_parameters)
     except (ValueError, np.linalg.LinAlgError, FloatingPointError) as e:
         raise IdentificationError(
             f"projecting the {result.method} identification onto physically consistent parameters failed: "
@@ -127,7 +131,9 @@ def project_physically_consistent(
         ) from e
 
 
-def _project(result: DynamicsIdentification, robot: RobotModel, max_nfev: int) -> DynamicsIdentification:
+def _project(
+    result: DynamicsIdentification, robot: RobotModel, max_nfev: int, fixed: np.ndarray | None
+) -> DynamicsIdentification:
     assert result.information is not None  # checked by the caller
     base = result.base
     nb, n = base.n_base, base.n_joints
@@ -149,7 +155,8 @@ def _project(result: DynamicsIdentification, robot: RobotModel, max_nfev: int) -
     # a strictly positive definite pseudo-inertia, so M(q) stays positive definite (a link may not
     # collapse to a point or a rod on a joint axis)
     x0 = np.empty(10 * n)
-    pi0 = robot.inertial_parameters()
+    fixed = np.zeros(10 * n) if fixed is None else np.asarray(fixed, dtype=float).reshape(10 * n)
+    pi0 = robot.inertial_parameters() - fixed
     eps = np.empty(n)
     for k in range(n):
         J = pseudo_inertia(pi0[10 * k : 10 * k + 10])
@@ -160,7 +167,7 @@ def _project(result: DynamicsIdentification, robot: RobotModel, max_nfev: int) -
             ev = np.linalg.eigvalsh(J)
         eps[k] = MIN_EIGENVALUE_FRACTION * ev[0]
         x0[10 * k : 10 * k + 10] = np.linalg.cholesky(J - eps[k] * np.eye(4))[_TRIL]
-    pi_eps = standard_from_pseudo_inertia(eps[:, None, None] * np.eye(4)[None]).reshape(-1)
+    pi_eps = standard_from_pseudo_inertia(eps[:, None, None] * np.eye(4)[None]).reshape(-1) + fixed
     RA = R @ A
     target = R @ beta_hat - RA @ pi_eps
 

@@ -35,9 +35,7 @@ friction and are not written.
 
 from __future__ import annotations
 
-import copy
 import os
-import warnings
 import xml.etree.ElementTree as ET
 from dataclasses import replace
 from pathlib import Path
@@ -47,17 +45,11 @@ import pinocchio as pin
 
 from reflexarm.errors import ModelError
 from reflexarm.ident._blas_threads import DEFAULT_BLAS_THREADS
-from reflexarm.ident._robot_xml import (
-    behind_locked_joint,
-    find_element,
-    read_xml,
-    relocate_paths,
-    set_inertial,
-    write_xml,
-)
+from reflexarm.ident._locked_links import link_groups, locked_links, robot_file
+from reflexarm.ident._robot_xml import find_element, read_xml, relocate_paths, set_inertial, write_xml
 from reflexarm.ident.consistency import project_physically_consistent, pseudo_inertia
 from reflexarm.ident.identification_result import DynamicsIdentification
-from reflexarm.robots.robot_model import RobotModel, load_robot
+from reflexarm.robots.robot_model import RobotModel
 
 __all__ = ["link_inertias", "with_consistent_links", "write_identified_robot"]
 
@@ -82,61 +74,41 @@ def with_consistent_links(
     See the module docstring: the result's own physically consistent parameters, else the realisation
     nearest to the file's inertias if every link of it is consistent (beta_b unchanged), else the
     projection onto consistent parameters (which moves beta_b; the note says how much the fit worsens).
-    Save the model file from the returned result too, so that the model file and the written robot
-    file are the same model. ``threads``: BLAS threads of the projection (None: as configured).
+    For an arm cut out of a bigger file the links behind locked joints keep the file's inertias and the
+    check (and projection) applies to the rest of each link. Save the model file from the returned result
+    too, so that the model file and the written robot file are the same model. ``threads``: BLAS threads
+    of the projection (None: as configured).
     """
-    if result.physical_parameters is not None:
+    fixed = locked_links(robot).parameters if robot.source is not None else None
+    own = np.zeros(10 * robot.n) if fixed is None else fixed
+    if result.physical_parameters is not None and _links_consistent(result.physical_parameters - own):
         return result, "the identification's physically consistent link parameters (projection of the estimate)"
     pi = result.standard_parameters(robot.inertial_parameters())
-    if _links_consistent(pi):
+    if result.physical_parameters is None and _links_consistent(pi - own):
         return replace(result, physical_parameters=pi), (
             "the link parameters realising the identified base parameters nearest to the file's own inertias "
             "(every link physically consistent); combinations the data cannot split keep the file's split"
         )
-    projected = project_physically_consistent(result, robot, threads=threads)
+    projected = project_physically_consistent(result, robot, threads=threads, fixed_parameters=fixed)
     return projected, (
         "the nearest physically consistent link parameters (the realisation nearest to the file's inertias has a "
         f"link with no physical mass distribution); {projected.notes[-1]}"
     )
 
 
-def _body_frames(robot: RobotModel, joint: int) -> list[pin.Frame]:
-    """BODY frames moved by ``joint`` (1-based Pinocchio joint index): the moving link first."""
-    return [f for f in robot.pin_model.frames if f.type == pin.FrameType.BODY and f.parentJoint == joint]
-
-
 def link_inertias(robot: RobotModel, pi: np.ndarray) -> dict[str, pin.Inertia]:
     """Per moving link (by name), the inertia of ``pi`` (10 per joint, about each joint frame) expressed in
     that link's own frame."""
     out = {}
-    for j, (main, _) in enumerate(_link_groups(robot), start=1):
+    for j, (main, _) in enumerate(link_groups(robot), start=1):
         inertia_joint = pin.Inertia.FromDynamicParameters(pi[10 * (j - 1) : 10 * j])
         frame = robot.pin_model.frames[robot.pin_model.getFrameId(main, pin.FrameType.BODY)]
         out[main] = frame.placement.actInv(inertia_joint)
     return out
 
 
-def _link_groups(robot: RobotModel) -> list[tuple[str, list[str]]]:
-    """Per joint: the link it moves and the other links attached to that link (lumped into its inertia)."""
-    groups = []
-    for j in range(1, robot.pin_model.njoints):
-        frames = _body_frames(robot, j)
-        if not frames:
-            raise ModelError(
-                f"joint {robot.joint_names[j - 1]!r} moves no link of {robot.name!r}; cannot write it back"
-            )
-        groups.append((frames[0].name, [f.name for f in frames[1:]]))
-    return groups
-
-
 def _fmt(x: float) -> str:
     return f"{x:.12g}"
-
-
-def _check_robot(robot: RobotModel) -> Path:
-    if robot.source is None or not Path(robot.source).is_file():
-        raise ModelError(f"robot {robot.name!r} has no robot file to copy (source {robot.source!r})")
-    return Path(robot.source)
 
 
 def write_identified_robot(
@@ -163,9 +135,8 @@ def write_identified_robot(
         ModelError: no robot file, an arm cut out of a bigger file, joints or links not found in the file,
             another format than the source's.
     """
-    src = _check_robot(robot)
+    src, fmt = robot_file(robot)
     dst = Path(path)
-    fmt = "urdf" if src.suffix.lower() == ".urdf" else "mjcf"
     want = ".urdf" if fmt == "urdf" else ".xml"
     if dst.suffix.lower() not in ((".urdf",) if fmt == "urdf" else (".xml", ".mjcf")):
         raise ModelError(f"the copy of {src.name} must be a {want} file like its source; got {str(dst)!r}")
@@ -178,14 +149,12 @@ def write_identified_robot(
     assert result.physical_parameters is not None  # set by with_consistent_links
     root = read_xml(src)
     moved = relocate_paths(root, fmt, src.parent, dst.parent)
-    groups = _link_groups(robot)
-    locked = set(robot.cut.locked) if robot.cut is not None else set()
-    behind = {link for main, links in groups for link in links if behind_locked_joint(root, fmt, link, main, locked)}
-    lumped = [link for _, links in groups for link in links if link not in behind]
+    links = locked_links(robot)
+    behind, lumped = links.behind, list(links.fixed)
     pi = np.asarray(result.physical_parameters, dtype=float)
-    if behind:  # the locked links keep the file's inertias: the moving links carry the rest
-        pi = pi - _locked_contributions(root, fmt, robot, groups, lumped, dst)
-        _check_remainder(pi, robot, groups, behind)
+    if links.parameters is not None:  # the locked links keep the file's inertias: the moving links carry the rest
+        pi = pi - links.parameters
+        _check_remainder(pi, robot, links.groups, behind)
     inertias = link_inertias(robot, pi)
     friction = result.friction
     notes = [how]
@@ -220,37 +189,18 @@ def write_identified_robot(
     return dst, notes
 
 
-def _locked_contributions(
-    root: ET.Element, fmt: str, robot: RobotModel, groups: list[tuple[str, list[str]]], lumped: list[str], dst: Path
-) -> np.ndarray:
-    """(10 n,) inertial parameters the links behind locked joints add to each joint (about its frame), as
-    the cut model lumps them: the file with every other link of the arm made massless, loaded with the
-    same cut."""
-    probe = copy.deepcopy(root)
-    tag = "link" if fmt == "urdf" else "body"
-    for name in [main for main, _ in groups] + lumped:
-        set_inertial(fmt, find_element(probe, tag, name, dst.name), 0.0, np.zeros(3), np.zeros((3, 3)))
-    tmp = dst.parent / f".{dst.stem}.locked-links{dst.suffix}"
-    dst.parent.mkdir(parents=True, exist_ok=True)
-    write_xml(probe, tmp)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # the file's notes were given when the robot was loaded
-            only_locked = load_robot(tmp, **robot.load_arguments())
-    finally:
-        tmp.unlink(missing_ok=True)
-    return only_locked.inertial_parameters()
-
-
-def _check_remainder(pi: np.ndarray, robot: RobotModel, groups: list[tuple[str, list[str]]], behind: set[str]) -> None:
+def _check_remainder(
+    pi: np.ndarray, robot: RobotModel, groups: tuple[tuple[str, tuple[str, ...]], ...], behind: frozenset[str]
+) -> None:
+    """Guard (with_consistent_links made the rest consistent): each moving link's own part is physical."""
     for j, (main, links) in enumerate(groups):
         ev = np.linalg.eigvalsh(pseudo_inertia(pi[10 * j : 10 * j + 10]))
         if ev[0] < -_CONSISTENCY_TOL * max(abs(ev[-1]), 1e-300):
             held = [link for link in links if link in behind]
             raise ModelError(
-                f"joint {j + 1} ({robot.joint_names[j]}): the identified inertia is lighter than the file's links "
-                f"behind locked joints ({', '.join(held)}) that hang on {main!r} (mass left for {main!r}: "
-                f"{pi[10 * j]:.4g} kg); the file cannot hold it without changing those links"
+                f"joint {j + 1} ({robot.joint_names[j]}): the identified inertia minus the file's links behind "
+                f"locked joints ({', '.join(held)}) is not a physical inertia for {main!r} (mass {pi[10 * j]:.4g} kg, "
+                f"smallest pseudo-inertia eigenvalue {ev[0]:.3g}); the file cannot hold it without changing those links"
             )
 
 
