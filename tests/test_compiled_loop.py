@@ -169,6 +169,8 @@ def test_what_cannot_be_compiled_runs_in_python(robot):
     with pytest.raises(ConfigError, match="cannot use the compiled loop: .*extra_joint_torque"):
         run_compiled(extra, Controller(robot), _GlitchyHold(q0), 0.01)
     assert compiled_reason(Plant(robot), Controller(robot), reset_controller=False) is not None
+    assert "torque_rate_limit" in str(compiled_reason(Plant(robot), Controller(robot, torque_rate_limit=1e4)))
+    assert compiled_reason(Plant(robot), Controller(robot)) is None
     tr = run_fast(extra, Controller(robot), _GlitchyHold(q0), 0.01)
     assert tr.meta["loop"] == "python" and len(tr.t) == 10
     tr = run_fast(Plant(robot), Controller(robot), _GlitchyHold(q0), 0.01)

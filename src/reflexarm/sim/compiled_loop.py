@@ -59,6 +59,10 @@ def compiled_reason(plant: Plant, controller: Any, *, reset_controller: bool = T
         return f"the controller is a {type(controller).__name__}, not a reflexarm Controller (its step is Python)"
     if not reset_controller:
         return "reset_controller=False: the compiled loop starts its controller from a reset"
+    if getattr(controller, "torque_rate_limit", None) is not None:
+        # a reset keeps the last command and the rate limit goes on from it; the compiled loop's controller
+        # is configured afresh, without one
+        return "the controller has a torque_rate_limit, which continues from its last command across a reset"
     if plant._extra is not None:
         return "the plant has a Python extra_joint_torque (called every substep); use smooth_friction for that law"
     if plant._failed is not None:
