@@ -249,8 +249,8 @@ def dynamics_study_command(args: argparse.Namespace) -> int:
         line += f"; paper: {compare_methods(paper['combined'], paper['sequential'])}"
     print(line)
     for m in st.notes["projected"]:  # type: ignore[attr-defined]
-        print(f"{m}: M(q) of the least-squares estimate is not positive definite everywhere; the saved and "
-              f"validated model is the nearest consistent one ({st.results[m].notes[-1]})")  # fmt: skip
+        print(f"{m}: the least-squares estimate has no physically consistent set of links near the file's; the saved "
+              f"and validated model is the nearest consistent one ({st.results[m].notes[-1]})")  # fmt: skip
     rel = {
         m: float(np.linalg.norm(r.beta_b - st.true_base) / np.linalg.norm(st.true_base)) for m, r in st.results.items()
     }

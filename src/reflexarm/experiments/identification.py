@@ -48,11 +48,9 @@ from reflexarm.ident import (
     identify_dynamics,
     optimize_excitation,
     preprocess_log,
-    project_physically_consistent,
     validate_model,
 )
 from reflexarm.ident._blas_threads import DEFAULT_BLAS_THREADS, blas_threads
-from reflexarm.ident.consistency import is_physically_consistent
 from reflexarm.ident.write_back import with_consistent_links
 from reflexarm.robots.perturbation import perturb_model
 from reflexarm.robots.robot_model import RobotModel, load_robot
@@ -120,8 +118,9 @@ class IdentificationStudy:
         validation_raw: the validation log as recorded (what ``reflexarm validate --log`` reads).
         min_speed: rows with |dq_j| below it are left out of both identifications [rad/s].
         estimates: the least-squares estimates per method.
-        results: the models per method as saved: the estimate, or its projection onto physically
-            consistent parameters (nearest to it in the fit's metric) when its M(q) is indefinite.
+        results: the models per method as saved: the estimate with physically consistent links, or its
+            projection onto consistent parameters (nearest in the fit's metric) when it has none near the
+            file's (see :func:`consistent_result`).
         validations: validation torques of ``results``.
         true_base: the plant's true base parameters.
         notes: the scenario's plant description and what was projected.
@@ -234,11 +233,11 @@ def validation_trajectory(robot: RobotModel, seed: int, base_frequency: float) -
 
 
 def consistent_result(result: DynamicsIdentification, robot: RobotModel, nominal: RobotModel) -> DynamicsIdentification:
-    """``result`` with physically consistent link parameters: those nearest to ``nominal``'s if every link
-    of them is consistent (same beta_b), else the projection onto consistent parameters (see
-    :func:`~reflexarm.ident.write_back.with_consistent_links`; what the model file and robot copy hold)."""
-    if not is_physically_consistent(result, robot):
-        return project_physically_consistent(result, nominal, threads=None)  # the caller sets the threads
+    """``result`` with physically consistent link parameters (:func:`~reflexarm.ident.write_back.with_consistent_links`
+    with ``nominal``'s file inertias): those nearest to ``nominal``'s if every link of them is consistent (same
+    beta_b, hence M(q) positive definite), else the projection onto consistent parameters. What the model file
+    and the robot copy hold; ``robot`` is unused (kept for callers)."""
+    del robot
     return with_consistent_links(result, nominal, threads=None)[0]  # the caller sets the threads
 
 
@@ -276,8 +275,9 @@ def run_identification_study(
             Table I does for the seven of the Atlas arm).
         min_speed: both methods leave out the rows with |dq_j| below this [rad/s] (see the module
             docstring).
-        project: validate (and hand out) the physically consistent projection of an estimate whose M(q)
-            is indefinite, as the CLI saves it (False: the raw least-squares estimates).
+        project: validate (and hand out) each estimate with physically consistent links
+            (:func:`consistent_result`: the same beta_b, or its projection when no consistent set of links
+            near the file's realises it), as the CLI saves it (False: the raw least-squares estimates).
         noise, seed: sensor noise and seed (validation log: its own trajectory, seed + 1, and noise
             seed, seed + 2).
         n_jobs: parallel single-joint runs.
