@@ -20,12 +20,9 @@ from reflexarm.cli import main
 from reflexarm.errors import ConfigError
 from reflexarm.experiments.any_arm import (
     EE_PEAK_SPEED,
-    STICK_GAP_M,
     VELOCITY_SHARE,
     ee_swing_plan,
     is_paper_arm,
-    link_body,
-    link_push_plan,
     start_posture,
     work_posture,
 )
@@ -38,6 +35,7 @@ from reflexarm.experiments.collision_summary import (
     write_outputs,
 )
 from reflexarm.experiments.compensation import CompensationSetup, held_posture, robot_options, true_robot
+from reflexarm.experiments.link_push import STICK_GAP_M, link_body, link_push_plan
 from reflexarm.experiments.velocity_tracking import VelocityTrackingSetup
 from reflexarm.robots import load_robot
 from reflexarm.robots.example_arms import UR_LIKE_TIP, write_ur_like_arm

@@ -6,7 +6,8 @@ constants of :mod:`reflexarm.experiments.collision`); on any other arm they deri
 stated in each function and nothing assumed about the number of joints, their names or their drives:
 
 * start posture (:func:`start_posture`): the robot's home (built-in robots), else the file's keyframe
-  named ``home`` (or its first keyframe, MJCF), else the middle of each joint's range;
+  named ``home`` (or its first keyframe, MJCF), else a working posture found by inverse kinematics
+  (:func:`work_posture`: end effector in front, tool pointing down);
 * the end-effector swing (:func:`ee_swing_plan`): the proximal joint that moves the end effector
   fastest horizontally swings it through ~:data:`SWING_PATH_M` at a peak speed of
   :data:`EE_PEAK_SPEED` (the paper's "moderate velocity"), inside the joint's range and below half
@@ -14,20 +15,17 @@ stated in each function and nothing assumed about the number of joints, their na
 * the cinderblock (:func:`~reflexarm.experiments.block_placement.place_cinderblock`): the end
   effector's path is computed by forward kinematics of that reference, and the block's padded face
   is put across the path where the rest of the path would still run ``depth`` into the block;
-* the link push (:func:`link_push_plan`): the link of joint ``link`` (1-based; default mid-chain) is
-  swung at ~:data:`LINK_SPEED` m/s by the proximal joint that moves it fastest; the stick approaches
-  against the link's velocity (:class:`~reflexarm.sim.ElbowStick`'s default), i.e. the motion drives
-  the link into it.
+* the link push (:func:`~reflexarm.experiments.link_push.link_push_plan`): a mid-chain link swung
+  across its radius, the stick coming against its motion.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import pinocchio as pin
 
 from reflexarm.errors import ConfigError
 from reflexarm.robots import RobotModel
@@ -35,16 +33,11 @@ from reflexarm.sim import JointTrajectory, Plant
 
 __all__ = [
     "EE_PEAK_SPEED",
-    "LINK_SPEED",
     "PAPER_ARM",
     "SWING_PATH_M",
     "EeSwingPlan",
-    "LinkPushPlan",
-    "default_link",
     "ee_swing_plan",
     "is_paper_arm",
-    "link_body",
-    "link_push_plan",
     "loaded_joints",
     "horizontal",
     "start_posture",
@@ -61,10 +54,6 @@ _PAPER_JOINTS = ("l_arm_shz", "l_arm_shx", "l_arm_ely", "l_arm_elx", "l_arm_wry"
 EE_PEAK_SPEED = 0.12
 #: Length of the end effector's swing [m] (Atlas' demo: 1 rad of shz at ~0.5 m, ~0.5 m).
 SWING_PATH_M = 0.5
-#: Peak speed of the pushed link in the link collision [m/s] (the paper's elbow moved at ~50 mm/s).
-LINK_SPEED = 0.05
-#: Length of the link's swing [m] (Atlas' link collision: 0.8 rad of shz, ~0.3 m at the elbow).
-LINK_PATH_M = 0.3
 #: Fraction of each joint's range kept free at both ends by every derived motion [-].
 RANGE_MARGIN = 0.05
 #: A derived motion uses at most this fraction of a joint's velocity limit [-].
@@ -189,7 +178,7 @@ def up_direction(robot: RobotModel) -> np.ndarray:
     return np.array([0.0, 0.0, 1.0]) if n == 0.0 else -g / n
 
 
-def _swing(
+def swing(
     robot: RobotModel, q0: np.ndarray, joint: int, path: float, radius: float, speed: float, max_travel: float
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """(start, goal, move time): joint ``joint`` travels about ``path / radius`` rad through q0, inside
@@ -208,7 +197,7 @@ def _swing(
     return start, goal, float(t_move)
 
 
-def _driving_joint(
+def driving_joint(
     robot: RobotModel,
     q: np.ndarray,
     frame: str,
@@ -224,7 +213,7 @@ def _driving_joint(
     it); radius: that speed per rad. ``point``: a world point fixed to ``frame`` moved instead of the
     frame's origin."""
     p = robot.compute_frame_pose(q, frame)[1] if point is None else np.asarray(point, dtype=float)
-    J = _point_jacobian(robot, q, frame, p)
+    J = point_jacobian(robot, q, frame, p)
     up = up_direction(robot)
     lateral = np.eye(3)
     if tangential:
@@ -272,8 +261,8 @@ def ee_swing_plan(robot: RobotModel, q0: np.ndarray | None = None) -> EeSwingPla
     """The swing of the end effector (module docstring): the joint among the first half of the chain
     that moves it fastest horizontally, ~:data:`SWING_PATH_M` at :data:`EE_PEAK_SPEED`, at most 1 rad."""
     q0 = start_posture(robot) if q0 is None else np.asarray(q0, dtype=float)
-    joint, radius = _driving_joint(robot, q0, robot.ee_frame, range(max(1, math.ceil(robot.n / 2))))
-    start, goal, t_move = _swing(robot, q0, joint, SWING_PATH_M, radius, EE_PEAK_SPEED, 1.0)
+    joint, radius = driving_joint(robot, q0, robot.ee_frame, range(max(1, math.ceil(robot.n / 2))))
+    start, goal, t_move = swing(robot, q0, joint, SWING_PATH_M, radius, EE_PEAK_SPEED, 1.0)
     return EeSwingPlan(start, goal, joint, t_move)
 
 
@@ -290,7 +279,7 @@ def geometry_plant(robot: RobotModel) -> Plant:
         return Plant(robot)
 
 
-def _point_jacobian(robot: RobotModel, q: np.ndarray, frame: str, point: np.ndarray) -> np.ndarray:
+def point_jacobian(robot: RobotModel, q: np.ndarray, frame: str, point: np.ndarray) -> np.ndarray:
     """3 x n Jacobian of the world ``point`` fixed to ``frame``: v_p = v + w x (p - origin)."""
     J6 = robot.compute_frame_jacobian(q, frame, world_aligned=True)
     r = np.asarray(point, dtype=float) - robot.compute_frame_pose(q, frame)[1]
@@ -302,107 +291,6 @@ def _base_point(robot: RobotModel, q: np.ndarray) -> np.ndarray:
     """The first joint's origin (world) [m]."""
     name = robot.joint_names[0]
     return robot.compute_frame_pose(q, name)[1] if name in robot.frame_names else np.zeros(3)
-
-
-def _body_frame(robot: RobotModel, joint: int) -> str:
-    m = robot.pin_model
-    for f in m.frames:
-        if f.parentJoint == joint + 1 and f.type == pin.FrameType.BODY:
-            return str(f.name)
-    raise ConfigError(f"joint {joint + 1} ({robot.joint_names[joint]}) has no link frame in {robot.name!r}")
-
-
-def default_link(robot: RobotModel) -> int:
-    """The mid-chain link the link collision pushes: that of joint ceil(n/2) (1-based; Atlas: 4, elx)."""
-    return max(1, math.ceil(robot.n / 2))
-
-
-def link_body(robot: RobotModel, link: int | str) -> tuple[int, str]:
-    """(joint, body name): ``link`` is a 1-based joint number (its child link) or a link/body name.
-
-    Raises:
-        ConfigError: a number outside 1..n or an unknown name (naming the choices).
-    """
-    names = [_body_frame(robot, j) for j in range(robot.n)]
-    if isinstance(link, str) and not link.strip().lstrip("-").isdigit():
-        if link not in names:
-            raise ConfigError(f"unknown link {link!r}; links are: {', '.join(names)} (or a joint number 1..{robot.n})")
-        return names.index(link), link
-    k = int(link)
-    if not 1 <= k <= robot.n:
-        raise ConfigError(f"link must be a joint number in 1..{robot.n} or a link name; got {link}")
-    return k - 1, names[k - 1]
-
-
-@dataclass(frozen=True)
-class LinkPushPlan:
-    """The link collision on one arm: the reference and where and when the stick pushes."""
-
-    trajectory: JointTrajectory
-    body: str
-    joint: int  # 0-based swing joint
-    link_joint: int  # 0-based joint whose link is pushed
-    t_start: float
-    info: dict[str, Any] = field(default_factory=dict)
-    standoff: float = 0.10  # stick tip to the target point at t_start [m] (ElbowStick's standoff)
-
-
-def link_push_plan(robot: RobotModel, link: int | str | None = None) -> LinkPushPlan:
-    """Swing the link of ``link`` (default :func:`default_link`) at ~:data:`LINK_SPEED` about the base
-    (the joint that moves it fastest across its radius, so the stick, coming against the motion, lies
-    beside the arm); the stick appears 40 % into the move (Atlas: 5 s into the 1 + 10 s)."""
-    link_joint, body = link_body(robot, default_link(robot) if link is None else link)
-    q0 = start_posture(robot)
-    # the link's middle: between its origin and the next link's (or the end effector)
-    after = robot.compute_frame_pose(q0, link_body(robot, link_joint + 2)[1] if link_joint + 1 < robot.n else None)[1]
-    middle = 0.5 * (robot.compute_frame_pose(q0, body)[1] + after)
-    joint, radius = _driving_joint(robot, q0, body, range(link_joint + 1), tangential=True, point=middle)
-    start, goal, t_move = _swing(robot, q0, joint, LINK_PATH_M, radius, LINK_SPEED, 0.8)
-    w = np.array([start, start, goal, goal])
-    traj = JointTrajectory(w, np.array([1.0, t_move, 2.0]))
-    t_start = 1.0 + 0.4 * t_move
-    standoff = STICK_GAP_M + _extent_along_motion(robot, traj.sample(t_start).q_d, body, joint, goal - start)
-    info = {
-        "link": link_joint + 1,
-        "body": body,
-        "swing_joint": joint + 1,
-        "move_time_s": t_move,
-        "stick_standoff_m": standoff,
-    }
-    return LinkPushPlan(traj, body, joint, link_joint, t_start, info, standoff)
-
-
-#: Gap between the link's surface and the stick's tip when the stick appears [m] (on Atlas' forearm the
-#: paper setting's 0.10 m standoff leaves ~5 cm).
-STICK_GAP_M = 0.05
-
-
-def _extent_along_motion(robot: RobotModel, q: np.ndarray, body: str, joint: int, delta: np.ndarray) -> float:
-    """How far the collision geoms of ``body`` reach from the stick's target point (the centre of its
-    first collision geom, :class:`~reflexarm.sim.ElbowStick`) in the direction it moves at ``q`` when
-    ``joint`` moves by ``delta`` [m] (the geoms' own bounding boxes)."""
-    import mujoco
-
-    plant = geometry_plant(robot)
-    m, d = plant.model, plant.data
-    d.qpos[plant._qadr_arr] = q
-    mujoco.mj_kinematics(m, d)
-    bid = m.body(body).id
-    geoms = [g for g in range(m.ngeom) if m.geom_bodyid[g] == bid and (m.geom_contype[g] or m.geom_conaffinity[g])]
-    if not geoms:
-        return 0.0
-    p = np.array(d.geom_xpos[geoms[0]])
-    v = _point_jacobian(robot, q, body, p)[:, joint] * float(np.sign(delta[joint]))
-    nv = float(np.linalg.norm(v))
-    if nv < 1e-9:
-        return 0.0
-    v /= nv
-    reach = []
-    for g in geoms:  # each geom's bounding box (in its own frame) projected on v
-        R = np.array(d.geom_xmat[g]).reshape(3, 3)
-        centre = np.array(d.geom_xpos[g]) + R @ m.geom_aabb[g, :3]
-        reach.append(float((centre - p) @ v + np.abs(R.T @ v) @ m.geom_aabb[g, 3:]))
-    return max(reach)
 
 
 def loaded_joints(robot: RobotModel, q: np.ndarray, count: int = 4) -> list[int]:

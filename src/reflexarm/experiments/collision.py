@@ -21,7 +21,6 @@ from reflexarm.errors import ConfigError
 from reflexarm.experiments.any_arm import (
     ee_swing_plan,
     is_paper_arm,
-    link_push_plan,
     loaded_waypoints,
     start_posture,
 )
@@ -33,6 +32,7 @@ from reflexarm.experiments.collision_summary import (
     summarize_link_collision,
     write_outputs,
 )
+from reflexarm.experiments.link_push import link_push_plan
 from reflexarm.robots import RobotModel, load_robot, perturb_model
 from reflexarm.sim import (
     PAPER_NOISE,

@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 
 from reflexarm.control import CONTROL_MODES, Controller, ModeSupervisor
-from reflexarm.experiments.any_arm import RANGE_MARGIN, default_link, is_paper_arm, link_body
+from reflexarm.experiments.any_arm import RANGE_MARGIN, is_paper_arm
 from reflexarm.experiments.compensation import (
     CompensationSetup,
     HoldReference,
@@ -18,6 +18,7 @@ from reflexarm.experiments.compensation import (
     run_case,
     true_robot,
 )
+from reflexarm.experiments.link_push import default_link, link_body
 from reflexarm.experiments.metrics import rms, window_mean
 from reflexarm.experiments.sweeps import trial_seeds
 from reflexarm.robots import RobotModel

@@ -46,8 +46,9 @@ import numpy.typing as npt
 
 from reflexarm.control import Controller
 from reflexarm.errors import ConfigError
-from reflexarm.experiments.any_arm import RANGE_MARGIN, VELOCITY_SHARE, default_link, is_paper_arm, start_posture
+from reflexarm.experiments.any_arm import RANGE_MARGIN, VELOCITY_SHARE, is_paper_arm, start_posture
 from reflexarm.experiments.collision import controller_model
+from reflexarm.experiments.link_push import default_link
 from reflexarm.robots import RobotModel, load_robot
 from reflexarm.signals import Command, Measurement, Reference
 from reflexarm.sim import PAPER_NOISE, Plant, SensorNoise, Trace, run_closed_loop
