@@ -36,7 +36,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     """Add ``demo`` and ``simulate`` to the top-level parser."""
     p = sub.add_parser(
         "demo",
-        help="end-effector collision with a cinderblock on the Atlas arm: Stiff / Compliant / Coll.Det (Figs. 7-8)",
+        help="end-effector collision with a cinderblock (Atlas arm by default, or --robot): Stiff / Compliant / "
+        "Coll.Det (Figs. 7-8)",
     )
     add_common(p, default_out="results/demo")
     add_model_options(p)
