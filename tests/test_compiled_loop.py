@@ -210,3 +210,24 @@ def test_continues_from_the_plants_state_with_a_force_applied_before(robot):
     # the force is seen by both loops from the first physics step after it was applied (sensor latency)
     assert np.abs(a2.f_ext_ee[1:, 2] + 30.0).max() < 1e-6 and a2.f_ext_ee[0, 2] == 0.0
     np.testing.assert_allclose(qb, qa, rtol=0, atol=TOL)
+
+
+def test_divergence_raises_as_in_the_python_loop(robot):
+    """A 1e7 N push makes the plant diverge: the same SimulationError, the same partial trace, a failed plant."""
+    from reflexarm.control import Controller
+    from reflexarm.errors import SimulationError
+    from reflexarm.sim import LinkForce
+
+    out = []
+    for run in (run_closed_loop, run_compiled):
+        plant = Plant(robot, scene=LinkForce(magnitude=1e7, t_on=0.05, t_off=10.0), noise=SensorNoise.none())
+        plant.reset(robot.home)
+        with pytest.raises(SimulationError, match="diverged") as info:
+            run(plant, Controller(robot), _GlitchyHold(robot.home), 1.0)
+        out.append((str(info.value), info.value.trace, plant))  # type: ignore[attr-defined]
+    (ma, ta, _), (mb, tb, pb) = out
+    assert mb == ma and "near t = 0.0510 s" in mb
+    assert len(tb.t) == len(ta.t) == 51
+    for f in ("q", "tau", "residual"):
+        np.testing.assert_allclose(getattr(tb, f), getattr(ta, f), rtol=0, atol=TOL, err_msg=f)
+    assert "failed earlier" in str(compiled_reason(pb, Controller(robot)))

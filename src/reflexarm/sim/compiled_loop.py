@@ -285,15 +285,26 @@ def run_compiled(
                 arr[k_from:] = v
 
     events = event_ticks(plays, times)
-    done = 0
+    tick0 = plant._tick
+    done = acted = 0  # rows recorded, physics periods stepped
+
+    def fail(status: int) -> None:
+        """The plant's SimulationError of the Python loop, with the plant in the same state."""
+        sync(acted)
+        plant._fail(float(np.sum(plant.data.qvel**2)) if status == cl.STEP_DIVERGED else np.inf)
+
+    def sync(periods: int) -> None:  # the plant's own bookkeeping, as Plant.step keeps it
+        plant._tau[:] = loop.applied_torque
+        plant._tick = tick0 + periods
+
     try:
         hold_constants(0)
         for k_event in [*sorted(events), N]:
             status = _advance(loop, done, k_event, rec)
-            done = rec.done
-            if status or k_event == N:
-                if status:
-                    plant._fail(float(np.sum(plant.data.qvel**2)) if status == cl.STEP_DIVERGED else np.inf)
+            done = acted = rec.done
+            if status:
+                fail(status)
+            if k_event == N:
                 break
             loop.sense(k_event)
             rec.done = done = k_event + 1
@@ -303,16 +314,19 @@ def run_compiled(
             hold_constants(k_event + 1)
             loop.set_forces(_forces(plant))
             status = loop.act(k_event)
+            acted = k_event + 1
             if status:
-                plant._fail(float(np.sum(plant.data.qvel**2)) if status == cl.STEP_DIVERGED else np.inf)
+                fail(status)
     except BaseException as e:
-        _finish(plant, loop, rec, mode, fault_code, fault_info, core)
+        sync(acted)
+        _texts(rec, mode, fault_code, fault_info, core)
         try:
             e.trace = rec.trace(meta | {"loop": "compiled", "error": f"{type(e).__name__}: {e}"})  # type: ignore[attr-defined]
         except Exception:  # pragma: no cover - never mask the original error
             pass
         raise
-    _finish(plant, loop, rec, mode, fault_code, fault_info, core)
+    sync(acted)
+    _texts(rec, mode, fault_code, fault_info, core)
     if not np.array_equal(rec.t[: rec.done], times[: rec.done]):
         raise SimulationError("the compiled loop's clock differs from the sampled reference times; not returning it")
     return rec.trace(meta | {"loop": "compiled"})
@@ -327,10 +341,8 @@ def _advance(loop: Any, k0: int, k1: int, rec: _Recorder) -> int:
     return int(status)
 
 
-def _finish(
-    plant: Plant, loop: Any, rec: _Recorder, mode: np.ndarray, code: np.ndarray, info: np.ndarray, core: ModuleType
-) -> None:
-    """Mode and fault texts of the recorded rows; the plant's torque and tick count as after the Python loop."""
+def _texts(rec: _Recorder, mode: np.ndarray, code: np.ndarray, info: np.ndarray, core: ModuleType) -> None:
+    """Mode names and fault texts of the recorded rows (the C++ core's own texts)."""
     d = rec.done
     rec.mode[:] = _MODES[mode[:d]].tolist()
     faults = [""] * d
@@ -338,5 +350,3 @@ def _finish(
         s, i, v, lo, hi = info[k]
         faults[k] = core.describe_fault(int(code[k]), int(s), int(i), float(v), float(lo), float(hi))
     rec.fault[:] = faults
-    plant._tau[:] = loop.applied_torque
-    plant._tick += d
