@@ -1,7 +1,9 @@
 """The *true* world: a MuJoCo plant built from the robot's own file, scenes (padded cinderblock, elbow
-push, end-effector force step), noisy sensors, a closed-loop runner and the recorded :class:`Trace`."""
+push, end-effector force step), noisy sensors, a closed-loop runner (Python, or compiled:
+:func:`run_compiled`) and the recorded :class:`Trace`."""
 
 from reflexarm.sim.cinderblock import Cinderblock
+from reflexarm.sim.compiled_loop import compiled_reason, run_compiled, run_fast
 from reflexarm.sim.elbow_stick import ElbowStick
 from reflexarm.sim.end_effector_force import EndEffectorForce
 from reflexarm.sim.hand_push import HandPush
@@ -28,6 +30,9 @@ __all__ = [
     "SensorNoise",
     "Trace",
     "TraceWriter",
+    "compiled_reason",
     "run_closed_loop",
+    "run_compiled",
+    "run_fast",
     "stream_closed_loop",
 ]
