@@ -1,4 +1,4 @@
-"""The identify CLI and logs: nothing is written before a problem with the logs is found."""
+"""The identify CLI and logs: nothing is written before a problem with the logs is found; bags and --joint-topic."""
 
 from __future__ import annotations
 
