@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from reflexarm.cli import main
-from reflexarm.errors import ConfigError
+from reflexarm.errors import ConfigError, DataError
 from reflexarm.experiments.collision import EE_START
 from reflexarm.ident.logs import save_log
 from reflexarm.ident.robot_log import RobotLog
@@ -185,3 +185,33 @@ def test_force_step_torques_are_the_virtual_work_of_the_force(atlas):
             assert r["delay_s"] == pytest.approx(detection_delay(11.0, tau[j], 0.2))
         else:
             assert r["first_joint"] is None and r["delay_s"] is None
+
+
+def test_a_traces_recorded_residual_is_tuned_on_as_it_is(atlas, tmp_path):
+    """``--recorded-residual``: the residual column of a trace, not a replay, goes into the study."""
+    from reflexarm.tuning import recorded_residual
+
+    r = _random_disturbance(atlas.n, 60.0, seed=9)
+    N, n = r.shape
+    q = np.tile(EE_START, (N, 1))
+    z = np.zeros((N, n))
+    tr = Trace(
+        t=np.arange(N) * DT, q=q, dq=z, q_meas=q, q_d=q, dq_d=z, tau=z, tau_m=z, residual=r,
+        collision=np.zeros(N, bool), collided=np.zeros((N, n), bool), mode=np.full(N, "compliant"),
+        fault=np.full(N, ""), wrench=np.zeros((N, 6)), f_ext_ee=np.zeros((N, 3)), tau_ext=z,
+    )  # fmt: skip
+    path = tr.save(tmp_path / "run.parquet")
+    rec = recorded_residual(path, n)
+    np.testing.assert_array_equal(rec.residual, r)
+    prop = tune_thresholds([rec], atlas, rate_per_hour=60.0, contact_rate_per_hour=600.0, gap_s=0.1, n_boot=20)
+    # the held values are the residual: the collision level lies above most of them
+    assert np.all(prop.collision > np.quantile(np.abs(r), 0.99, axis=0))
+    out = tmp_path / "out"
+    args = f"tune-thresholds {path} --recorded-residual --rate 60 --contact-rate 600 --gap 0.1 --no-figure --out {out}"
+    assert main(args.split()) == 0
+    doc = json.loads((out / "thresholds.json").read_text())
+    np.testing.assert_allclose(doc["collision_Nm"], prop.collision, rtol=1e-12)
+    assert doc["logs"] == ["run.parquet (recorded residual)"]
+    assert any("--model and the observer options were not applied" in note for note in doc["notes"])
+    with pytest.raises(DataError, match="a recorded residual is read from a reflexarm trace"):
+        recorded_residual(save_log(_static_log(atlas, np.zeros((10, n))), tmp_path / "log.parquet"), n)

@@ -72,14 +72,22 @@ def register(sub: argparse._SubParsersAction) -> None:
     t.add_argument(
         "--allow-extrapolation", action="store_true", help="warn instead of refusing when the logs are too short"
     )
+    p.add_argument(
+        "--recorded-residual",
+        action="store_true",
+        help="reflexarm traces: tune on the residual their controller computed online (with the measured noise) "
+        "instead of replaying it (a trace holds true velocities); right when that controller is the one you run",
+    )
     p.add_argument("--out", type=Path, default=Path("results/thresholds"), help="output folder")
     p.add_argument("--no-figure", action="store_true", help="skip the figures")
     p.set_defaults(func=_tune)
 
 
 def _load(args: argparse.Namespace, path: str, robot: Any) -> Any:
-    from reflexarm.tuning.replay import is_trace_file, load_free_motion_log
+    from reflexarm.tuning.replay import is_trace_file, load_free_motion_log, recorded_residual
 
+    if args.recorded_residual:
+        return recorded_residual(path, robot.n)
     if is_trace_file(path):
         return load_free_motion_log(path, robot)
     return load_log_from_args(args, path, robot)
@@ -103,22 +111,29 @@ def _tune(args: argparse.Namespace) -> int:
     )
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ThresholdWarning)
-        proposal = tune_thresholds(
-            list(args.logs),
-            model,
-            settings=settings,
-            rate_per_hour=args.rate,
-            contact_rate_per_hour=args.contact_rate,
-            step_torque=args.step_torque,
-            step_force=args.step_force,
-            method=args.method,
-            gap_s=args.gap,
-            allow_extrapolation=args.allow_extrapolation,
-            load=lambda path: _load(args, str(path), model),
-        )
-    for w in caught:
-        print(f"warning: {w.message}", file=sys.stderr)
+        try:
+            proposal = tune_thresholds(
+                [_load(args, p, model) if args.recorded_residual else p for p in args.logs],
+                model,
+                settings=settings,
+                rate_per_hour=args.rate,
+                contact_rate_per_hour=args.contact_rate,
+                step_torque=args.step_torque,
+                step_force=args.step_force,
+                method=args.method,
+                gap_s=args.gap,
+                allow_extrapolation=args.allow_extrapolation,
+                load=lambda path: _load(args, str(path), model),
+            )
+        finally:  # what the study warned about is printed even when it then fails
+            for w in caught:
+                print(f"warning: {w.message}", file=sys.stderr)
     proposal.notes.extend(str(w.message) for w in caught if str(w.message) not in proposal.notes)
+    if args.recorded_residual:
+        proposal.notes.append(
+            "residuals recorded online by the traces' controllers: --model and the observer options were not applied "
+            "(the delays use --observer-gain)"
+        )
     files = proposal.write(args.out, figure=not args.no_figure)
     print(proposal.report())
     print(f"\nwrote {', '.join(str(f) for f in files.values())}")

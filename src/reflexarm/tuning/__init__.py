@@ -14,6 +14,7 @@ from reflexarm.tuning.replay import (
     ThresholdWarning,
     is_trace_file,
     load_free_motion_log,
+    recorded_residual,
     replay_residual,
 )
 from reflexarm.tuning.study import (
@@ -50,6 +51,7 @@ __all__ = [
     "is_trace_file",
     "load_free_motion_log",
     "record_free_motion_log",
+    "recorded_residual",
     "replay_residual",
     "tune_thresholds",
 ]

@@ -28,6 +28,7 @@ __all__ = [
     "ThresholdWarning",
     "is_trace_file",
     "load_free_motion_log",
+    "recorded_residual",
     "replay_residual",
 ]
 
@@ -218,3 +219,32 @@ def _trace_log(p: Path, robot: RobotModel) -> RobotLog:
         source=p.name,
         notes=("read from a reflexarm trace (true velocities)",),
     )
+
+
+def recorded_residual(path: str | os.PathLike[str], n: int) -> ResidualReplay:
+    """The residual a closed-loop run's controller computed online, read from its trace (``.parquet``).
+
+    It saw the measured signals (with their noise), so it is the right residual to tune on when the run's
+    controller is the one the thresholds are for (its model, k_o, kappa_f, EFC): e.g. ``reflexarm simulate
+    free-motion``, whose trace holds the plant's true velocities, which a replay would lack the noise of.
+
+    Raises:
+        DataError: not a reflexarm trace, or not of an ``n``-joint arm.
+    """
+    import pyarrow.parquet as pq
+
+    p = Path(path)
+    if not is_trace_file(p):
+        raise DataError(
+            f"{p.name}: a recorded residual is read from a reflexarm trace (.parquet); this file is not one"
+        )
+    cols = ["t"] + [f"residual_{j}" for j in range(n)]
+    try:
+        table = pq.read_table(p, columns=cols)
+    except Exception as e:
+        raise DataError(f"{p.name}: not a trace of a {n}-joint robot (columns {cols[1]}..): {e}") from e
+    t = table.column("t").to_numpy()
+    r = np.column_stack([table.column(c).to_numpy() for c in cols[1:]])
+    if t.size < 2:
+        raise DataError(f"{p.name}: a trace needs at least 2 samples; got {t.size}")
+    return ResidualReplay(f"{p.name} (recorded residual)", t, r, float(np.median(np.diff(t))), 0, ())

@@ -248,7 +248,7 @@ def _check_rate(value: float, name: str) -> float:
 
 
 def tune_thresholds(
-    logs: RobotLog | str | os.PathLike[str] | Sequence[RobotLog | str | os.PathLike[str]],
+    logs: RobotLog | str | os.PathLike[str] | Sequence[RobotLog | ResidualReplay | str | os.PathLike[str]],
     robot: RobotModel,
     *,
     settings: ObserverSettings | None = None,
@@ -268,7 +268,8 @@ def tune_thresholds(
     Args:
         logs: one or more free-motion logs of the arm (no contact), pooled: :class:`RobotLog` objects or
             files (read one at a time by :func:`~reflexarm.tuning.load_free_motion_log`, so only their
-            residuals stay in memory).
+            residuals stay in memory), or residuals already computed (:class:`ResidualReplay`, e.g.
+            :func:`~reflexarm.tuning.recorded_residual`), used as they are.
         robot: the controller's model (identified, else the nominal one).
         settings: the observer settings the user runs.
         rate_per_hour: false alarms per hour of the collision level, for the whole arm.
@@ -308,6 +309,9 @@ def tune_thresholds(
     replays = []
     posture: np.ndarray | None = None
     for item in log_list:
+        if isinstance(item, ResidualReplay):
+            replays.append(item)
+            continue
         log = item if isinstance(item, RobotLog) else read(item)
         if posture is None:
             posture = np.median(log.q, axis=0)
