@@ -24,13 +24,17 @@ def stamps_ns(log: RobotLog, start_ns: int = EPOCH_NS) -> list[int]:
 
 
 def write_named_csv(log: RobotLog, path: Path, joint_names: list[str], start_ns: int = EPOCH_NS) -> Path:
-    """ns epoch stamps, ``position_<joint>``/``<joint>/velocity``/``effort_<joint>`` columns, extra columns."""
+    """ns epoch stamps, ``position_<joint>``/``<joint>/velocity``/``effort_<joint>`` columns, extra columns,
+    the wrench (if any) as ``wrench.force.x`` .. ``wrench.torque.z``."""
     cols: dict[str, object] = {"seq": np.arange(len(log)), "timestamp": np.asarray(stamps_ns(log, start_ns))}
     for j, name in enumerate(joint_names):
         cols[f"position_{name}"] = log.q[:, j]
         cols[f"{name}/velocity"] = log.dq[:, j]
         cols[f"effort_{name}"] = log.measured_torque[:, j]
         cols[f"temperature_{name}"] = 40.0 + j
+    if log.wrench is not None:
+        for k, axis in enumerate(("force.x", "force.y", "force.z", "torque.x", "torque.y", "torque.z")):
+            cols[f"wrench.{axis}"] = log.wrench[:, k]
     pd.DataFrame(cols).to_csv(path, index=False, float_format="%.17g")
     return path
 

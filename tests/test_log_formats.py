@@ -1,5 +1,6 @@
 """One identification log exported four ways (plain CSV; ns epoch stamps with joint-named and extra columns;
-MCAP bag; rosbag2 sqlite3 bag) reads to the same samples, identifies to the same model and validates."""
+MCAP bag; rosbag2 sqlite3 bag; each with the wrist wrench) reads to the same samples, identifies to the same
+model and validates."""
 
 from __future__ import annotations
 
@@ -37,23 +38,28 @@ def exports(tmp_path_factory, atlas):
     q, dq, ddq = tr.evaluate(t)
     fr = FrictionParameters.from_model(atlas.friction)
     tau = BatchRegressor(atlas).compute_regressor(q, dq, ddq) @ atlas.inertial_parameters() + fr.compute_torque(dq)
-    plain = save_log(RobotLog(t, q, dq, tau, source="sim"), d / "plain.csv")
+    # a slowly varying wrist wrench [N, Nm], carried through every format; the measured torques hold its
+    # joint torque as eq. (14) removes it (tau_m = model - J^T w), so the data stay consistent
+    wrench = 2.0 * np.sin(2 * np.pi * np.outer(t, [0.3, 0.5, 0.7, 0.2, 0.4, 0.6]) + np.arange(6))
+    tau -= np.stack([atlas.compute_frame_jacobian(qk).T @ wk for qk, wk in zip(q, wrench, strict=True)])
+    plain = save_log(RobotLog(t, q, dq, tau, wrench=wrench, source="sim"), d / "plain.csv")
     log = load_log(plain, n_joints=7)  # what the CSV holds (10 significant digits): the others repeat it
     names = list(atlas.joint_names)
     return {
         "plain": plain,
         "named": write_named_csv(log, d / "named.csv", names),
-        "mcap": write_bag(log, d / "bag.mcap.d", names, storage="mcap"),
-        "sqlite3": write_bag(log, d / "bag.db3.d", names, storage="sqlite3"),
+        "mcap": write_bag(log, d / "bag.mcap.d", names, storage="mcap", wrench_topic="/ft"),
+        "sqlite3": write_bag(log, d / "bag.db3.d", names, storage="sqlite3", wrench_topic="/ft"),
     }
 
 
 def test_the_four_exports_read_to_the_same_samples(exports, atlas):
-    logs = {k: load_log(p, joint_names=atlas.joint_names) for k, p in exports.items()}
+    topic = {"mcap": "/ft", "sqlite3": "/ft"}
+    logs = {k: load_log(p, joint_names=atlas.joint_names, wrench_topic=topic.get(k)) for k, p in exports.items()}
     ref = logs["plain"]
     for k, log in logs.items():
         np.testing.assert_allclose(log.t, ref.t, rtol=0, atol=TIME_ATOL, err_msg=k)
-        for name in ("q", "dq", "tau"):
+        for name in ("q", "dq", "tau", "wrench"):  # the bags' wrench: interpolated at its own stamps
             np.testing.assert_array_equal(getattr(log, name), getattr(ref, name), err_msg=f"{k} {name}")
     assert ref.notes == ()
     named = "\n".join(logs["named"].notes)
@@ -73,13 +79,14 @@ def test_the_four_exports_identify_to_the_same_model_and_validate(exports, tmp_p
     for k, p in exports.items():
         out = tmp_path / k
         args = ["identify", "dynamics", "--log", str(p), "--split", "0.6", "--method", "combined", "--out", str(out)]
-        assert main([*args, "--quiet"]) == 0, k
+        bag_options = ["--wrench-topic", "/ft"] if k in ("mcap", "sqlite3") else []
+        assert main([*args, *bag_options, "--quiet"]) == 0, k
         text = capsys.readouterr().out
         if k != "plain":
             assert "log: " in text, k  # the reader's notes are printed
         models[k] = out / "model_combined.json"
         assert main(["validate", "--model", str(models[k]), "--log", str(p), "--out", str(tmp_path / f"v{k}"),
-                     "--quiet"]) == 0, k  # fmt: skip
+                     *bag_options, "--quiet"]) == 0, k  # fmt: skip
         assert "pooled RMSE:" in capsys.readouterr().out
     ref, _ = read_identified_model(models["plain"])
     ref_val = json.loads((tmp_path / "vplain" / "validate.json").read_text())["validation"]["pooled_rmse"]
