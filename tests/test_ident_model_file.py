@@ -117,3 +117,16 @@ def test_a_cut_arm_is_stored_with_its_base_tip_and_locks_and_reloads_cut(tmp_pat
         assert doc["robot"]["locked"] == {"gripper_left_finger_joint": 0.0, "gripper_right_finger_joint": 0.0}
         model = load_identified_model(tmp_path / "results" / "model.json")
     assert model.cut is not None and model.cut.tip == "tool0" and model.joint_names == robot.joint_names
+
+
+def test_validate_without_robot_options_uses_the_robot_the_model_file_names(saved: Path, tmp_path: Path) -> None:
+    robot = load_robot(saved / "robot" / "ur_like_6dof.urdf", ee_frame=SIX_DOF_TOOL)
+    log = save_log(_exact_log(robot, seed=4), tmp_path / "val.npz")
+    code = main(["validate", "--model", str(saved / "results" / "model.json"), "--log", str(log),
+                 "--out", str(tmp_path / "val"), "--quiet"])  # fmt: skip
+    assert code == 0
+    doc = json.loads((tmp_path / "val" / "validate.json").read_text())
+    assert doc["robot"] == "ur_like_6dof"
+    # exact data of the model's own arm: what is left is the 10 Hz low-pass of the validation states
+    # (0.03 Nm measured, on torques of up to ~50 Nm); a model of another arm would be off by Nm
+    assert doc["validation"]["pooled_rmse"] < 0.1

@@ -307,13 +307,17 @@ def dynamics_study_command(args: argparse.Namespace) -> int:
 
 def validate_command(args: argparse.Namespace) -> int:
     """Score a saved model on ``--log``; ``--closed-loop``: tracking on the plant against the nominal model."""
+    from reflexarm._cli.robot_options import DEFAULT_ROBOT
     from reflexarm.ident import preprocess_log, validate_model
-    from reflexarm.ident.model_file import load_identified_model, read_identified_model
+    from reflexarm.ident.model_file import load_identified_model, load_model_robot, read_identified_model
     from reflexarm.ident.plots import plot_torque_validation
 
     out = out_dir(args)
+    result, doc = read_identified_model(args.model)
     robot = load_robot_arg(args)
-    result, _ = read_identified_model(args.model)
+    if args.robot == DEFAULT_ROBOT and doc.get("robot", {}).get("name") != robot.name:
+        robot = load_model_robot(args.model)  # no --robot: the robot the model file names
+        say(args, f"robot {robot.name!r} from {Path(args.model).name} (give --robot to use another file)")
     identified = load_identified_model(args.model, robot)
     if args.log is None and not args.closed_loop:
         raise ConfigError("give --log FILE to validate on, or --closed-loop to compare tracking in simulation")

@@ -155,6 +155,24 @@ def read_identified_model(path: str | os.PathLike[str]) -> tuple[DynamicsIdentif
     return result, doc
 
 
+def _stored_robot(doc: dict[str, Any], path: str | os.PathLike[str]) -> RobotModel:
+    info = doc.get("robot", {})
+    src = info.get("source")
+    if not src:
+        raise ModelError(f"{Path(path).name}: no robot source stored; pass robot=")
+    cut = {k: info[k] for k in _CUT_KEYS if info.get(k)}
+    return load_robot(
+        resolve_robot_source(src, path), ee_frame=info.get("ee_frame"), sensor_frame=info.get("sensor_frame"), **cut
+    )
+
+
+def load_model_robot(path: str | os.PathLike[str]) -> RobotModel:
+    """The robot a model file was identified for, as its file stores it (the robot file relative to the
+    model file's folder, frames, and base/tip/locked): the nominal model, not the identified one."""
+    _, doc = read_identified_model(path)
+    return _stored_robot(doc, path)
+
+
 def load_identified_model(
     path: str | os.PathLike[str], robot: RobotModel | None = None, *, allow_inconsistent: bool = False
 ) -> RobotModel:
@@ -174,15 +192,8 @@ def load_identified_model(
     """
     result, doc = read_identified_model(path)
     name = Path(path).name
-    info = doc.get("robot", {})
     if robot is None:
-        src = info.get("source")
-        if not src:
-            raise ModelError(f"{name}: no robot source stored; pass robot=")
-        cut = {k: info[k] for k in _CUT_KEYS if info.get(k)}
-        robot = load_robot(
-            resolve_robot_source(src, path), ee_frame=info.get("ee_frame"), sensor_frame=info.get("sensor_frame"), **cut
-        )
+        robot = _stored_robot(doc, path)
     if tuple(robot.joint_names) != tuple(result.joint_names):
         raise ModelError(
             f"{name}: identified for joints {list(result.joint_names)}; robot {robot.name!r} has {robot.joint_names}"
