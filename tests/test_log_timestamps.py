@@ -47,6 +47,8 @@ def test_integer_stamps_in_each_unit_from_zero_or_the_epoch(tmp_path, unit, scal
     assert f"log.csv: time stamps (t): in {unit} (inferred" in note
     assert f"made relative to the first sample (subtracted {start} {unit}" in note
     assert ("a Unix epoch time" in note) == epoch
+    # the failure with ns stamps: "cutoff must be below the Nyquist frequency 5e-07 Hz"
+    assert preprocess_log(back).period == pytest.approx(1e-3)
 
 
 def test_epoch_seconds_as_floats(tmp_path):
