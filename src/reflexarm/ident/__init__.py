@@ -1,6 +1,8 @@
 """Learning the model (Sec. II-D): logs in, single-joint friction, base parameters, Fourier excitation,
 weighted least squares (combined and sequential) with the file's armature and joint springs as known
-terms, validation, and the identified model written back.
+terms, validation, and what the user takes away: the identified model (model file, and a copy of the robot
+file with the identified inertias and friction, :func:`write_identified_robot`) and the excitation as a
+sampled trajectory (:func:`sample_excitation`, :func:`write_excitation_csv`).
 
 Never imports :mod:`reflexarm.control`; the experiments that run the plant with the controller live in
 :mod:`reflexarm.experiments.identification`. Figures are in :mod:`reflexarm.ident.plots`.
@@ -19,6 +21,14 @@ from reflexarm.ident.estimation import (
     validate_model,
 )
 from reflexarm.ident.excitation import ExcitationDesign, FourierTrajectory, optimize_excitation
+from reflexarm.ident.excitation_export import (
+    ExcitationLimitError,
+    ExcitationMarginWarning,
+    SampledExcitation,
+    sample_excitation,
+    write_excitation_csv,
+)
+from reflexarm.ident.friction_parameters import ImplausibleFrictionWarning, check_friction_plausibility
 from reflexarm.ident.joint_friction import (
     ConstantVelocityTrajectory,
     FrictionFit,
@@ -32,8 +42,14 @@ from reflexarm.ident.joint_friction import (
 )
 from reflexarm.ident.known_terms import KnownJointTerms
 from reflexarm.ident.logs import DEFAULT_CUTOFF_HZ, LogRepairWarning, RobotLog, load_log, preprocess_log, save_log
-from reflexarm.ident.model_file import load_identified_model, read_identified_model, save_identified_model
+from reflexarm.ident.model_file import (
+    load_identified_model,
+    load_model_robot,
+    read_identified_model,
+    save_identified_model,
+)
 from reflexarm.ident.regressor import BatchRegressor, compute_friction_regressor
+from reflexarm.ident.write_back import with_consistent_links, write_identified_robot
 
 __all__ = [
     "DEFAULT_CUTOFF_HZ",
@@ -43,16 +59,21 @@ __all__ = [
     "ConstantVelocityTrajectory",
     "DynamicsIdentification",
     "ExcitationDesign",
+    "ExcitationLimitError",
+    "ExcitationMarginWarning",
     "FourierTrajectory",
     "FrictionFit",
     "FrictionParameters",
     "FrictionPoint",
     "IllConditionedWarning",
+    "ImplausibleFrictionWarning",
     "KnownJointTerms",
     "LogRepairWarning",
     "PhysicalConsistencyWarning",
     "RobotLog",
+    "SampledExcitation",
     "TorqueValidation",
+    "check_friction_plausibility",
     "compute_base_parameters",
     "compute_friction_regressor",
     "fit_friction",
@@ -62,14 +83,19 @@ __all__ = [
     "identify_joint_friction",
     "load_identified_model",
     "load_log",
+    "load_model_robot",
     "mass_matrix_margin",
     "optimize_excitation",
     "plan_friction_experiment",
     "preprocess_log",
     "project_physically_consistent",
     "read_identified_model",
+    "sample_excitation",
     "save_identified_model",
     "save_log",
     "segment_constant_velocity",
     "validate_model",
+    "with_consistent_links",
+    "write_excitation_csv",
+    "write_identified_robot",
 ]
