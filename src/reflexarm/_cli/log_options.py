@@ -55,10 +55,10 @@ def load_log_from_args(args: argparse.Namespace, path: str, robot: Any) -> Any:
             joint_topic=getattr(args, "joint_topic", None),
             wrench_topic=getattr(args, "wrench_topic", None),
         )
-    warned = {str(w.message) for w in caught}
+    cores = [str(w.message).split(": ", 1)[-1] for w in caught]  # a warning's text after "file: "
     for note in log.notes:
-        print(("warning: " if note in warned else "log: ") + note)
-    for w in caught:  # warnings that are not notes (none today) are passed on
-        if str(w.message) not in log.notes:
+        print(("warning: " if any(c in note for c in cores) else "log: ") + note)
+    for w, core in zip(caught, cores, strict=True):  # warnings that are not in the notes are passed on
+        if not any(core in note for note in log.notes):
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     return log
