@@ -112,7 +112,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "full simulated study (friction runs, optimized excitation, validation) on the built-in arm",
     )
     robot_args(d)
-    d.add_argument("--log", action="append", default=[], help="identification log (.csv/.parquet/.npz); repeatable")
+    d.add_argument(
+        "--log",
+        action="append",
+        default=[],
+        help="identification log (.csv/.parquet/.npz, or a ROS 2 bag: .db3, .mcap or its folder); repeatable",
+    )
     d.add_argument("--validation-log", default=None, help="a different log to validate on")
     d.add_argument(
         "--split",
@@ -168,7 +173,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     robot_args(v)
     v.add_argument("--model", required=True, help="model.json written by 'identify dynamics'")
-    v.add_argument("--log", default=None, help="validation log (.csv/.parquet/.npz)")
+    v.add_argument("--log", default=None, help="validation log (.csv/.parquet/.npz or a ROS 2 bag)")
     v.add_argument("--cutoff", type=float, default=10.0, help="low-pass cutoff for the states [Hz] (default 10)")
     v.add_argument("--closed-loop", action="store_true", help="compare tracking on the simulated plant")
     v.add_argument("--kappa-f", type=int, choices=(0, 1), default=1, help="friction compensation in (2) (closed loop)")
