@@ -68,8 +68,8 @@ def robot_options(arm: str, folder: Path) -> list[str]:
 def load_from_options(options: list[str], source: str | None = None, ee_frame: str | None = None) -> Any:
     """The RobotModel the options load (``source`` replaces the robot file, e.g. by a written copy)."""
     flags = dict(zip(options[::2], options[1::2], strict=True))
-    kwargs = {key: flags[flag] for key, flag in (("ee_frame", "--ee-frame"), ("base", "--base"), ("tip", "--tip"))
-              if flag in flags}  # fmt: skip
+    named = (("ee_frame", "--ee-frame"), ("base", "--base"), ("tip", "--tip"))
+    kwargs: dict[str, Any] = {key: flags[flag] for key, flag in named if flag in flags}
     if ee_frame is not None:
         kwargs["ee_frame"] = ee_frame
     with warnings.catch_warnings():
@@ -160,6 +160,7 @@ def nominal_rmse(log_path: Path, robot: Any) -> float:
     raw = load_log(log_path, joint_names=robot.joint_names)
     states = preprocess_log(raw, cutoff_hz=10.0)
     nominal = perturb_model(robot, 0.1, seed=0)
+    assert states.ddq is not None  # preprocess_log differentiates dq
     idx = np.arange(0, states.t.size, 10)
     pred = np.array([nominal.compute_motor_torque(states.q[i], states.dq[i], states.ddq[i]) for i in idx])
     meas = np.column_stack([np.interp(states.t[idx], raw.t, raw.tau[:, j]) for j in range(robot.n)])
