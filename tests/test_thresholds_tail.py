@@ -116,3 +116,18 @@ def test_count_alarms_merges_joints_and_close_excursions():
     assert res["alarms_per_joint"] == {"1": 1, "2": 2}
     np.testing.assert_allclose(res["alarm_times_s"], [1.0, 8.0], atol=dt)
     assert count_alarms(r, [6.0, 6.0], dt, gap_s=0.5)["alarms"] == 0
+
+
+def test_the_lowest_level_the_logs_cross_at_most_k_times():
+    from reflexarm.tuning._log_check import count_crossings, lowest_level_crossed_at_most
+
+    dt = 1e-3
+    x = np.zeros(20_000)
+    for k in range(10):  # separate excursions of heights 1..10, 2 s apart
+        x[k * 2000 + 500 : k * 2000 + 600] = k + 1.0
+    fit = fit_tail(np.r_[x, np.random.default_rng(0).exponential(0.1, 200_000)], dt, gap_s=0.1)
+    assert count_crossings([x], 6.5, dt, fit)[0] == 4  # 7, 8, 9, 10
+    level = lowest_level_crossed_at_most([x], 2.0, dt, fit, allowed=3)
+    # heights 8, 9, 10 may stay above it: the level lies in [7, 8); the grid's step is 0.5 % of (10 - 2)
+    assert 7.0 <= level < 7.0 + 0.005 * 8.0 + 1e-9
+    assert count_crossings([x], level, dt, fit)[0] == 3

@@ -42,6 +42,7 @@ from scipy.stats import poisson
 from reflexarm.errors import ConfigError, DataError
 from reflexarm.ident.robot_log import RobotLog
 from reflexarm.robots.robot_model import RobotModel
+from reflexarm.tuning._log_check import count_crossings, lowest_level_crossed_at_most
 from reflexarm.tuning.delays import detection_delay, force_step_delays
 from reflexarm.tuning.replay import (
     ObserverSettings,
@@ -50,7 +51,7 @@ from reflexarm.tuning.replay import (
     load_free_motion_log,
     replay_residual,
 )
-from reflexarm.tuning.tail import TailFit, cluster_maxima, fit_tail
+from reflexarm.tuning.tail import TailFit, fit_tail
 
 __all__ = [
     "DEFAULT_CONTACT_RATE",
@@ -234,13 +235,6 @@ class ThresholdProposal:
         return files
 
 
-def _check_against_logs(parts: list[np.ndarray], level: float, dt: float, fit: TailFit) -> tuple[int, float]:
-    """(alarms at ``level`` counted in the logs, alarms the fitted rate at ``level`` predicts over their span)."""
-    gap = int(math.ceil(fit.gap_s / dt - 1e-9))
-    counted = sum(cluster_maxima(p, level, gap).size for p in parts)
-    return int(counted), float(fit.rate(level) * fit.duration_h)
-
-
 def _check_rate(value: float, name: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
         raise ConfigError(f"{name} must be a positive number of false alarms per hour; got {value!r}")
@@ -348,19 +342,28 @@ def tune_thresholds(
         coll, cont = fit.level(rate / n), fit.level(contact_rate / n)
         delays: dict[str, float | None] = {}
         in_logs: dict[str, float] = {}
-        for name, zeta in (("collision", coll), ("contact", cont)):
-            delays[f"{name}_delay_s"] = detection_delay(zeta, step_torque, time_constant)
-            delays[f"{name}_delay_unfavourable_s"] = detection_delay(zeta, step_torque, time_constant, -q95)
-            counted, expected = _check_against_logs(parts, zeta, dt, fit)
-            in_logs[f"{name}_alarms_in_logs"], in_logs[f"{name}_alarms_expected"] = counted, expected
+        levels = {"collision": coll, "contact": cont}
+        for name, zeta in list(levels.items()):
+            counted, expected = count_crossings(parts, zeta, dt, fit)
             if counted > poisson.ppf(CONSISTENCY_QUANTILE, expected):
+                raised = lowest_level_crossed_at_most(
+                    parts, zeta, dt, fit, int(poisson.ppf(CONSISTENCY_QUANTILE, expected))
+                )
                 msg = (
                     f"joint {j + 1} ({robot.joint_names[j]}): the logs cross the {name} level {zeta:.4g} Nm {counted} "
-                    f"times where its rate predicts {expected:.2g}: the fitted tail misses the largest excursions "
-                    "(record more free motion, or try method 'exponential')"
+                    f"times where its rate predicts {expected:.2g}: the fitted tail misses the largest excursions; "
+                    f"raised to {raised:.4g} Nm, the lowest level the logs cross no more often than that allows "
+                    "(record more free motion for a fitted level)"
                 )
                 warnings.warn(msg, ThresholdWarning, stacklevel=2)
                 notes.append(msg)
+                in_logs[f"{name}_fitted_Nm"] = zeta
+                levels[name] = zeta = raised
+                counted = count_crossings(parts, zeta, dt, fit)[0]
+            in_logs[f"{name}_alarms_in_logs"], in_logs[f"{name}_alarms_expected"] = counted, expected
+            delays[f"{name}_delay_s"] = detection_delay(zeta, step_torque, time_constant)
+            delays[f"{name}_delay_unfavourable_s"] = detection_delay(zeta, step_torque, time_constant, -q95)
+        coll, cont = levels["collision"], levels["contact"]
         joints.append(
             JointThresholds(
                 joint=j,
