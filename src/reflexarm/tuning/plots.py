@@ -93,7 +93,7 @@ def plot_tails(proposal: ThresholdProposal, path: str | Path) -> Path:
         ax.axvspan(*jt.collision_interval, color="tab:red", alpha=0.15)
         ax.set_title(f"joint {j + 1} ({jt.name})", fontsize=8)
         ax.set_xlabel("level [Nm]", fontsize=8)
-        ax.set_ylabel("alarms / h", fontsize=8)
+        ax.set_ylabel("alarms / h (0 at 1e-3)", fontsize=8)
         ax.legend(fontsize=6)
     for k in range(n, rows * cols):
         axes[k // cols, k % cols].axis("off")
