@@ -92,6 +92,11 @@ def test_identify_dynamics_from_a_log_writes_a_robot_copy_with_the_same_model(tm
                      "--method", "combined", "--quiet", "--out", str(out)])  # fmt: skip
     assert code == 0
     assert "robot_combined.urdf" in capsys.readouterr().out
+    copy = json.loads((out / "identification.json").read_text())["methods"]["combined"]["robot_copy"]
+    assert copy["file"] == "robot_combined.urdf"
+    # how the links were chosen: realising beta_b near the file's inertias, or (here, from filtered data
+    # whose nearest realisation has a link with no physical inertia) the projection, with its cost
+    assert copy["notes"][0].startswith(("link parameters realising", "projected onto physically consistent"))
     from_model_file = load_identified_model(out / "model_combined.json")
     from_copy = load_robot(out / "robot_combined.urdf", ee_frame=SIX_DOF_TOOL)
     rng = np.random.default_rng(2)

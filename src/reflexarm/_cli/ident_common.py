@@ -107,28 +107,32 @@ def for_controller(result: Any, robot: Any, nominal: Any, args: argparse.Namespa
     return consistent
 
 
-def write_robot_copy(result: Any, robot: Any, out: Path, args: argparse.Namespace) -> str | None:
+def write_robot_copy(result: Any, robot: Any, out: Path, args: argparse.Namespace) -> tuple[str | None, list[str]]:
     """Write ``robot_<method>.urdf|.xml`` (the identified inertias and friction in a copy of the robot file).
 
-    Returns the file name, or None (with the reason printed) when no copy can be written: an arm cut out
-    of a bigger file, a robot without a file, or ``--no-projection`` (the file needs consistent links).
+    Returns the file name and the notes on what was written (how the links were chosen, what the data
+    cannot split, clipped friction, lumped links), or None and the reason when no copy can be written (a
+    robot without a file, links the file cannot hold, ``--no-projection``: the file needs consistent links).
     """
     from reflexarm.errors import ModelError
     from reflexarm.ident.write_back import write_identified_robot
 
     if getattr(args, "no_projection", False):
-        print(f"{result.method}: no robot file copy with --no-projection (a robot file needs consistent links)")
-        return None
+        why = "no robot file copy with --no-projection (a robot file needs physically consistent links)"
+        print(f"{result.method}: {why}")
+        return None, [why]
     source = getattr(robot, "source", None)
     suffix = ".urdf" if source is not None and Path(source).suffix.lower() == ".urdf" else ".xml"
     try:
-        path, notes = write_identified_robot(result, robot, out / f"robot_{result.method}{suffix}", threads=None)
+        path, notes = write_identified_robot(
+            result, robot, out / f"robot_{result.method}{suffix}", threads=None
+        )  # the command sets --threads
     except ModelError as e:
         print(f"{result.method}: no robot file copy written: {e}")
-        return None
-    for note in notes[1:]:  # the first says how the links were chosen, printed by for_controller if it matters
+        return None, [f"not written: {e}"]
+    for note in notes:
         say(args, f"{path.name}: {note}")
-    return path.name
+    return path.name, notes
 
 
 def export_excitation_csv(args: argparse.Namespace, robot: Any, design: Any) -> Path:

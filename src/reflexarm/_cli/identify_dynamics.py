@@ -124,13 +124,15 @@ def _identify_from_logs(args: argparse.Namespace) -> int:
         results[m] = for_controller(estimate, robot, robot, args)
     # what can still fail on the logs (validation times against the states) runs before anything is written
     vals = {} if val_raw is None else {m: validate_model(r, robot, val_raw, states=states) for m, r in results.items()}
-    copies = []
+    copies, copy_notes = [], {}
     for m, r in results.items():
         save_identified_model(r, robot, out / f"model_{m}.json")
-        copies.append(write_robot_copy(r, robot, out, args))
+        name, copy_notes[m] = write_robot_copy(r, robot, out, args)
+        copies.append(name)
     summary: dict[str, Any] = {"robot": robot.name, "n_base": base.n_base, "methods": {}}
-    for m, r in results.items():
+    for (m, r), name in zip(results.items(), copies, strict=True):
         summary["methods"][m] = {
+            "robot_copy": {"file": name, "notes": copy_notes[m]},
             "condition_number": r.condition_number,
             "residual_rms": r.residual_rms,
             "friction": r.friction.to_dict(),
@@ -259,7 +261,7 @@ def dynamics_study_command(args: argparse.Namespace) -> int:
         save_identified_model(
             r, robot, out / f"model_{m}.json", extra={"scenario": args.scenario, "min_speed": st.min_speed}
         )
-        copies.append(write_robot_copy(r, st.nominal, out, args))
+        copies.append(write_robot_copy(r, st.nominal, out, args)[0])
     save_log(st.validation_raw, out / "validation_log.npz")
     write_json(out / "excitation.json", {"robot": robot.name, **st.excitation.to_dict()})
     write_json(

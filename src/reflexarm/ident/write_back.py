@@ -66,6 +66,10 @@ def _links_consistent(pi: np.ndarray) -> bool:
     return True
 
 
+#: How the notes of :func:`with_consistent_links` start when beta_b is realised without a projection.
+_NEAREST = "link parameters"
+
+
 def with_consistent_links(
     result: DynamicsIdentification, robot: RobotModel, *, threads: int | None = DEFAULT_BLAS_THREADS
 ) -> tuple[DynamicsIdentification, str]:
@@ -82,13 +86,15 @@ def with_consistent_links(
     fixed = locked_links(robot).parameters if robot.source is not None else None
     own = np.zeros(10 * robot.n) if fixed is None else fixed
     if result.physical_parameters is not None and _links_consistent(result.physical_parameters - own):
-        return result, "the identification's physically consistent link parameters (projection of the estimate)"
+        said = [n for n in result.notes if n.startswith((_NEAREST, "projected onto physically consistent"))]
+        return result, said[-1] if said else "the identification's physically consistent link parameters"
     pi = result.standard_parameters(robot.inertial_parameters())
     if result.physical_parameters is None and _links_consistent(pi - own):
-        return replace(result, physical_parameters=pi), (
-            "the link parameters realising the identified base parameters nearest to the file's own inertias "
-            "(every link physically consistent); combinations the data cannot split keep the file's split"
+        how = (
+            f"{_NEAREST} realising the identified base parameters nearest to the file's own inertias (every link "
+            "physically consistent); combinations the data cannot split keep the file's split"
         )
+        return replace(result, physical_parameters=pi, notes=result.notes + (how,)), how
     projected = project_physically_consistent(result, robot, threads=threads, fixed_parameters=fixed)
     return projected, (
         "the nearest physically consistent link parameters (the realisation nearest to the file's inertias has a "
