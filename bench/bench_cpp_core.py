@@ -1,9 +1,15 @@
-"""The C++ tick (``reflexarm._core``) called from Python against the bare Pinocchio calls it makes, from Python.
+"""The tick against its four bare Pinocchio calls, from Python and inside C++, ratios in one run (issue 10).
 
-Three things are timed in the same process on the same states, interleaved round by round so that the load
-of the machine hits them alike: ``core.update`` (the whole tick in C++, one call), the four (five with the
-wrist-wrench term) Pinocchio calls of a tick made from Python and nothing else, and today's
-``Controller.step``. Printed: medians per call and the ratios (issue 10 asks tick/floor <= 1.0).
+Timed in the same process on the same states, interleaved round by round so that the load of the machine hits
+them alike:
+
+- from Python: ``Controller.step`` (the whole tick: one call into the C++ core, the Command built), the four
+  (five with the wrist-wrench term, EFC) Pinocchio calls of a tick made from Python and nothing else, and the
+  core's bare ``update`` (no Command);
+- inside C++ (``reflexarm._core.time_tick_in_cpp``): ``reflexarm::Controller::update`` and the same Pinocchio
+  calls made from C++, alternating which goes first.
+
+Goals: Controller.step / calls from Python <= 1.0; update / calls inside C++ <= 1.5.
 
     python bench/bench_cpp_core.py [--rounds 7]
 """
@@ -11,15 +17,16 @@ wrist-wrench term) Pinocchio calls of a tick made from Python and nothing else, 
 from __future__ import annotations
 
 import argparse
-import importlib
 import time
 from collections.abc import Callable
 
 import numpy as np
 import pinocchio as pin
 
+import reflexarm._core as core
 from reflexarm import Measurement, Reference, load_robot
 from reflexarm.control import Controller
+from reflexarm.control._setup import core_params
 
 N_STATES = 1000
 
@@ -42,37 +49,23 @@ def make_states(robot, seed: int = 0) -> list[tuple]:
     return out
 
 
-def per_call(fn: Callable[[tuple], object], states: list[tuple], reset: Callable[[], None]) -> float:
-    """Median wall time of one call over a pass of the states [s]."""
+def per_call(fn: Callable[..., object], args: list[tuple], reset: Callable[[], None]) -> float:
+    """Median wall time of one call ``fn(*a)`` over a pass of the argument tuples [s]."""
     reset()
     clock = time.perf_counter
-    ts = np.empty(len(states))
-    for i, s in enumerate(states):
+    ts = np.empty(len(args))
+    for i, a in enumerate(args):
         t0 = clock()
-        fn(s)
+        fn(*a)
         ts[i] = clock() - t0
     return float(np.median(ts))
 
 
-def make_core(robot, efc: bool):
-    core = importlib.import_module("reflexarm._core")  # built by make install (scikit-build-core)
-
-    p = core.ControllerParams()
-    p.kappa_f = p.kappa_eps = 1
-    p.kappa_ext = int(efc)
-    p.friction_coulomb, p.friction_viscous = robot.friction.coulomb.copy(), robot.friction.viscous.copy()
-    p.friction_velocity_band = robot.friction.velocity_band
-    p.sensor_frame_id = robot.sensor_frame_id
-    ctrl = core.Controller(robot.pin_model.saveToString(), p)
-    update = ctrl.update
-
-    def tick(s: tuple) -> None:
-        update(*s)
-
-    return tick, ctrl.reset
+def make_controller(robot, efc: bool) -> Controller:
+    return Controller(robot, kappa_f=1, kappa_eps=1, kappa_ext=int(efc), reaction="none")
 
 
-def make_floor(robot, efc: bool):
+def make_floor(robot, efc: bool) -> Callable[..., None]:
     """The Pinocchio calls of one tick, made from Python, and nothing else."""
     model = robot.pin_model.copy()
     d_g, d_c, d_j = model.createData(), model.createData(), model.createData()
@@ -82,8 +75,7 @@ def make_floor(robot, efc: bool):
     zeros = np.zeros(robot.n)
     fid = robot.sensor_frame_id
 
-    def floor(s: tuple) -> None:
-        q, dq, q_d, ddq_d = s[1], s[2], s[6], s[8]
+    def floor(t, q, dq, tau_m, wrench, gravity, q_d, dq_d, ddq_d) -> None:  # type: ignore[no-untyped-def]
         pin.computeGeneralizedGravity(model, d_g, q)
         pin.computeCoriolisMatrix(model, d_c, q, dq)
         pin.rnea(model0, d_p, q, zeros, dq)
@@ -91,39 +83,61 @@ def make_floor(robot, efc: bool):
         if efc:
             pin.computeFrameJacobian(model, d_j, q, fid, pin.LOCAL)
 
-    return floor, lambda: None
+    return floor
 
 
-def make_python(robot, efc: bool):
-    ctrl = Controller(robot, kappa_f=1, kappa_eps=1, kappa_ext=int(efc))
+def in_cpp(robot, efc: bool, states: list[tuple], rounds: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per-call times [s] of the tick and of its Pinocchio calls, both inside C++."""
+    ctrl = make_controller(robot, efc)
+    cols = list(zip(*states, strict=True))
+    t = np.array(cols[0])
+    arrays = [np.ascontiguousarray(np.array(c)) for c in cols[1:]]
+    tick, calls, faults = core.time_tick_in_cpp(robot.pin_model.saveToString(), core_params(ctrl, core), t,
+                                                *arrays, rounds)  # fmt: skip
+    assert faults == 0, f"{faults} ticks faulted: the timing would not be of the tick"
+    return np.asarray(tick), np.asarray(calls)
 
-    def step(s: tuple) -> None:
-        ctrl.step(Measurement(*s[:6]), Reference(*s[6:]))
 
-    return step, ctrl.reset
-
-
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--rounds", type=int, default=7)
-    args = parser.parse_args()
+def main(rounds: int = 7) -> dict[str, float]:
     robot = load_robot("atlas_v5_left_arm")
     states = make_states(robot)
-    print(f"{robot.name}, n={robot.n}, {N_STATES} states x {args.rounds} rounds (medians of per-round medians)")
-    head = ("configuration", "core.update", "pin floor", "Controller", "core/floor", "core/Ctrl")
-    print(f"{head[0]:<14}{head[1]:>13}{head[2]:>12}{head[3]:>13}{head[4]:>12}{head[5]:>11}")
+    print(f"{robot.name}, n={robot.n}, {N_STATES} states x {rounds} rounds (medians of per-round medians)")
+    print(f"{'':14}{'---------------- from Python ----------------':>47}{'------- inside C++ -------':>32}")
+    head = ("configuration", "step", "update", "calls", "step/calls", "update", "calls", "update/calls")
+    print(f"{head[0]:<14}{head[1]:>10}{head[2]:>10}{head[3]:>10}{head[4]:>12}{head[5]:>10}{head[6]:>10}{head[7]:>14}")
+    results: dict[str, float] = {}
     for efc in (False, True):
-        runs = {"core": make_core(robot, efc), "floor": make_floor(robot, efc), "py": make_python(robot, efc)}
-        for fn, reset in runs.values():  # warm-up pass
-            per_call(fn, states[:100], reset)
+        step_ctrl, core_ctrl = make_controller(robot, efc), make_controller(robot, efc)
+        # the caller's Measurement and Reference exist before the tick, as in a control loop
+        prepared = [(Measurement(*s[:6]), Reference(*s[6:])) for s in states]
+        runs = {
+            "step": (step_ctrl.step, step_ctrl.reset, prepared),
+            "update": (core_ctrl._core.update, core_ctrl.reset, states),
+            "calls": (make_floor(robot, efc), lambda: None, states),
+        }
+        for fn, reset, seq in runs.values():  # warm-up pass
+            per_call(fn, seq[:100], reset)
         med: dict[str, list[float]] = {k: [] for k in runs}
-        for _ in range(args.rounds):
-            for key, (fn, reset) in runs.items():
-                med[key].append(per_call(fn, states, reset))
-        c, f, p = (float(np.median(med[k])) * 1e6 for k in ("core", "floor", "py"))
+        cpp_tick: list[float] = []
+        cpp_calls: list[float] = []
+        for _ in range(rounds):
+            for key, (fn, reset, seq) in runs.items():
+                med[key].append(per_call(fn, seq, reset))
+            tick, calls = in_cpp(robot, efc, states, 1)
+            cpp_tick.append(float(np.median(tick)))
+            cpp_calls.append(float(np.median(calls)))
+        st, up, ca = (float(np.median(med[k])) * 1e6 for k in ("step", "update", "calls"))
+        ct, cc = float(np.median(cpp_tick)) * 1e6, float(np.median(cpp_calls)) * 1e6
         name = "DC+EFC" if efc else "DC"
-        print(f"{name:<14}{c:>10.2f} us{f:>9.2f} us{p:>10.2f} us{c / f:>12.2f}{c / p:>11.2f}")
+        print(f"{name:<14}{st:>7.2f} us{up:>7.2f} us{ca:>7.2f} us{st / ca:>12.2f}{ct:>7.2f} us{cc:>7.2f} us{ct / cc:>14.2f}")
+        key = "efc" if efc else "dc"
+        results.update({f"step_us_{key}": st, f"update_us_{key}": up, f"py_calls_us_{key}": ca,
+                        f"step_over_calls_{key}": st / ca, f"cpp_update_us_{key}": ct, f"cpp_calls_us_{key}": cc,
+                        f"cpp_update_over_calls_{key}": ct / cc})  # fmt: skip
+    return results
 
 
 if __name__ == "__main__":
-    main()
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rounds", type=int, default=7)
+    main(parser.parse_args().rounds)

@@ -22,6 +22,8 @@
 namespace nb = nanobind;
 using namespace nb::literals;
 
+void registerTiming(nb::module_ & m); // timing.cpp: time_tick_in_cpp, for bench/bench_cpp_core.py
+
 namespace
 {
   using Map = Eigen::Map<const Eigen::VectorXd>;
@@ -123,6 +125,7 @@ namespace
 NB_MODULE(_core, m)
 {
   m.doc() = "reflexarm's real-time core (C++): the control tick of eqs. (2), (4)-(6), (9)-(13)";
+  registerTiming(m);
   m.attr("SAT_SHIFT") = kSatShift;
 
   nb::class_<reflexarm::InputBounds>(m, "InputBounds")

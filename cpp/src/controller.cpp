@@ -22,6 +22,7 @@ namespace reflexarm
   FaultCode Controller::update(
     double t, double period, const State & s, const Reference & r, Command & cmd) noexcept
   {
+    damping_updated_ = false;
     if (!commandFits(cmd))
       return notReady(cmd);
     FaultCode code = checkPeriod(period);
@@ -152,6 +153,7 @@ namespace reflexarm
     has_last_q_ = true;
     if (update_damping)
       D_ = D_new_;
+    damping_updated_ = update_damping;
   }
 
   double Controller::advanceClock(double t, double period) noexcept

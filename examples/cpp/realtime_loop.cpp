@@ -3,19 +3,30 @@
 // What a ros2_control controller would do, in one file: configure() once (on_configure), reset() when
 // the loop starts (on_activate), update() every period (update). The plant is MuJoCo through its C API
 // (two 0.5 ms steps per tick, joint friction of the file); a 60 N push on the hand from t = 1.5 s is
-// detected and answered by gravity compensation (13). Prints the median/p99/max time of update() and
-// fails if update() allocated on the heap.
+// detected and answered by gravity compensation (13). Prints the median/p99/max time of update() (all ticks,
+// and split into the ticks that recompute the modal damping and the others) and fails if update() allocated on
+// the heap.
 //
-//   realtime_loop [robot.xml] [seconds] [--busy]     (--busy: no sleep between ticks, for comparison)
+//   realtime_loop [robot.xml] [seconds] [options]
+//     --busy        no wait between ticks (and time the bare Pinocchio calls for the ratio update()/calls)
+//     --spin        wait for the next period by spinning on the clock instead of sleeping
+//     --pin CPU     run on this CPU only (sched_setaffinity)
+//     --mlock       lock the process's memory (mlockall), no page faults in the loop
+//     --fifo PRIO   real-time scheduling (SCHED_FIFO, needs the privilege)
+//     --warmup N    N untimed ticks on the initial state before the loop (then reset(), as on_activate)
 #include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <ctime>
+#include <cstring>
 #include <new>
 #include <string>
 #include <vector>
+
+#include <sched.h>
+#include <sys/mman.h>
 
 #include <mujoco/mujoco.h>
 
@@ -57,12 +68,110 @@ static double nowSeconds()
   return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
 }
 
+struct Options
+{
+  std::string path = REFLEXARM_DEFAULT_ROBOT;
+  double seconds = 3.0;
+  bool busy = false, spin = false, mlock = false;
+  int pin = -1, fifo = 0;
+  long warmup = 0;
+};
+
+static Options parseOptions(int argc, char ** argv)
+{
+  Options o;
+  int positional = 0;
+  for (int i = 1; i < argc; ++i)
+  {
+    const std::string a = argv[i];
+    const bool has_value = i + 1 < argc;
+    if (a == "--busy")
+      o.busy = true;
+    else if (a == "--spin")
+      o.spin = true;
+    else if (a == "--mlock")
+      o.mlock = true;
+    else if (a == "--pin" && has_value)
+      o.pin = std::atoi(argv[++i]);
+    else if (a == "--fifo" && has_value)
+      o.fifo = std::atoi(argv[++i]);
+    else if (a == "--warmup" && has_value)
+      o.warmup = std::atol(argv[++i]);
+    else if (positional == 0 && a.rfind("--", 0) != 0)
+    {
+      if (!a.empty())
+        o.path = a;
+      ++positional;
+    }
+    else if (positional == 1 && a.rfind("--", 0) != 0)
+    {
+      o.seconds = std::atof(a.c_str());
+      ++positional;
+    }
+    else
+    {
+      std::fprintf(stderr, "unknown argument '%s'\n", a.c_str());
+      std::exit(2);
+    }
+  }
+  return o;
+}
+
+/// The settings of a real-time thread that the options ask for; prints what each did.
+static void applyRealTimeSettings(const Options & o)
+{
+  if (o.pin >= 0)
+  {
+    cpu_set_t set;
+    CPU_ZERO(&set);
+    CPU_SET(o.pin, &set);
+    const int rc = sched_setaffinity(0, sizeof(set), &set);
+    std::printf("pinned to CPU %d: %s\n", o.pin, rc == 0 ? "yes" : std::strerror(errno));
+  }
+  if (o.mlock)
+  {
+    const int rc = mlockall(MCL_CURRENT | MCL_FUTURE);
+    std::printf("mlockall: %s\n", rc == 0 ? "yes" : std::strerror(errno));
+  }
+  if (o.fifo > 0)
+  {
+    sched_param sp{};
+    sp.sched_priority = o.fifo;
+    const int rc = sched_setscheduler(0, SCHED_FIFO, &sp);
+    std::printf("SCHED_FIFO priority %d: %s\n", o.fifo, rc == 0 ? "yes" : std::strerror(errno));
+  }
+}
+
+struct Stats
+{
+  double median = 0.0, p99 = 0.0, max = 0.0; // [us]
+  std::size_t count = 0;
+};
+
+static Stats stats(std::vector<double> v)
+{
+  Stats s;
+  s.count = v.size();
+  if (v.empty())
+    return s;
+  std::sort(v.begin(), v.end());
+  auto at = [&](double p) {
+    return 1e6 * v[std::min(v.size() - 1, static_cast<std::size_t>(p * static_cast<double>(v.size())))];
+  };
+  s.median = at(0.5);
+  s.p99 = at(0.99);
+  s.max = 1e6 * v.back();
+  return s;
+}
+
 int main(int argc, char ** argv)
 {
-  const std::string path = argc > 1 && argv[1][0] != '\0' ? argv[1] : REFLEXARM_DEFAULT_ROBOT;
-  const double seconds = argc > 2 ? std::atof(argv[2]) : 3.0;
-  const bool busy = argc > 3 && std::string(argv[3]) == "--busy";
+  const Options opt = parseOptions(argc, argv);
+  const std::string & path = opt.path;
+  const double seconds = opt.seconds;
+  const bool busy = opt.busy;
   constexpr double dt = 1e-3;
+  applyRealTimeSettings(opt);
 
   // ---------------------------------------------------------------- the controller (on_configure)
   const pinocchio::Model model = loadModel(path);
@@ -109,7 +218,9 @@ int main(int argc, char ** argv)
   Eigen::Matrix<double, 6, 1> wrench = Eigen::Matrix<double, 6, 1>::Zero();
   Eigen::Vector3d gravity(m->opt.gravity[0], m->opt.gravity[1], m->opt.gravity[2]);
   const long ticks = static_cast<long>(seconds / dt);
-  std::vector<double> durations(static_cast<std::size_t>(ticks)), floor_durations;
+  std::vector<double> durations(static_cast<std::size_t>(ticks)), floor_durations, damping_ticks, other_ticks;
+  damping_ticks.reserve(static_cast<std::size_t>(ticks));
+  other_ticks.reserve(static_cast<std::size_t>(ticks));
   // --busy also times the tick's bare Pinocchio calls (g, C, two RNEAs) on the same state, alternating
   // which goes first, for the ratio update() / floor inside C++
   pinocchio::Model model0 = model;
@@ -128,6 +239,12 @@ int main(int argc, char ** argv)
     floor_durations.reserve(static_cast<std::size_t>(ticks));
   long allocations = 0, late = 0, faults = 0;
 
+  if (opt.warmup > 0) // untimed ticks on the initial state: caches, branch predictors, page tables
+  {
+    Eigen::VectorXd z = Eigen::VectorXd::Zero(n);
+    for (long k = 0; k < opt.warmup; ++k)
+      controller.update(static_cast<double>(k + 1) * dt, dt, {q0, z, z, wrench, gravity}, {q0, z, z}, command);
+  }
   controller.reset(); // on_activate
   timespec next;
   clock_gettime(CLOCK_MONOTONIC, &next);
@@ -155,6 +272,7 @@ int main(int argc, char ** argv)
     g_counting.store(false, std::memory_order_relaxed);
     allocations += g_allocations.load(std::memory_order_relaxed);
     durations[static_cast<std::size_t>(k)] = t1 - t0;
+    (controller.dampingUpdated() ? damping_ticks : other_ticks).push_back(t1 - t0);
     faults += code != reflexarm::FaultCode::None;
     if (busy && k % 2 == 1)
       floor_calls();
@@ -181,19 +299,22 @@ int main(int argc, char ** argv)
       continue;
     if (now.tv_sec > next.tv_sec || (now.tv_sec == next.tv_sec && now.tv_nsec > next.tv_nsec))
       ++late;
+    else if (opt.spin)
+      while (now.tv_sec < next.tv_sec || (now.tv_sec == next.tv_sec && now.tv_nsec < next.tv_nsec))
+        clock_gettime(CLOCK_MONOTONIC, &now);
     else
       clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &next, nullptr);
   }
 
-  std::vector<double> sorted = durations;
-  std::sort(sorted.begin(), sorted.end());
-  auto pct = [&](double p) {
-    return 1e6 * sorted[std::min(sorted.size() - 1, static_cast<std::size_t>(p * static_cast<double>(sorted.size())))];
-  };
-  std::printf("robot: %s (%d joints), %ld ticks at 1 kHz, %d MuJoCo step(s) of %.4g s per tick\n", path.c_str(), n,
-              ticks, substeps, m->opt.timestep);
-  std::printf("update(): median %.2f us, p99 %.2f us, max %.2f us (p99/median %.2f)\n", pct(0.5), pct(0.99),
-              1e6 * sorted.back(), pct(0.99) / pct(0.5));
+  const Stats all = stats(durations), with_damping = stats(damping_ticks), other = stats(other_ticks);
+  std::printf("robot: %s (%d joints), %ld ticks at 1 kHz, %d MuJoCo step(s) of %.4g s per tick, wait: %s\n",
+              path.c_str(), n, ticks, substeps, m->opt.timestep, busy ? "none (--busy)" : opt.spin ? "spin" : "sleep");
+  std::printf("update(): median %.2f us, p99 %.2f us, max %.2f us (p99/median %.2f)\n", all.median, all.p99, all.max,
+              all.p99 / all.median);
+  std::printf("  ticks without a damping update (%zu): median %.2f us, p99 %.2f us (p99/median %.2f)\n", other.count,
+              other.median, other.p99, other.p99 / other.median);
+  std::printf("  ticks with a damping update (%zu): median %.2f us, p99 %.2f us\n", with_damping.count,
+              with_damping.median, with_damping.p99);
   std::printf("late periods: %ld, faults: %ld, collision detected at t = %.3f s, mode %s\n", late, faults,
               controller.firstDetectionTime(), reflexarm::modeName(controller.mode()));
   if (busy)
@@ -201,7 +322,7 @@ int main(int argc, char ** argv)
     std::sort(floor_durations.begin(), floor_durations.end());
     const double floor_median = 1e6 * floor_durations[floor_durations.size() / 2];
     std::printf("bare Pinocchio calls (g, C, 2 x RNEA): median %.2f us; update()/calls %.2f\n", floor_median,
-                pct(0.5) / floor_median);
+                all.median / floor_median);
   }
   std::printf("heap allocations inside update(): %ld\n", allocations);
   mj_deleteData(d);

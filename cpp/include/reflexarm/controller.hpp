@@ -95,6 +95,8 @@ namespace reflexarm
     bool observerInvalid() const noexcept { return obs_invalid_; }
     const TimingStats & timing() const noexcept { return timing_; }
     const Eigen::MatrixXd & damping() const noexcept { return D_; }
+    /// True if the last update() recomputed the damping matrix (every damping_update_period accepted ticks).
+    bool dampingUpdated() const noexcept { return damping_updated_; }
     /// The residual the detector looks at (the detection observer's if there is one).
     const Eigen::VectorXd & detectionResidual() const noexcept
     {
@@ -182,6 +184,7 @@ namespace reflexarm
     bool reacted_ = false, gravity_mode_ = false, detected_ = false;
     double first_time_ = 0.0;
     int damping_countdown_ = 0;
+    bool damping_updated_ = false;
     Mode mode_ = Mode::Compliant;
     FaultInfo fault_;
   };
