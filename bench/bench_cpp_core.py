@@ -22,8 +22,8 @@ from collections.abc import Callable
 
 import numpy as np
 import pinocchio as pin
-
 import reflexarm._core as core
+
 from reflexarm import Measurement, Reference, load_robot
 from reflexarm.control import Controller
 from reflexarm.control._setup import core_params
@@ -129,7 +129,8 @@ def main(rounds: int = 7) -> dict[str, float]:
         st, up, ca = (float(np.median(med[k])) * 1e6 for k in ("step", "update", "calls"))
         ct, cc = float(np.median(cpp_tick)) * 1e6, float(np.median(cpp_calls)) * 1e6
         name = "DC+EFC" if efc else "DC"
-        print(f"{name:<14}{st:>7.2f} us{up:>7.2f} us{ca:>7.2f} us{st / ca:>12.2f}{ct:>7.2f} us{cc:>7.2f} us{ct / cc:>14.2f}")
+        py = f"{st:>7.2f} us{up:>7.2f} us{ca:>7.2f} us{st / ca:>12.2f}"
+        print(f"{name:<14}{py}{ct:>7.2f} us{cc:>7.2f} us{ct / cc:>14.2f}")
         key = "efc" if efc else "dc"
         results.update({f"step_us_{key}": st, f"update_us_{key}": up, f"py_calls_us_{key}": ca,
                         f"step_over_calls_{key}": st / ca, f"cpp_update_us_{key}": ct, f"cpp_calls_us_{key}": cc,
