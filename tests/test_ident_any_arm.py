@@ -107,6 +107,11 @@ def test_identify_dynamics_study_runs_on_a_six_joint_arm_without_atlas_wording(t
     study = json.loads((out / "study.json").read_text())
     assert study["compared_joints"] == [1, 2, 3, 4, 5, 6]
     assert len(study["friction_fits"]) == 6
+    for method in ("combined", "sequential"):  # the robot copies load as the arm they were identified for
+        assert (
+            load_robot(out / f"robot_{method}.urdf", ee_frame=SIX_DOF_TOOL).joint_names
+            == load_robot(path, ee_frame=SIX_DOF_TOOL).joint_names
+        )
 
 
 def test_a_negative_value_within_two_standard_deviations_or_round_off_of_zero_is_not_reported() -> None:
