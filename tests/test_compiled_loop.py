@@ -158,12 +158,37 @@ def test_fault_ticks_carry_the_same_text(robot):
     assert "q_d" in cc[0].fault[faulted][0]
 
 
+def test_hand_push_is_the_python_loop():
+    """Fig. 11's hand: started in Python (direction from the state), then its spring-damper evaluated in C++."""
+    setup = CP.CompensationSetup()
+    ref = CP.HoldReference(CP.held_posture(setup, CP.true_robot(setup)))
+    scenes = []
+
+    def plant():
+        scenes.append(HandPush(t_start=0.5, t_ramp=1.0, t_release=4.0))
+        return CP.build_plant(setup, [scenes[-1]], noise_scale=1.0, seed=4)[0]
+
+    py, cc = both(plant, lambda: CP.make_controller(setup, 1, 0, model_seed=2), ref, setup.duration)
+    assert_same(py, cc, expect_detection=False)
+    t, f = cc[0].t, np.linalg.norm(cc[0].extras["hand_force"], axis=1)
+    assert f[(t > 1.6) & (t < 3.9)].min() > 10.0  # the hand holds the arm displaced (N)
+    assert not f[(t < 0.5) | (t > 4.01)].any()
+    a, b = scenes  # the scene is left as the Python loop leaves it (its state after the last update)
+    assert b._last_x == a._last_x and b._handle == a._handle is None
+    np.testing.assert_array_equal(b._force, a._force)
+
+
 def test_what_cannot_be_compiled_runs_in_python(robot):
     from reflexarm.control import Controller
+    from reflexarm.sim import Scene
+
+    class Custom(Scene):
+        def update(self, plant):
+            pass
 
     q0 = robot.home
-    push = Plant(robot, scene=HandPush(), noise=SensorNoise.none())
-    assert "HandPush" in str(compiled_reason(push, Controller(robot)))
+    custom = Plant(robot, scene=Custom(), noise=SensorNoise.none())
+    assert "Custom" in str(compiled_reason(custom, Controller(robot)))
     extra = Plant(robot, noise=SensorNoise.none(), extra_joint_torque=lambda q, dq, t: np.zeros(7))
     assert "extra_joint_torque" in str(compiled_reason(extra, Controller(robot)))
     with pytest.raises(ConfigError, match="cannot use the compiled loop: .*extra_joint_torque"):

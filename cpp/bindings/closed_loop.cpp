@@ -231,6 +231,53 @@ NB_MODULE(_closed_loop, m)
         return static_cast<int>(self.loop.act(k));
       },
       "k"_a)
+    .def(
+      "set_push",
+      [](PyLoop & self, int body, int site, std::tuple<double, double, double> u, std::tuple<double, double, double> p0,
+         double stiffness, double damping, double period, const Arr<const double> & rest,
+         const Arr<const double> & rest_v, const Arr<double> & force_out, const Arr<double> & target_out,
+         double last_x, bool has_last, bool applied, std::tuple<double, double, double> force,
+         std::tuple<double, double, double> target, std::tuple<double, double, double> point_local) {
+        const long N = self.rows;
+        reflexarm::SpringPush push;
+        push.body = body;
+        push.site = site;
+        const auto put = [](double * out, const std::tuple<double, double, double> & v) {
+          out[0] = std::get<0>(v);
+          out[1] = std::get<1>(v);
+          out[2] = std::get<2>(v);
+        };
+        put(push.u, u);
+        put(push.p0, p0);
+        push.stiffness = stiffness;
+        push.damping = damping;
+        push.period = period;
+        push.rest = rowsOf(rest, N, 0, "rest");
+        push.rest_v = rowsOf(rest_v, N, 0, "rest_v");
+        push.force_out = rowsOf(force_out, N, 3, "force_out");
+        push.target_out = rowsOf(target_out, N, 3, "target_out");
+        push.last_x = last_x;
+        push.has_last = has_last;
+        push.applied = applied;
+        put(push.force, force);
+        put(push.target, target);
+        put(push.point_local, point_local);
+        std::vector<reflexarm::SpringPush> pushes = self.loop.pushes();
+        pushes.push_back(push);
+        self.loop.setPushes(pushes);
+      },
+      "body"_a, "site"_a, "u"_a, "p0"_a, "stiffness"_a, "damping"_a, "period"_a, "rest"_a, "rest_v"_a,
+      "force_out"_a, "target_out"_a, "last_x"_a, "has_last"_a, "applied"_a, "force"_a, "target"_a, "point_local"_a,
+      "Adds a spring-damper push (reflexarm::SpringPush; rest NaN: off) with its state; arrays of N rows.")
+    .def("clear_pushes", [](PyLoop & self) { self.loop.setPushes({}); })
+    .def(
+      "push_state",
+      [](PyLoop & self, size_t i) {
+        const auto & p = self.loop.pushes().at(i);
+        const auto v3 = [](const double * a) { return std::make_tuple(a[0], a[1], a[2]); };
+        return std::make_tuple(p.last_x, p.has_last, p.applied, v3(p.force), v3(p.target), v3(p.point_local));
+      },
+      "i"_a, "(last_x, has_last, applied, force, target, point_local) of push i now.")
     .def("reset_controller", [](PyLoop & self) { self.loop.controller().reset(); })
     .def(
       "set_applied_torque",

@@ -217,14 +217,67 @@ namespace reflexarm
       std::memcpy(rec.out + k * rec.size, d_->qpos + rec.adr, sizeof(double) * static_cast<size_t>(rec.size));
     for (const auto & rec : mocap_records_)
       std::memcpy(rec.out + 3 * k, d_->mocap_pos + 3 * rec.mocap_id, sizeof(double) * 3);
+    for (const auto & push : pushes_)
+    {
+      std::memcpy(push.force_out + 3 * k, push.force, sizeof(double) * 3);
+      std::memcpy(push.target_out + 3 * k, push.target, sizeof(double) * 3);
+    }
+  }
+
+  // As HandPush.update (reflexarm/sim/hand_push.py) and Plant.apply_external_force, operation by operation.
+  void ClosedLoop::updatePush(SpringPush & push, long k) noexcept
+  {
+    push.applied = false;
+    const double r = push.rest[k];
+    if (std::isnan(r))
+    {
+      push.force[0] = push.force[1] = push.force[2] = 0.0;
+      push.has_last = false;
+      return;
+    }
+    const mjtNum * p = d_->site_xpos + 3 * push.site;
+    const double x = push.u[0] * (p[0] - push.p0[0]) + push.u[1] * (p[1] - push.p0[1]) + push.u[2] * (p[2] - push.p0[2]);
+    const double v = push.has_last ? (x - push.last_x) / push.period : 0.0;
+    push.last_x = x;
+    push.has_last = true;
+    for (int i = 0; i < 3; ++i)
+      push.target[i] = push.p0[i] + push.u[i] * r;
+    double f = push.stiffness * (r - x) + push.damping * (push.rest_v[k] - v);
+    f = f > 0.0 ? f : 0.0;
+    for (int i = 0; i < 3; ++i)
+      push.force[i] = f * push.u[i];
+    if (f > 0.0)
+    {
+      const mjtNum * pos = d_->xpos + 3 * push.body;
+      const mjtNum * R = d_->xmat + 9 * push.body;
+      const double dx[3] = {p[0] - pos[0], p[1] - pos[1], p[2] - pos[2]};
+      for (int i = 0; i < 3; ++i) // R^T (p - xpos)
+        push.point_local[i] = R[i] * dx[0] + R[3 + i] * dx[1] + R[6 + i] * dx[2];
+      push.applied = true;
+    }
   }
 
   void ClosedLoop::applyForces() noexcept
   {
     mjtNum * xfrc = d_->xfrc_applied;
     std::memset(xfrc, 0, sizeof(mjtNum) * 6 * static_cast<size_t>(m_->nbody));
-    for (const auto & f : forces_)
+    const size_t n_list = forces_.size();
+    for (size_t j = 0; j < n_list + pushes_.size(); ++j)
     {
+      AppliedForce pf;
+      if (j >= n_list)
+      {
+        const SpringPush & push = pushes_[j - n_list];
+        if (!push.applied)
+          continue;
+        pf.body = push.body;
+        for (int i = 0; i < 3; ++i)
+        {
+          pf.force[i] = push.force[i];
+          pf.point_local[i] = push.point_local[i];
+        }
+      }
+      const AppliedForce & f = j < n_list ? forces_[j] : pf;
       const int b = f.body;
       const mjtNum * pos = d_->xpos + 3 * b;
       const mjtNum * R = d_->xmat + 9 * b;
@@ -252,7 +305,9 @@ namespace reflexarm
         for (int c = 0; c < 3; ++c)
           d_->mocap_pos[3 * plan.mocap_id + c] = p[c];
     }
-    if (!forces_.empty())
+    for (auto & push : pushes_)
+      updatePush(push, k);
+    if (!forces_.empty() || !pushes_.empty())
       applyForces();
     for (int i = 0; i < n_; ++i)
     {

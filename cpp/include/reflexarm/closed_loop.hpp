@@ -85,6 +85,25 @@ namespace reflexarm
     double * out = nullptr;
   };
 
+  /// A spring-damper "hand" pushing a site along a fixed world direction u from a start point p0 (as
+  /// reflexarm.sim.HandPush): each tick with a rest travel r, x = u.(p - p0), v = (x - x_last) / period (0 on
+  /// the first tick of a push), force = max(0, k (r - x) + c (r_v - v)) u at the site, fixed on its body.
+  struct SpringPush
+  {
+    int body = 0, site = 0;
+    double u[3] = {0.0, 0.0, 0.0}, p0[3] = {0.0, 0.0, 0.0};
+    double stiffness = 0.0, damping = 0.0, period = 1e-3;
+    const double * rest = nullptr;   ///< N: rest travel [m] per tick, NaN: the hand is off
+    const double * rest_v = nullptr; ///< N: its speed [m/s]
+    double * force_out = nullptr;    ///< N x 3: force recorded with row k (the one applied over tick k - 1)
+    double * target_out = nullptr;   ///< N x 3: rest point recorded with row k
+    // state (read back by the caller after a run)
+    double last_x = 0.0;
+    bool has_last = false;
+    bool applied = false; ///< a force is applied now (force, point_local)
+    double force[3] = {0.0, 0.0, 0.0}, target[3] = {0.0, 0.0, 0.0}, point_local[3] = {0.0, 0.0, 0.0};
+  };
+
   /// Outcome of ClosedLoop::act / run.
   enum class StepStatus : int
   {
@@ -114,6 +133,8 @@ namespace reflexarm
     void setBuffers(const RunBuffers & buffers) { buf_ = buffers; }
     void setForces(const std::vector<AppliedForce> & forces) { forces_ = forces; }
     void setMocapPlans(const std::vector<MocapPlan> & plans) { mocap_plans_ = plans; }
+    void setPushes(const std::vector<SpringPush> & pushes) { pushes_ = pushes; }
+    const std::vector<SpringPush> & pushes() const noexcept { return pushes_; }
     void setRecords(const std::vector<QposRecord> & qpos, const std::vector<MocapRecord> & mocap)
     {
       qpos_records_ = qpos;
@@ -138,6 +159,7 @@ namespace reflexarm
   private:
     void loadCompensatedWrench(double * out) noexcept;
     void applyForces() noexcept;
+    void updatePush(SpringPush & push, long k) noexcept;
 
     const mjModel * m_ = nullptr;
     mjData * d_ = nullptr;
@@ -148,6 +170,7 @@ namespace reflexarm
     RunBuffers buf_;
     std::vector<AppliedForce> forces_;
     std::vector<MocapPlan> mocap_plans_;
+    std::vector<SpringPush> pushes_;
     std::vector<QposRecord> qpos_records_;
     std::vector<MocapRecord> mocap_records_;
     std::vector<int> parent_, dof_body_;

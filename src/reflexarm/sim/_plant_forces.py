@@ -80,7 +80,8 @@ class _PlantForces:
             if p.shape != (3,) or not np.all(np.isfinite(p)):
                 raise ConfigError(f"point_world must be a finite 3-vector [m]; got {point_world!r}")
         R = d.xmat[bid].reshape(3, 3)
-        local = R.T @ (p - d.xpos[bid])
+        dx = p - d.xpos[bid]
+        local = (R[0] * dx[0] + R[1] * dx[1]) + R[2] * dx[2]  # R^T dx as the compiled loop sums it
         handle = self._next_force
         self._next_force += 1
         self._forces[handle] = _AppliedForce(bid, f.copy(), local)
@@ -101,8 +102,11 @@ class _PlantForces:
         d = self._data
         xfrc = self._xfrc
         xfrc[:] = 0.0
+        # R l and R^T dx are written as element-wise sums, not `@`: numpy's matrix products go to BLAS, whose
+        # kernels fuse multiply-adds differently per CPU; these sums are what cpp/src/closed_loop.cpp computes
         for f in self._forces.values():
             b = f.body
-            p = d.xpos[b] + d.xmat[b].reshape(3, 3) @ f.point_local
+            R, loc = d.xmat[b].reshape(3, 3), f.point_local
+            p = d.xpos[b] + ((R[:, 0] * loc[0] + R[:, 1] * loc[1]) + R[:, 2] * loc[2])
             xfrc[b, :3] += f.force
             xfrc[b, 3:] += np.cross(p - d.xipos[b], f.force)

@@ -12,10 +12,12 @@ tick is a function of time alone or nothing:
   and refreshed from the body's pose every tick in C++, as ``Plant`` does;
 * :class:`~reflexarm.sim.ElbowStick`: acts at ``t_start`` (its direction comes from the arm's velocity
   then); afterwards the tip path is a function of time, sampled for every later tick.
+* :class:`~reflexarm.sim.HandPush`: acts at ``t_start`` in Python (its direction and start point come from
+  the state then); afterwards its spring-damper on the end-effector position is evaluated in C++ every
+  tick (``reflexarm::SpringPush``) from its rest travel, sampled per tick.
 
-Not playable: :class:`~reflexarm.sim.HandPush` (its force is a spring-damper on the end-effector position
-and velocity, state feedback every tick) and any scene type not listed here that overrides ``update`` or
-``observe``: those runs use the Python loop.
+Not playable: any scene type not listed here that overrides ``update`` or ``observe``: those runs use the
+Python loop.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ import numpy as np
 from reflexarm.sim.cinderblock import Cinderblock
 from reflexarm.sim.elbow_stick import PARKED, ElbowStick
 from reflexarm.sim.end_effector_force import EndEffectorForce
+from reflexarm.sim.hand_push import HandPush
 from reflexarm.sim.link_force import LinkForce
 from reflexarm.sim.scene import Scene
 
@@ -52,6 +55,7 @@ class ScenePlay:
         qpos_keys: recorded signals read from ``qpos`` every tick: key -> (address, size).
         mocap_keys: recorded signals read from a mocap position every tick: key -> mocap id.
         mocap_id: the mocap body whose path is played after an event (ElbowStick), else None.
+        push: the scene is a HandPush, evaluated in C++ after its event.
     """
 
     scene: Scene
@@ -60,6 +64,7 @@ class ScenePlay:
     qpos_keys: dict[str, tuple[int, int]] = field(default_factory=dict)
     mocap_keys: dict[str, int] = field(default_factory=dict)
     mocap_id: int | None = None
+    push: bool = False
 
     def plan_after_update(self, plant: Plant, k: int, times: np.ndarray, plan: np.ndarray | None) -> None:
         """After the Python update at tick ``k``: write the mocap path of ticks k+1.. into ``plan`` (N, 3)."""
@@ -88,9 +93,12 @@ def playback(scene: Scene, plant: Plant) -> ScenePlay | str:
         bid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, scene.name)
         assert int(m.body_mocapid[bid]) == mocap
         return ScenePlay(scene, events=[scene.t_start], mocap_keys={f"{scene.name}_tip": mocap}, mocap_id=mocap)
+    if kind is HandPush:
+        assert isinstance(scene, HandPush)
+        return ScenePlay(scene, events=[scene.t_start], constant_keys=list(scene.observe(plant)), push=True)
     return (
         f"scene {kind.__name__} acts every tick from the state (update/observe in Python) and has no playback; "
-        "playable: static scenes, Cinderblock, EndEffectorForce, LinkForce, ElbowStick"
+        "playable: static scenes, Cinderblock, EndEffectorForce, LinkForce, ElbowStick, HandPush"
     )
 
 

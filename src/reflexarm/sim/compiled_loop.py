@@ -24,8 +24,9 @@ from typing import Any
 import numpy as np
 
 from reflexarm.errors import ConfigError, SimulationError
+from reflexarm.sim._plant_forces import _AppliedForce
 from reflexarm.sim._plant_sensors import _NOISE_BLOCK
-from reflexarm.sim._playback import ScenePlay, event_ticks, playback
+from reflexarm.sim._playback import TIME_SLACK, ScenePlay, event_ticks, playback
 from reflexarm.sim.plant import MAX_SPEED, Plant
 from reflexarm.sim.recording import _Recorder
 from reflexarm.sim.run_observers import observers_active
@@ -201,9 +202,52 @@ def _draw_noise(plant: Plant, N: int) -> np.ndarray | None:
     return out
 
 
-def _forces(plant: Plant) -> np.ndarray:
-    rows = [[f.body, *f.force, *f.point_local] for f in plant._forces.values()]
+def _forces(plant: Plant, skip: set[int] | None = None) -> np.ndarray:
+    """The plant's applied forces as rows (body, force, point in the body frame), without the ``skip`` handles."""
+    rows = [[f.body, *f.force, *f.point_local] for h, f in plant._forces.items() if not skip or h not in skip]
     return np.array(rows, dtype=float).reshape(-1, 7)
+
+
+def _push_to(
+    loop: Any, plant: Plant, scene: Any, k: int, times: np.ndarray, rec: _Recorder, owned: set[int]
+) -> list[np.ndarray]:
+    """Hand a HandPush, just updated in Python at tick k, to C++ for the ticks after k; returns its arrays."""
+    N = times.size
+    rest, rest_v = np.full(N, np.nan), np.zeros(N)
+    for j in range(k + 1, N):
+        t = float(times[j]) + TIME_SLACK  # as HandPush.update: plant.time + 1e-9
+        if not (t < scene.t_start or t >= scene.t_release):
+            rest[j], rest_v[j] = scene._rest(t)
+    handle = scene._handle
+    local = plant._forces[handle].point_local if handle is not None else np.zeros(3)
+    if handle is not None:
+        owned.add(handle)
+    u = scene._u if scene._u is not None else np.zeros(3)
+    last = scene._last_x
+    loop.set_push(
+        plant._ee_body, plant._ee_site, tuple(u), tuple(scene._p0), scene.stiffness, scene.damping,
+        plant.control_period, rest, rest_v, rec.extras["hand_force"], rec.extras["hand_target"],
+        0.0 if last is None else last, last is not None, handle is not None,
+        tuple(scene._force), tuple(scene._target), tuple(local),
+    )  # fmt: skip
+    return [rest, rest_v]
+
+
+def _push_back(plant: Plant, scene: Any, state: tuple, owned: set[int]) -> None:
+    """The HandPush's Python state (and its force in the plant) as the Python loop would have left them."""
+    last_x, has_last, applied, force, target, local = state
+    scene._last_x = last_x if has_last else None
+    scene._force, scene._target = np.array(force), np.array(target)
+    if scene._handle is not None and scene._handle in owned:
+        plant._forces.pop(scene._handle, None)
+        owned.discard(scene._handle)
+    scene._handle = None
+    if applied:
+        handle = plant._next_force
+        plant._next_force += 1
+        plant._forces[handle] = _AppliedForce(plant._ee_body, np.array(force), np.array(local))
+        scene._handle = handle
+        owned.add(handle)
 
 
 def run_compiled(
@@ -277,8 +321,14 @@ def run_compiled(
     loop.set_forces(_forces(plant))
     loop.set_applied_torque(np.array(plant._tau))
 
+    pushes: list[ScenePlay] = []  # HandPush scenes handed to C++ (in the order of their index there)
+    owned: set[int] = set()  # handles of plant._forces that a C++ push evaluates now
+    keep: list[np.ndarray] = []  # arrays the loop reads through raw pointers
+
     def hold_constants(k_from: int) -> None:  # values of observe() from row k_from on
         for p in consts:
+            if p in pushes:
+                continue  # recorded by C++
             for key, value in p.scene.observe(plant).items():
                 v = np.asarray(value)
                 arr = rec.extras.setdefault(key, np.zeros((N, *v.shape), dtype=v.dtype))
@@ -296,6 +346,8 @@ def run_compiled(
     def sync(periods: int) -> None:  # the plant's own bookkeeping, as Plant.step keeps it
         plant._tau[:] = loop.applied_torque
         plant._tick = tick0 + periods
+        for i, p in enumerate(pushes):
+            _push_back(plant, p.scene, loop.push_state(i), owned)
 
     try:
         hold_constants(0)
@@ -317,6 +369,11 @@ def run_compiled(
             acted = k_event + 1
             if status:
                 fail(status)
+            for p in events[k_event]:
+                if p.push and p not in pushes:
+                    keep.extend(_push_to(loop, plant, p.scene, k_event, times, rec, owned))
+                    pushes.append(p)
+            loop.set_forces(_forces(plant, owned))
     except BaseException as e:
         sync(acted)
         _texts(rec, mode, fault_code, fault_info, core)

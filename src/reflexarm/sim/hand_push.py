@@ -95,7 +95,8 @@ class HandPush(Scene):
                 self._u = self.direction.copy()
             self._p0 = p.copy()
         u = self._u
-        x = float(u @ (p - self._p0))  # displacement of the end effector along the push
+        dp = p - self._p0  # displacement of the end effector along the push (scalar sums: no BLAS, whose
+        x = float(u[0] * dp[0] + u[1] * dp[1] + u[2] * dp[2])  # kernels fuse differently per CPU)
         v = 0.0 if self._last_x is None else (x - self._last_x) / plant.control_period
         self._last_x = x
         rest, rest_v = self._rest(t)
