@@ -198,9 +198,10 @@ def check_thresholds(out: Path, free_motion: dict[str, Any], n: int) -> np.ndarr
     assert np.all(contact < collision), (contact, collision)
     assert [j["joint"] for j in doc["joints"]] == list(range(1, n + 1))  # 1-based for people
     assert all(j["collision_alarms_in_logs"] == 0 for j in doc["joints"]), doc["joints"]
-    # the online residual of the same run (the controller's, with the measured noise): what --recorded-residual
-    # tunes on, so its maximum is below a level meant for 1 false alarm per hour
-    assert np.all(collision > np.asarray(free_motion["max_abs_residual_Nm"])), (collision, free_motion)
+    # the online residual of the same run (the controller's, with the measured noise) is what --recorded-residual
+    # tunes on: a level meant for 1 false alarm per hour is not below its maximum (a fitted level that falls
+    # below is raised to it, with a note; an alarm needs |r| > zeta)
+    assert np.all(collision >= np.asarray(free_motion["max_abs_residual_Nm"])), (collision, free_motion)
     return collision
 
 
