@@ -290,7 +290,7 @@ def test_impedance_alone_matches_composed_controller(atlas):
 
 @pytest.mark.parametrize("kappa_f, kappa_ext", [(0, 0), (1, 0), (0, 1), (1, 1)])
 def test_compiled_tick_matches_numpy_reference(atlas, kappa_f, kappa_ext):
-    # the fused compiled tick against the readable pieces: MomentumObserver + JointImpedanceController
+    # the C++ tick against the readable pieces: MomentumObserver + JointImpedanceController
     rng = np.random.default_rng(11)
     kw = dict(stiffness=250, damping_ratio=0.6)
     ctrl = Controller(

@@ -31,7 +31,7 @@ namespace
   using View = nb::ndarray<nb::numpy, const T, nb::ndim<1>>;
   using MatView = nb::ndarray<nb::numpy, const double, nb::ndim<2>>;
   using WritableView = nb::ndarray<nb::numpy, double, nb::ndim<1>>;
-  constexpr int kSatShift = 8; // as reflexarm.control._kernels.SAT_SHIFT
+  constexpr int kSatShift = 8; // status = n_collided + (n_saturated << kSatShift)
 
   struct PyController
   {
@@ -286,7 +286,7 @@ NB_MODULE(_core, m)
         const auto & f = c.cmd.fault;
         return std::make_tuple(static_cast<int>(f.signal), f.index, f.value, f.lo, f.hi);
       },
-      "(signal id, component, value, lo, hi) of the last fault (ids as reflexarm.control._kernels.SIG_*)")
+      "(signal id, component, value, lo, hi) of the last fault (ids as reflexarm.control.contract.SIG_*)")
     // ---------------------------------------------------------------- controller state
     .def_prop_ro("mode", [](const PyController & c) { return std::string(reflexarm::modeName(c.ctrl.mode())); })
     .def_prop_ro("kappa_f", [](const PyController & c) { return c.ctrl.kappaF(); })

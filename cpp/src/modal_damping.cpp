@@ -16,6 +16,9 @@ namespace reflexarm
     LU.setZero(n, n);
     lambda.setZero(n);
     U.setZero(n, n);
+    W.setZero(n, n);
+    V.setZero(n, n);
+    has_basis = false;
   }
 
   bool symmetricEigen(Eigen::Ref<Eigen::MatrixXd> W, Eigen::Ref<Eigen::VectorXd> values,
@@ -83,6 +86,61 @@ namespace reflexarm
     return true;
   }
 
+  namespace
+  {
+    /// lambda, U of A = U diag(lambda) U^T starting from the previous eigenvectors U0 = ws.U: W = U0^T A U0 is
+    /// nearly diagonal, W = V diag(lambda) V^T by Jacobi rotations, U = U0 V. False (ws.U untouched) if there
+    /// is no previous basis or the rotations did not converge.
+    bool eigenFromPreviousBasis(ModalDampingWorkspace & ws) noexcept
+    {
+      if (!ws.has_basis)
+        return false;
+      const Eigen::Index n = ws.A.rows();
+      const Eigen::MatrixXd & A = ws.A;
+      Eigen::MatrixXd & U = ws.U;
+      Eigen::MatrixXd & AU = ws.LU; // scratch until the end of computeModalDamping
+      for (Eigen::Index i = 0; i < n; ++i)
+        for (Eigen::Index j = 0; j < n; ++j)
+        {
+          double s = 0.0;
+          for (Eigen::Index m = 0; m < n; ++m)
+            s += A(i, m) * U(m, j);
+          AU(i, j) = s;
+        }
+      for (Eigen::Index i = 0; i < n; ++i)
+        for (Eigen::Index j = 0; j <= i; ++j)
+        {
+          double s = 0.0, t = 0.0;
+          for (Eigen::Index m = 0; m < n; ++m)
+          {
+            s += U(m, i) * AU(m, j);
+            t += U(m, j) * AU(m, i);
+          }
+          ws.W(i, j) = ws.W(j, i) = 0.5 * (s + t); // symmetric to round-off
+        }
+      if (!ws.W.allFinite() || !symmetricEigen(ws.W, ws.lambda, ws.V))
+        return false;
+      for (Eigen::Index i = 0; i < n; ++i) // U <- U0 V, through AU as scratch
+        for (Eigen::Index j = 0; j < n; ++j)
+        {
+          double s = 0.0;
+          for (Eigen::Index m = 0; m < n; ++m)
+            s += U(i, m) * ws.V(m, j);
+          AU(i, j) = s;
+        }
+      U = AU;
+      // re-orthonormalize (modified Gram-Schmidt): the products U0 V would otherwise let round-off build up
+      // over the many thousand updates of a long run
+      for (Eigen::Index j = 0; j < n; ++j)
+      {
+        for (Eigen::Index i = 0; i < j; ++i)
+          U.col(j) -= U.col(i).dot(U.col(j)) * U.col(i);
+        U.col(j).normalize();
+      }
+      return true;
+    }
+  } // namespace
+
   bool computeModalDamping(
     const Eigen::Ref<const Eigen::MatrixXd> & M,
     const Eigen::Ref<const Eigen::VectorXd> & stiffness,
@@ -141,8 +199,13 @@ namespace reflexarm
         if (!std::isfinite(A(i, j)))
           return false;
     Eigen::VectorXd & lam = ws.lambda;
-    if (!symmetricEigen(A, lam, ws.U)) // A is overwritten
-      return false;
+    if (!eigenFromPreviousBasis(ws))
+    {
+      ws.has_basis = false;
+      if (!symmetricEigen(A, lam, ws.U)) // cold start; A is overwritten
+        return false;
+    }
+    ws.has_basis = true;
     const Eigen::MatrixXd & U = ws.U;
     Eigen::MatrixXd & LU = ws.LU;
     for (Eigen::Index i = 0; i < n; ++i)

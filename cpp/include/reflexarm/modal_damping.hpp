@@ -14,6 +14,9 @@ namespace reflexarm
 
     Eigen::MatrixXd L, B, A, LU, U;
     Eigen::VectorXd lambda;
+    /// Warm start: A in the previous call's eigenvectors (W) and the rotation that diagonalizes it (V).
+    Eigen::MatrixXd W, V;
+    bool has_basis = false; ///< U holds the previous call's eigenvectors (M(q) changes little between calls)
   };
 
   /// Eigen-decomposition of a symmetric matrix W = V diag(values) V^T by cyclic Jacobi rotations
@@ -25,7 +28,9 @@ namespace reflexarm
   /// (lambda ascending; damping_ratio[i] applies to the i-th mode).
   ///
   /// Reads the upper triangle of M only. Returns false (out untouched) if M is not finite or not positive
-  /// definite. No allocation, no exception. Same loops as reflexarm.control._kernels.modal_damping_into.
+  /// definite. No allocation, no exception. The eigen-decomposition starts from the previous call's
+  /// eigenvectors (ws.U) when there is one: in that basis L^-1 K L^-T is nearly diagonal and the Jacobi
+  /// rotations converge in a sweep or two instead of ~6 (D does not depend on the start: same to round-off).
   bool computeModalDamping(
     const Eigen::Ref<const Eigen::MatrixXd> & M,
     const Eigen::Ref<const Eigen::VectorXd> & stiffness,
