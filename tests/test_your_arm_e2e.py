@@ -10,10 +10,11 @@ log) -> ``tune-thresholds`` on it -> ``demo``, ``simulate link-collision`` and `
 ``--model`` the identified model.
 
 The commands run in-process through :func:`reflexarm.cli.main` rather than in subprocesses: the same
-argument parsing and command code, without ~3 s of imports per command (27 commands per arm on a shared
-2-core machine); the installed ``reflexarm`` script itself is exercised by test_packaging.py.
-Settings are short (10 s excitations, 3 harmonics, 2 friction speeds on one joint); the assertions are
-about what each step must deliver, not the precision a long run would give.
+argument parsing and command code, without ~3 s of imports for each of the 10 commands per arm on a shared
+2-core machine, and a failing step's traceback in the test report (the installed ``reflexarm`` script
+is this ``main``: pyproject's [project.scripts]). Settings are short (10 s excitations, 3 harmonics, 2
+friction speeds per joint, 150 s of free motion; ~45-60 s of CPU per arm); the assertions are about what
+each step must deliver, not the precision a long run would give.
 """
 
 from __future__ import annotations
