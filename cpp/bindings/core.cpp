@@ -226,19 +226,20 @@ NB_MODULE(_core, m)
           return nb::int_(status);
         // the plain command (no threshold crossing, nothing bounded): built here, the copies by numpy
         nb::object tau = c.tau_copy(), residual = c.residual_copy();
-        PyObject * items = PyTuple_New(8);
-        if (!items)
-          throw nb::python_error();
-        PyObject * fields[8] = {tau.release().ptr(), residual.release().ptr(),
-                                nb::bool_(c.cmd.collision).release().ptr(), c.empty_tuple.inc_ref().ptr(),
-                                c.mode_names[static_cast<int>(c.cmd.mode)].inc_ref().ptr(),
-                                c.empty_str.inc_ref().ptr(), c.empty_tuple.inc_ref().ptr(), c.zero.inc_ref().ptr()};
-        for (int i = 0; i < 8; ++i)
-          PyTuple_SET_ITEM(items, i, fields[i]);
-        nb::object args = nb::make_tuple(nb::steal(items)); // tuple.__new__(Command, (items,))
-        PyObject * out = PyTuple_Type.tp_new(reinterpret_cast<PyTypeObject *>(c.command_type.ptr()), args.ptr(), nullptr);
+        // a Command is a tuple subclass: allocate it with its 8 items directly (what tuple.__new__ does)
+        // (no Python allocation between tp_alloc and the last item: the half-filled tuple is never seen)
+        auto * type = reinterpret_cast<PyTypeObject *>(c.command_type.ptr());
+        PyObject * out = type->tp_alloc(type, 8);
         if (!out)
           throw nb::python_error();
+        PyTuple_SET_ITEM(out, 0, tau.release().ptr());
+        PyTuple_SET_ITEM(out, 1, residual.release().ptr());
+        PyTuple_SET_ITEM(out, 2, nb::bool_(c.cmd.collision).release().ptr()); // Py_True/Py_False
+        PyTuple_SET_ITEM(out, 3, c.empty_tuple.inc_ref().ptr());
+        PyTuple_SET_ITEM(out, 4, c.mode_names[static_cast<int>(c.cmd.mode)].inc_ref().ptr());
+        PyTuple_SET_ITEM(out, 5, c.empty_str.inc_ref().ptr());
+        PyTuple_SET_ITEM(out, 6, c.empty_tuple.inc_ref().ptr());
+        PyTuple_SET_ITEM(out, 7, c.zero.inc_ref().ptr());
         return nb::steal(out);
       },
       "t"_a.noconvert(), "q"_a, "dq"_a, "tau_m"_a, "wrench"_a, "gravity"_a, "q_d"_a, "dq_d"_a, "ddq_d"_a,
