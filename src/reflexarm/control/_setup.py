@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from reflexarm._validation import as_vector
-from reflexarm.errors import ConfigError, ModelError
+from reflexarm.errors import ConfigError, ReflexArmError
 from reflexarm.robots.robot_model import RobotModel
 
 if TYPE_CHECKING:
@@ -64,11 +64,11 @@ def resolve_torque_limit(robot: RobotModel, torque_limit: npt.ArrayLike | str | 
 
 
 def load_core() -> ModuleType:
-    """The compiled module ``reflexarm._core`` (built by ``make install``), or a ModelError saying how to get it."""
+    """The compiled module ``reflexarm._core`` (built by ``make install``), or an error saying how to get it."""
     try:
         return importlib.import_module("reflexarm._core")
     except ImportError as e:
-        raise ModelError(
+        raise ReflexArmError(
             f"reflexarm's C++ core (module reflexarm._core) cannot be imported ({e}); expected it built and "
             "installed by `make install` (needs cmake >= 3.18 and a C++17 compiler)"
         ) from e
