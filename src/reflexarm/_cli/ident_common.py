@@ -76,18 +76,82 @@ def say(args: argparse.Namespace, msg: str) -> None:
         print(msg, file=sys.stderr)
 
 
-def load_friction(path: str | None) -> Any:
-    """Friction parameters from a friction.json of 'identify friction' (without the pose-specific offsets)."""
+def friction_file(robot: Any, friction: Any, rows: list[dict[str, object]], why_missing: str) -> dict[str, object]:
+    """The content of friction.json: d_v, mu_C (``null`` for joints not identified) and which joints were.
+
+    ``why_missing`` says why the joints without a fit have none (e.g. "not run (--joints 1)").
+    """
+    from reflexarm.ident.friction_parameters import format_joints
+
+    doc: dict[str, object] = {
+        "robot": robot.name,
+        "joint_names": robot.joint_names,
+        **friction.to_dict(),
+        "identified_joints": [j + 1 for j in friction.known],
+        "fits": rows,
+    }
+    if friction.missing:
+        doc["not_identified"] = {
+            "joints": [j + 1 for j in friction.missing],
+            "note": f"joint(s) {format_joints(friction.missing, robot.joint_names)} {why_missing}: their d_v, mu_C are "
+            "null (not identified, not 0). 'identify dynamics --friction' estimates them with the base parameters "
+            "in the sequential method; to fix them too, run them: --joints "
+            + ",".join(str(j + 1) for j in range(robot.n)),
+        }
+    return doc
+
+
+def load_friction(path: str | None, robot: Any) -> Any:
+    """Friction parameters from a friction.json of 'identify friction' (without the pose-specific offsets).
+
+    Joints not identified are NaN (:attr:`FrictionParameters.missing`): ``null`` in the file, or in a file
+    written before they were marked (0 for every joint not run), the joints its ``fits`` do not list. A file
+    of other joint names than ``robot``'s is noted (the same arm may name its joints differently).
+    """
     if path is None:
         return None
     from reflexarm.ident import FrictionParameters
+    from reflexarm.ident.friction_parameters import format_joints
 
+    name = Path(path).name
     try:
         d = json.loads(Path(path).read_text())
     except (OSError, json.JSONDecodeError) as e:
         raise ConfigError(f"cannot read friction file {path!r}: {e}") from e
     fr = FrictionParameters.from_dict(d)
-    return FrictionParameters(fr.viscous, fr.coulomb, None)  # offsets of single-joint runs are pose-specific
+    fr = FrictionParameters(fr.viscous, fr.coulomb, None)  # offsets of single-joint runs are pose-specific
+    if fr.n != robot.n:
+        raise ConfigError(f"{name} has friction for {fr.n} joints; robot {robot.name!r} has {robot.n}")
+    fitted = _fitted_joints(d, name, robot.n)
+    if "identified_joints" not in d and fitted is not None and not fr.missing and set(fitted) != set(range(fr.n)):
+        fr = fr.restricted_to(fitted)
+        print(
+            f"{name}: no record of which joints were identified (written by an older reflexarm); its fits cover "
+            f"joint(s) {format_joints(fitted, robot.joint_names)}: the 0 of joint(s) "
+            f"{format_joints(fr.missing, robot.joint_names)} are taken as not identified"
+        )
+    names = d.get("joint_names")
+    if isinstance(names, list) and list(names) != list(robot.joint_names):
+        print(f"{name}: identified on joints {', '.join(map(str, names))}; robot {robot.name!r} has "
+              f"{', '.join(robot.joint_names)}: check that it is the same arm")  # fmt: skip
+    return fr
+
+
+def _fitted_joints(d: dict[str, Any], name: str, n: int) -> list[int] | None:
+    """0-based joints of friction.json's ``fits`` rows (``"joint": "3 (elbow)"``), or None without them."""
+    rows = d.get("fits")
+    if not isinstance(rows, list):
+        return None
+    joints = []
+    for row in rows:
+        text = str(row.get("joint", "")) if isinstance(row, dict) else ""
+        head = text.split(" ", 1)[0]
+        if not head.isdigit() or not 1 <= int(head) <= n:
+            raise ConfigError(
+                f"{name}: a fit's joint must be a 1-based joint number 1..{n} (e.g. '3 (elbow)'); got {text!r}"
+            )
+        joints.append(int(head) - 1)
+    return sorted(set(joints))
 
 
 def for_controller(result: Any, robot: Any, nominal: Any, args: argparse.Namespace) -> Any:

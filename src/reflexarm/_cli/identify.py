@@ -18,6 +18,7 @@ import numpy as np
 from reflexarm._cli.common import add_common, format_table, out_dir
 from reflexarm._cli.ident_common import (
     export_excitation_csv,
+    friction_file,
     load_robot_arg,
     parse_floats,
     parse_joints,
@@ -287,12 +288,19 @@ def _identify_friction(args: argparse.Namespace) -> int:
                 raise ConfigError(f"{Path(path).name}: no constant-velocity interval of joint {j + 1} found")
             pts = friction_points(robot, j, proc.t, proc.q, proc.dq, proc.tau, intervals)
             fits.append(fit_friction(pts, offset=not args.no_offset, robot=robot))
-        friction = friction_from_fits(fits, robot.n)
+        # friction_from_fits puts 0 for the joints without a run: mark them not identified instead
+        friction = friction_from_fits(fits, robot.n).restricted_to([ft.joint for ft in fits])
+        why_missing = "have no run (--run)"
     else:
         from reflexarm.experiments.identification import hydraulic_joints, run_friction_experiments, scenario_extra
         from reflexarm.robots import perturb_model
 
         joints = parse_joints(args.joints, robot.n) if args.joints else list(hydraulic_joints(robot) or range(robot.n))
+        why_missing = (
+            f"were not run (--joints {args.joints})"
+            if args.joints
+            else "were not run (default on the Atlas arm: the hydraulic joints, as Fig. 4 of the paper)"
+        )
         say(
             args,
             f"simulating constant-velocity runs of joints {[j + 1 for j in joints]} on the {args.scenario} plant ...",
@@ -336,10 +344,8 @@ def _identify_friction(args: argparse.Namespace) -> int:
         for p in ft.points
     ]
     write_csv(out / "friction_points.csv", points)
-    write_json(
-        out / "friction.json",
-        {"robot": robot.name, "joint_names": robot.joint_names, **friction.to_dict(), "fits": rows},
-    )
+    doc = friction_file(robot, friction, rows, why_missing)
+    write_json(out / "friction.json", doc)
     fig = plot_friction(fits, out / "fig4_friction.png", joint_names=robot.joint_names, truth=truth)
     cols = [
         ("joint", "joint", "{}"),
@@ -351,5 +357,7 @@ def _identify_friction(args: argparse.Namespace) -> int:
     if truth is not None:
         cols[3:3] = [("mu_C_err_pct", "mu_C err [%]", "{:+.2f}"), ("d_v_err_pct", "d_v err [%]", "{:+.2f}")]
     print(format_table(rows, cols))
+    if "not_identified" in doc:
+        print(f"\nfriction.json: {doc['not_identified']['note']}")  # type: ignore[index]
     print(f"\nwrote {out}/ (friction.json, friction.csv, friction_points.csv, {fig.name})")
     return 0

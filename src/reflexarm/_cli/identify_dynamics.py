@@ -100,13 +100,15 @@ def _identify_from_logs(args: argparse.Namespace) -> int:
     if args.validation_log is not None:
         val_raw = load_log_from_args(args, args.validation_log, robot)
         states = preprocess_log(val_raw, cutoff_hz=args.cutoff)
-    friction = load_friction(args.friction)
+    friction = load_friction(args.friction, robot)
     methods = ["combined", "sequential"] if args.method == "both" else [args.method]
     if "sequential" in methods and friction is None:
         if args.method == "sequential":
             raise ConfigError("--method sequential needs --friction friction.json (from 'reflexarm identify friction')")
         methods = ["combined"]
         say(args, "no --friction given: only the combined method is run")
+    if "sequential" in methods and friction.missing:
+        print(_partial_friction_line(args.friction, friction, robot, base.n_base))
     results = {}  # the models as saved: what the validation below scores
     for m in methods:
         estimate = identify_dynamics(
@@ -136,6 +138,7 @@ def _identify_from_logs(args: argparse.Namespace) -> int:
             "condition_number": r.condition_number,
             "residual_rms": r.residual_rms,
             "friction": r.friction.to_dict(),
+            "friction_estimated_joints": [j + 1 for j in r.estimated_friction_joints],
             "notes": r.notes,
             "timings": r.timings,
         }
@@ -169,6 +172,25 @@ def _identify_from_logs(args: argparse.Namespace) -> int:
         "identification.json" + (", validation.csv, fig6_torques.png)" if val_raw is not None else ")")
     )
     return 0
+
+
+def _partial_friction_line(path: str, friction: Any, robot: Any, n_base: int) -> str:
+    """What the sequential method does with a friction file that lacks some joints (they are estimated)."""
+    from reflexarm.ident.friction_parameters import format_joints
+
+    missing, known = friction.missing, friction.known
+    line = (
+        f"sequential: {Path(path).name} has no friction for joint(s) {format_joints(missing, robot.joint_names)} "
+        f"(not identified): their d_v, mu_C are estimated with the base parameters ({n_base} + {2 * len(missing)} "
+        f"unknowns); joint(s) {format_joints(known, robot.joint_names) or '(none)'} keep the file's friction (eq. 16)"
+    )
+    if not known:
+        return line + ": the same unknowns as the combined method"
+    return line + (
+        f". For every joint's friction fixed ({n_base} unknowns), identify it: 'identify friction --joints "
+        + ",".join(str(j + 1) for j in range(robot.n))
+        + "'"
+    )
 
 
 def _load_excitation(robot: Any, path: str) -> Any:

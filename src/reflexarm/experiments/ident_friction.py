@@ -35,8 +35,8 @@ class FrictionExperiment:
 
     Attributes:
         fits: one :class:`FrictionFit` per identified joint.
-        friction: all joints' d_v, mu_C (joints not run keep ``default``'s values, see
-            :func:`run_friction_experiments`); the offsets of the fits are not included (they absorb the
+        friction: all joints' d_v, mu_C (joints not run: ``default``'s values if given, else not known, NaN,
+            see :func:`run_friction_experiments`); the offsets of the fits are not included (they absorb the
             mean rigid-body model error over each joint's travel).
         plans: the reference of each joint's runs.
         logs: the recorded log of each joint.
@@ -152,7 +152,8 @@ def run_friction_experiments(
             for every speed and both directions, since each speed runs the same range both ways).
         noise, seed: sensor noise and seed.
         true_friction, extra_joint_torque: the plant's friction (default: the file's) and extra torque.
-        default: friction of the joints not run (default: zeros).
+        default: friction of the joints not run (default: none; they are not known, NaN in ``friction``:
+            :func:`~reflexarm.ident.identify_dynamics` then estimates them in the sequential method).
         n_jobs: joints run in parallel (joblib processes).
         progress: progress bars.
     """
@@ -170,6 +171,8 @@ def run_friction_experiments(
     fits = tuple(r[0] for r in runs)
     fr = friction_from_fits(fits, robot.n, default=default)
     fr = FrictionParameters(fr.viscous, fr.coulomb, None)
+    if default is None:  # friction_from_fits puts 0 for the joints not run: not a friction value
+        fr = fr.restricted_to(joints)
     truth = true_friction if true_friction is not None else robot.friction
     return FrictionExperiment(
         fits=fits,

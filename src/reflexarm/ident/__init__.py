@@ -28,7 +28,11 @@ from reflexarm.ident.excitation_export import (
     sample_excitation,
     write_excitation_csv,
 )
-from reflexarm.ident.friction_parameters import ImplausibleFrictionWarning, check_friction_plausibility
+from reflexarm.ident.friction_parameters import (
+    ImplausibleFrictionWarning,
+    MissingFrictionError,
+    check_friction_plausibility,
+)
 from reflexarm.ident.joint_friction import (
     ConstantVelocityTrajectory,
     FrictionFit,
@@ -69,6 +73,7 @@ __all__ = [
     "ImplausibleFrictionWarning",
     "KnownJointTerms",
     "LogRepairWarning",
+    "MissingFrictionError",
     "PhysicalConsistencyWarning",
     "RobotLog",
     "SampledExcitation",

@@ -197,17 +197,17 @@ def _project(
     rel_change = float(np.linalg.norm(d_beta)) / max(float(np.linalg.norm(beta_hat)), 1e-300)
     rss = float(np.sum(result.residual_rms**2 / np.maximum(result.noise_variance, 1e-300))) * result.n_samples
     friction = result.friction
-    if K is not None:
-        f = np.r_[friction.viscous, friction.coulomb] if result.method == "combined" else np.zeros(0)
-        if friction.offset is not None:
+    if K is not None:  # the estimated friction (and offsets) follow beta_b: d(friction) = -K d(beta)
+        fe = list(result.estimated_friction_joints)
+        m = len(fe)
+        f = np.r_[friction.viscous[fe], friction.coulomb[fe]]
+        estimated_offset = friction.offset is not None and K.shape[0] == 2 * m + n
+        if estimated_offset:
             f = np.r_[f, friction.offset]
         f = f - K @ d_beta
-        k = 0
-        if result.method == "combined":
-            friction = FrictionParameters(f[:n], f[n : 2 * n], friction.offset)
-            k = 2 * n
-        if friction.offset is not None and f.size > k:
-            friction = FrictionParameters(friction.viscous, friction.coulomb, f[k : k + n])
+        viscous, coulomb = friction.viscous.copy(), friction.coulomb.copy()
+        viscous[fe], coulomb[fe] = f[:m], f[m : 2 * m]
+        friction = FrictionParameters(viscous, coulomb, f[2 * m : 2 * m + n] if estimated_offset else friction.offset)
     projected = replace(
         result,
         beta_b=beta,

@@ -9,7 +9,10 @@ The model (14) with tau_ext = 0 (or removed with the wrist wrench) and the frict
 * **sequential** (the paper's beta_II): d_v, mu_C come from the single-joint constant-velocity
   experiments (:mod:`reflexarm.ident.joint_friction`); the friction-corrected torque (16)-(17)
   ``tau_m,f = tau_m - Phi_f (d_v, mu_C)`` is then explained by Phi_b beta_b alone (45 instead of 59
-  unknowns on the Atlas arm).
+  unknowns on the Atlas arm). Joints the given friction does not know (NaN: no single-joint run, e.g.
+  the Atlas wrist when only the hydraulic joints were run) keep their friction columns and are
+  estimated with beta_b (45 + 2 per such joint unknowns), never corrected with a zero friction; the
+  result says so in its notes and records them (``DynamicsIdentification.friction_estimated``).
 
 Both solve (18), ``beta = (F^T Sigma^-1 F)^-1 F^T Sigma^-1 b``, with F and b stacked over the samples as in
 (19) and ``Sigma = diag(sigma_1^2, ..., sigma_n^2)`` repeated per sample: each joint's rows are weighted
@@ -49,7 +52,7 @@ from reflexarm.ident.base_parameters import (
     compute_base_parameters,
     warn_if_ill_conditioned,
 )
-from reflexarm.ident.friction_parameters import FrictionParameters, check_friction_against_robot
+from reflexarm.ident.friction_parameters import FrictionParameters, check_friction_against_robot, format_joints
 from reflexarm.ident.identification_result import (
     _CHUNK,
     DynamicsIdentification,
@@ -111,7 +114,8 @@ def identify_dynamics(
             the measured torque as known terms; the nominal inertias are not used).
         log: one or more preprocessed logs (with ``ddq``, see :func:`~reflexarm.ident.preprocess_log`).
         method: ``"sequential"`` (friction fixed to ``friction``, eqs. (16)-(17)) or ``"combined"``.
-        friction: the pre-identified friction for ``sequential`` (required there, ignored otherwise).
+        friction: the pre-identified friction for ``sequential`` (required there, ignored otherwise); joints
+            it does not know (NaN, :attr:`FrictionParameters.missing`) get their d_v, mu_C estimated here.
         offset: also estimate a constant torque per joint (see the module docstring).
         noise_variance: sigma_j^2 per joint [Nm^2] for Sigma; ``"estimate"``: from the residuals of an
             unweighted pass; None: unweighted (Sigma = I).
@@ -135,7 +139,8 @@ def identify_dynamics(
 
     Raises:
         IdentificationError: unknown method, missing friction for ``sequential``, log without ddq,
-            joint count mismatch.
+            joint count mismatch, noise variances of the wrong count, a joint left without rows by
+            ``min_speed``, given offsets without the friction of some joints.
         NonFiniteEstimateError: (an IdentificationError) the solution is NaN/inf; the message and its
             ``samples`` name the rows that stand out most from their columns (the likely bad rows).
         ImplausibleDataError: (a DataError) ``check_limits`` and a log far outside the robot's limits;
@@ -186,13 +191,27 @@ def _identify_dynamics(
         fixed = FrictionParameters.from_model(friction) if isinstance(friction, CoulombViscousFriction) else friction
         if fixed.n != n:
             raise IdentificationError(f"friction has {fixed.n} joints; robot {robot.name!r} has {n}")
+        if fixed.missing and fixed.offset is not None:
+            raise IdentificationError(
+                f"the given friction has offsets but no friction for joint(s) "
+                f"{format_joints(fixed.missing, robot.joint_names)}: give it without offsets (offset=True then "
+                "estimates every joint's offset) or with every joint's friction and offset"
+            )
+    # joints whose d_v, mu_C are columns of (19): every joint (combined); those the given friction does not
+    # know (sequential: no single-joint run), whose torque would otherwise be corrected with 0 friction
+    fric_est = tuple(range(n)) if fixed is None else fixed.missing
+    n_fe = len(fric_est)
+    fe = np.asarray(fric_est, dtype=int)
     base = base if base is not None else compute_base_parameters(robot)
     reg = BatchRegressor(robot)
     known = KnownJointTerms.from_robot(robot)
     nb = base.n_base
     est_offset = offset and (fixed is None or fixed.offset is None)
-    n_fric = 0 if method == "sequential" else 2 * n
-    p = nb + n_fric + (n if est_offset else 0)
+    p = nb + 2 * n_fe + (n if est_offset else 0)
+    if fixed is not None:  # eq. (16) on the joints with given friction; the others' friction is estimated
+        given = ~np.isnan(fixed.viscous)
+        fixed_viscous = np.where(given, fixed.viscous, 0.0)
+        fixed_coulomb = np.where(given, fixed.coulomb, 0.0)
 
     def rows(lg: RobotLog, b_all: np.ndarray, sl: slice, Y: np.ndarray) -> np.ndarray:
         """Rows [Phi_b (Phi_f) (offsets) | b] of (19), per joint: (n, m, p + 1)."""
@@ -203,12 +222,15 @@ def _identify_dynamics(
         dq = lg.dq[sl]
         k = nb
         idx = np.arange(n)
-        if method == "combined":  # eq. (15): each joint's friction columns act on its own rows only
-            M[idx, :, k + idx] = dq.T
-            M[idx, :, k + n + idx] = np.sign(dq).T
-            k += 2 * n
-        elif fixed is not None:
-            b = b - fixed.compute_torque(dq)  # eq. (16)
+        if n_fe:  # eq. (15): each joint's friction columns act on its own rows only
+            i = np.arange(n_fe)
+            M[fe, :, k + i] = dq[:, fe].T
+            M[fe, :, k + n_fe + i] = np.sign(dq[:, fe]).T
+            k += 2 * n_fe
+        if fixed is not None:
+            b = b - (fixed_viscous * dq + fixed_coulomb * np.sign(dq))  # eq. (16)
+            if fixed.offset is not None:
+                b = b - fixed.offset
         if est_offset:
             M[idx, :, k + idx] = 1.0
         M[:, :, p] = b.T
@@ -222,7 +244,12 @@ def _identify_dynamics(
                 f"noise_variance must be per-joint variances, 'estimate' or None; got {noise_variance!r}"
             )
     elif noise_variance is not None:
-        given = np.broadcast_to(np.asarray(noise_variance, dtype=float), (n,)).copy()
+        nv = np.asarray(noise_variance, dtype=float).reshape(-1)
+        if nv.size not in (1, n):
+            raise IdentificationError(
+                f"noise_variance must be one variance or one per joint ({n}); got {nv.size}: {nv.tolist()}"
+            )
+        given = np.broadcast_to(nv, (n,)).copy()
         if not np.all(np.isfinite(given)) or np.any(given <= 0):
             raise IdentificationError(f"noise_variance must be positive per joint; got {given.tolist()}")
     total = sum(len(lg) for lg in logs)
@@ -249,6 +276,13 @@ def _identify_dynamics(
             acc.add(M, keep)
             t_solve += time.perf_counter() - clock
     _refuse_non_finite({"entries of the information matrix": acc.G}, logs)
+    if np.any(acc.rows == 0):  # only min_speed removes rows: no equation of the joint is left
+        empty = tuple(int(j) for j in np.flatnonzero(acc.rows == 0))
+        raise IdentificationError(
+            f"joint(s) {format_joints(empty, robot.joint_names)}: no sample left with |dq_j| >= min_speed = "
+            f"{min_speed:g} rad/s in {total:,} samples; their torque would not enter the fit. Lower min_speed or "
+            "log motion of these joints"
+        )
     clock = time.perf_counter()
     notes: list[str] = [] if known.is_zero else [known.describe()]
     if given is not None:
@@ -293,17 +327,30 @@ def _identify_dynamics(
         )
     beta_b = x[:nb]
     k = nb
-    if method == "combined":
-        fr = FrictionParameters(x[k : k + n], x[k + n : k + 2 * n])
-        k += 2 * n
-    else:
-        assert fixed is not None
-        fr = fixed
+    viscous = np.zeros(n) if fixed is None else fixed.viscous.copy()  # combined: every entry estimated below
+    coulomb = np.zeros(n) if fixed is None else fixed.coulomb.copy()
+    viscous[fe], coulomb[fe] = x[k : k + n_fe], x[k + n_fe : k + 2 * n_fe]
+    fr = FrictionParameters(viscous, coulomb, None if fixed is None else fixed.offset)
+    k += 2 * n_fe
     if est_offset:
         fr = replace(fr, offset=x[k : k + n])
-    if method == "combined":
-        fr_std = FrictionParameters(std[nb : nb + n], std[nb + n : nb + 2 * n])
-        check_friction_against_robot(fr, robot, std=fr_std, source="combined identification", stacklevel=4)
+    if n_fe:
+        v_std, c_std = np.zeros(n), np.zeros(n)
+        v_std[fe], c_std[fe] = std[nb : nb + n_fe], std[nb + n_fe : nb + 2 * n_fe]
+        check_friction_against_robot(
+            fr,
+            robot,
+            joints=fric_est,
+            std=FrictionParameters(v_std, c_std),
+            source=f"{method} identification",
+            stacklevel=4,
+        )
+    if method == "sequential" and n_fe:
+        notes.append(
+            f"the given friction has none for joint(s) {format_joints(fric_est, robot.joint_names)} (not identified): "
+            f"their d_v, mu_C were estimated with beta_b ({nb} + {2 * n_fe} unknowns); the other joints' friction "
+            "is the given one (eq. 16)"
+        )
     return DynamicsIdentification(
         method=method,
         robot_name=robot.name,
@@ -320,6 +367,7 @@ def _identify_dynamics(
         timings={"regressor_s": t_reg, "solve_s": t_solve},
         information=sol.information,
         known_terms=known,
+        friction_estimated=fric_est,
     )
 
 

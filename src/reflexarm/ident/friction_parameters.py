@@ -2,6 +2,12 @@
 
 The identification's own bundle (exact sign, optional constant offsets); :meth:`FrictionParameters.to_model`
 turns it into the controller's :class:`~reflexarm.robots.friction.CoulombViscousFriction`.
+
+Joints whose friction is not known (no single-joint run: ``identify friction --joints``, or the Atlas
+default of the hydraulic joints only) hold NaN, written as ``null`` by :meth:`FrictionParameters.to_dict`;
+never 0, which would be a friction value. :meth:`~FrictionParameters.compute_torque` and
+:meth:`~FrictionParameters.to_model` refuse them (:class:`MissingFrictionError`);
+:func:`~reflexarm.ident.identify_dynamics` (sequential) estimates them in the least squares.
 """
 
 from __future__ import annotations
@@ -22,9 +28,29 @@ __all__ = [
     "VISCOUS_EFFORT_FRACTION",
     "FrictionParameters",
     "ImplausibleFrictionWarning",
+    "MissingFrictionError",
     "check_friction_against_robot",
     "check_friction_plausibility",
 ]
+
+
+class MissingFrictionError(IdentificationError):
+    """Friction coefficients are needed for joints whose friction is not known (NaN: not identified).
+
+    Attributes:
+        joints: the 0-based joints without coefficients (messages give them 1-based).
+    """
+
+    def __init__(self, message: str, *, joints: tuple[int, ...]) -> None:
+        super().__init__(message)
+        self.joints = joints
+
+
+def format_joints(joints: Sequence[int], joint_names: Sequence[str] | None = None) -> str:
+    """0-based ``joints`` as people read them: ``"2 (elbow), 3 (wrist_1)"`` (1-based, with names if given)."""
+    if joint_names is None:
+        return ", ".join(str(j + 1) for j in joints)
+    return ", ".join(f"{j + 1} ({joint_names[j]})" for j in joints)
 
 
 @dataclass(frozen=True)
@@ -32,9 +58,9 @@ class FrictionParameters:
     """Coulomb + viscous (+ offset) friction per joint, eq. (15), exact sign.
 
     Attributes:
-        viscous: d_v [Nms/rad] (n,).
-        coulomb: mu_C [Nm] (n,).
-        offset: constant torque [Nm] (n,) or None.
+        viscous: d_v [Nms/rad] (n,); NaN for a joint whose friction is not known (see :attr:`missing`).
+        coulomb: mu_C [Nm] (n,); NaN exactly where ``viscous`` is.
+        offset: constant torque [Nm] (n,) or None; NaN allowed only on the joints of :attr:`missing`.
     """
 
     viscous: np.ndarray
@@ -46,17 +72,58 @@ class FrictionParameters:
         c = np.asarray(self.coulomb, dtype=float).reshape(-1)
         if v.shape != c.shape:
             raise IdentificationError(f"viscous {v.shape} and coulomb {c.shape} must have one value per joint")
+        if np.any(np.isinf(v)) or np.any(np.isinf(c)) or np.any(np.isnan(v) != np.isnan(c)):
+            raise IdentificationError(
+                f"friction coefficients must be finite, or NaN for both d_v and mu_C of a joint whose friction is "
+                f"not known; got viscous {v.tolist()}, coulomb {c.tolist()}"
+            )
         object.__setattr__(self, "viscous", v)
         object.__setattr__(self, "coulomb", c)
         if self.offset is not None:
             o = np.asarray(self.offset, dtype=float).reshape(-1)
             if o.shape != v.shape:
                 raise IdentificationError(f"offset {o.shape} must have one value per joint like viscous {v.shape}")
+            if np.any(np.isinf(o)) or np.any(np.isnan(o) & ~np.isnan(v)):
+                raise IdentificationError(
+                    f"offsets must be finite on every joint with known friction (NaN only where d_v, mu_C are); "
+                    f"got offset {o.tolist()}, viscous {v.tolist()}"
+                )
             object.__setattr__(self, "offset", o)
 
     @property
     def n(self) -> int:
         return int(self.viscous.size)
+
+    @property
+    def missing(self) -> tuple[int, ...]:
+        """0-based joints whose friction is not known (NaN); () when every joint has coefficients."""
+        return tuple(int(j) for j in np.flatnonzero(np.isnan(self.viscous)))
+
+    @property
+    def known(self) -> tuple[int, ...]:
+        """0-based joints with coefficients (the complement of :attr:`missing`)."""
+        return tuple(int(j) for j in np.flatnonzero(~np.isnan(self.viscous)))
+
+    def restricted_to(self, joints: Sequence[int]) -> FrictionParameters:
+        """These coefficients on the 0-based ``joints`` only; every other joint not known (NaN).
+
+        E.g. the result of :func:`~reflexarm.ident.friction_from_fits` (0 for joints without a fit) restricted
+        to the fitted joints.
+        """
+        keep = np.zeros(self.n, dtype=bool)
+        keep[list(joints)] = True
+        off = None if self.offset is None else np.where(keep, self.offset, np.nan)
+        return FrictionParameters(np.where(keep, self.viscous, np.nan), np.where(keep, self.coulomb, np.nan), off)
+
+    def _require_complete(self, what: str) -> None:
+        missing = self.missing
+        if missing:
+            raise MissingFrictionError(
+                f"{what} needs every joint's friction; joint(s) {format_joints(missing)} (1-based) of {self.n} have "
+                "none (not identified). Identify them (single-joint runs) or let identify_dynamics "
+                "(method='sequential') estimate them in the least squares",
+                joints=missing,
+            )
 
     @classmethod
     def from_model(cls, friction: CoulombViscousFriction) -> FrictionParameters:
@@ -70,33 +137,49 @@ class FrictionParameters:
 
     def compute_torque(self, dq: npt.ArrayLike) -> np.ndarray:
         """tau_f = d_v dq + mu_C sgn(dq) [+ offset], exact sign, for (n,) or (N, n) velocities [Nm]."""
+        self._require_complete("the friction torque")
         dq = np.asarray(dq, dtype=float)
         out = self.viscous * dq + self.coulomb * np.sign(dq)
         return out + self.offset if self.offset is not None else out
 
     def to_model(self, velocity_band: float = DEFAULT_VELOCITY_BAND) -> CoulombViscousFriction:
         """The controller's friction model (negative coefficients clipped to 0; offsets are not part of it)."""
+        self._require_complete("the controller's friction model")
         return CoulombViscousFriction(
             np.maximum(self.coulomb, 0.0), np.maximum(self.viscous, 0.0), velocity_band=velocity_band
         )
 
     def to_dict(self) -> dict[str, object]:
+        """``viscous``, ``coulomb``, ``offset`` lists (``null`` for a joint whose value is not known)."""
         return {
-            "viscous": self.viscous.tolist(),
-            "coulomb": self.coulomb.tolist(),
-            "offset": None if self.offset is None else self.offset.tolist(),
+            "viscous": _with_nulls(self.viscous),
+            "coulomb": _with_nulls(self.coulomb),
+            "offset": None if self.offset is None else _with_nulls(self.offset),
         }
 
     @classmethod
     def from_dict(cls, d: dict[str, object]) -> FrictionParameters:
+        """From :meth:`to_dict`'s layout; ``null`` entries are joints whose friction is not known."""
         try:
             return cls(
-                np.asarray(d["viscous"], dtype=float),
-                np.asarray(d["coulomb"], dtype=float),
-                None if d.get("offset") is None else np.asarray(d["offset"], dtype=float),
+                _from_nulls(d["viscous"]),
+                _from_nulls(d["coulomb"]),
+                None if d.get("offset") is None else _from_nulls(d["offset"]),
             )
         except (KeyError, TypeError, ValueError) as e:
             raise IdentificationError(f"malformed friction description: {e}") from e
+
+
+def _with_nulls(values: np.ndarray) -> list[float | None]:
+    return [None if np.isnan(x) else float(x) for x in values]
+
+
+def _from_nulls(values: object) -> np.ndarray:
+    if isinstance(values, np.ndarray):
+        return values.astype(float)
+    if not isinstance(values, (list, tuple)):
+        raise TypeError(f"expected a list of numbers (null: not known); got {values!r}")
+    return np.array([np.nan if x is None else float(x) for x in values], dtype=float)
 
 
 class ImplausibleFrictionWarning(UserWarning):

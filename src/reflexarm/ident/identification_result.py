@@ -51,6 +51,10 @@ class DynamicsIdentification:
         known_terms: the robot file's armature and joint springs, subtracted from the measured torque
             before the regression and added back by :meth:`compute_torque` (not identified; see
             :mod:`reflexarm.ident.known_terms`); None in results saved before they were accounted for.
+        friction_estimated: 0-based joints whose d_v, mu_C are estimated parameters (after beta_b in
+            ``beta_std`` and ``information``: d_v of these joints, then their mu_C); every joint for the
+            combined method, those the given friction did not know for the sequential one. None in
+            results saved before it was recorded: see :attr:`estimated_friction_joints`.
     """
 
     method: str
@@ -69,10 +73,18 @@ class DynamicsIdentification:
     information: np.ndarray | None = field(default=None, compare=False)
     physical_parameters: np.ndarray | None = field(default=None, compare=False)
     known_terms: KnownJointTerms | None = field(default=None, compare=False)
+    friction_estimated: tuple[int, ...] | None = field(default=None, compare=False)
 
     @property
     def n(self) -> int:
         return self.base.n_joints
+
+    @property
+    def estimated_friction_joints(self) -> tuple[int, ...]:
+        """:attr:`friction_estimated`, or for old results every joint (combined) or none (sequential)."""
+        if self.friction_estimated is not None:
+            return self.friction_estimated
+        return tuple(range(self.n)) if self.method == "combined" else ()
 
     def compute_torque(
         self,
@@ -159,6 +171,7 @@ class DynamicsIdentification:
             "information": None if self.information is None else self.information.tolist(),
             "physical_parameters": None if self.physical_parameters is None else self.physical_parameters.tolist(),
             "known_terms": None if self.known_terms is None else self.known_terms.to_dict(),
+            "friction_estimated": None if self.friction_estimated is None else list(self.friction_estimated),
         }
 
     @classmethod
@@ -184,6 +197,9 @@ class DynamicsIdentification:
                 if d.get("physical_parameters") is None
                 else np.asarray(d["physical_parameters"], dtype=float),
                 known_terms=None if known is None else KnownJointTerms.from_dict(known),  # type: ignore[arg-type]
+                friction_estimated=None
+                if d.get("friction_estimated") is None
+                else tuple(int(j) for j in d["friction_estimated"]),  # type: ignore[attr-defined]
             )
         except (KeyError, TypeError, ValueError) as e:
             raise IdentificationError(f"malformed identification result: {e}") from e
