@@ -30,6 +30,7 @@ import pytest
 
 from conftest import SHARED
 from reflexarm.cli import main
+from reflexarm.experiments.collision import free_motion_trajectory
 from reflexarm.experiments.collision_summary import CONTACT_FORCE_N
 from reflexarm.ident import load_identified_model
 from reflexarm.ident.excitation import FourierTrajectory
@@ -43,12 +44,12 @@ ARMS = ("panda", "ur_like", "iiwa14", "atlas_cut")
 
 #: The excitation's period at the default base frequency 0.1 Hz [s]; one period is recorded.
 PERIOD_S = 10.0
-#: Free-motion log for tune-thresholds [s] (the demo's swing, repeated): the tail fit needs 20 separate
-#: excursions of each joint's residual (1 s apart). With an identified model the residual is dominated by
-#: its deterministic model error, which repeats with the motion: excursions come with the motion's cycles,
-#: not with the log's length over the gap. Measured on Panda (one identified model): 60 s of the swing or
-#: 240 s of the slower 'loaded' motion give 9-19 on some joint (refused); 150 s of the swing are enough.
-FREE_MOTION_S = 150.0
+#: Free-motion log for tune-thresholds, in cycles of the demo's swing (out and back, 13-16.6 s on these
+#: arms): the tail fit needs 20 separate excursions of each joint's residual (1 s apart). With an identified
+#: model the residual is dominated by its deterministic model error, which repeats with the motion, so the
+#: excursions come with the cycles (measured: about 2 per cycle; 9.1 cycles gave 18-19 on the UR-like arm,
+#: refused; 11.5 cycles were enough on Panda), not with the log's length over the gap. 14 cycles: >= 24.
+FREE_MOTION_CYCLES = 14
 
 
 def robot_options(arm: str, folder: Path) -> list[str]:
@@ -268,8 +269,9 @@ def test_the_whole_workflow_from_the_command_line(arm, tmp_path):
     check_validation(tmp_path / "vd", val / "log.csv", robot, models["sequential"])
     # thresholds from a free-motion log of the arm under the identified model
     fm, tt = tmp_path / "free", tmp_path / "thresholds"
-    run(["simulate", "free-motion", *options, "--model", model, "--duration", f"{FREE_MOTION_S:g}", "--out",
-         str(fm), "--quiet"])  # fmt: skip
+    duration = FREE_MOTION_CYCLES * free_motion_trajectory(1.0, "demo", robot).duration  # one cycle at least
+    run(["simulate", "free-motion", *options, "--model", model, "--duration", f"{duration:.3f}", "--out", str(fm),
+         "--quiet"])  # fmt: skip
     free_motion = json.loads((fm / "free_motion.json").read_text())
     run(["tune-thresholds", str(fm / "free_motion_trace.parquet"), *options, "--model", model,
          "--recorded-residual", "--allow-extrapolation", "--no-figure", "--out", str(tt)])  # fmt: skip
