@@ -13,7 +13,7 @@ The commands run in-process through :func:`reflexarm.cli.main` rather than in su
 argument parsing and command code, without ~3 s of imports for each of the 10 commands per arm on a shared
 2-core machine, and a failing step's traceback in the test report (the installed ``reflexarm`` script
 is this ``main``: pyproject's [project.scripts]). Settings are short (10 s excitations, 3 harmonics, 2
-friction speeds per joint, 150 s of free motion; ~45-60 s of CPU per arm); the assertions are about what
+friction speeds per joint, 14 cycles of free motion; ~45-60 s of CPU per arm); the assertions are about what
 each step must deliver, not the precision a long run would give.
 """
 
