@@ -7,6 +7,7 @@
 // `_address`): the same libmujoco is mapped once in the process, and the Python objects outlive the loop
 // (the Python wrapper keeps them). Every array is checked for dtype, C order and row count once, when it is
 // handed over; the loop then writes through raw pointers.
+#include <algorithm>
 #include <cstdint>
 #include <string>
 #include <tuple>
@@ -278,6 +279,23 @@ NB_MODULE(_closed_loop, m)
         return std::make_tuple(p.last_x, p.has_last, p.applied, v3(p.force), v3(p.target), v3(p.point_local));
       },
       "i"_a, "(last_x, has_last, applied, force, target, point_local) of push i now.")
+    .def(
+      "keep_still", [](PyLoop & self, int spec) { self.loop.keepStill(spec); }, "spec"_a,
+      "Keep MuJoCo's state (mj_getState with the mjtState mask `spec`; 0: stop) at the first tick sensed and at "
+      "the tick of the largest sum of tau_ext_i^2 (strictly larger than any before; reflexarm::StillStates).")
+    .def_prop_ro(
+      "still",
+      [](PyLoop & self) {
+        const auto & s = self.loop.still();
+        const auto arr = [](const std::vector<double> & v) {
+          auto * data = new double[v.size()];
+          std::copy(v.begin(), v.end(), data);
+          nb::capsule owner(data, [](void * p) noexcept { delete[] static_cast<double *>(p); });
+          return nb::ndarray<nb::numpy, double, nb::ndim<1>>(data, {v.size()}, owner);
+        };
+        return std::make_tuple(s.spec, s.start_tick, arr(s.start), s.peak_tick, arr(s.peak), s.peak2);
+      },
+      "(spec, start tick, start state, peak tick (-1: none), peak state, peak sum of tau_ext_i^2), copied.")
     .def("reset_controller", [](PyLoop & self) { self.loop.controller().reset(); })
     .def(
       "set_applied_torque",

@@ -222,6 +222,50 @@ namespace reflexarm
       std::memcpy(push.force_out + 3 * k, push.force, sizeof(double) * 3);
       std::memcpy(push.target_out + 3 * k, push.target, sizeof(double) * 3);
     }
+    if (still_.spec != 0)
+      watchStill(k);
+  }
+
+  // ------------------------------------------------------------------------------------------ stills
+  void ClosedLoop::keepStill(int spec)
+  {
+    if (spec == 0)
+    {
+      still_ = StillStates{};
+      return;
+    }
+    const int all = static_cast<int>(mjSTATE_INTEGRATION); // every bit of mjtState
+    if (spec < 0 || (spec & ~all) != 0)
+      throw ConfigError("ClosedLoop.keep_still: spec must be a mask of mjtState bits (within mjSTATE_INTEGRATION = "
+                        + std::to_string(all) + "); got " + std::to_string(spec));
+    if (m_ == nullptr)
+      throw ConfigError("ClosedLoop.keep_still: configure the loop first");
+    const int size = mj_stateSize(m_, spec);
+    still_.spec = spec;
+    still_.start.assign(static_cast<size_t>(size), 0.0);
+    still_.peak.assign(static_cast<size_t>(size), 0.0);
+    still_.start_tick = still_.peak_tick = -1;
+    still_.peak2 = 0.0;
+  }
+
+  // After row k is recorded: its tau_ext row is the one StillCapture evaluates at tick k (see StillStates).
+  void ClosedLoop::watchStill(long k) noexcept
+  {
+    if (still_.start_tick < 0)
+    {
+      mj_getState(m_, d_, still_.start.data(), still_.spec);
+      still_.start_tick = k;
+    }
+    const double * tau = buf_.tau_ext + k * n_;
+    double s = 0.0;
+    for (int i = 0; i < n_; ++i)
+      s += tau[i] * tau[i]; // rounded product, then the sum (this file is built with -ffp-contract=off)
+    if (s > still_.peak2)
+    {
+      still_.peak2 = s;
+      still_.peak_tick = k;
+      mj_getState(m_, d_, still_.peak.data(), still_.spec);
+    }
   }
 
   // As HandPush.update (reflexarm/sim/hand_push.py) and Plant.apply_external_force, operation by operation.

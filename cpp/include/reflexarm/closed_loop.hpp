@@ -104,6 +104,22 @@ namespace reflexarm
     double force[3] = {0.0, 0.0, 0.0}, target[3] = {0.0, 0.0, 0.0}, point_local[3] = {0.0, 0.0, 0.0};
   };
 
+  /// MuJoCo states kept for a still of the run (reflexarm.sim.video.StillCapture), as mj_getState gives them
+  /// for `spec` (a mjtState bit mask): at the first tick sensed and at the tick of the largest true external
+  /// joint torque. Both are taken in sense(k), after the measurement and the recording of row k and before
+  /// act(k) (where the Python loop calls its callbacks). The criterion is StillCapture's: the squared norm
+  /// tau_ext . tau_ext summed over the joints in their order, left to right (no fused multiply-add); a tick
+  /// is the new peak when that sum is strictly larger than the largest so far, which starts at 0: ties keep
+  /// the earlier tick, and without any external torque no peak is taken (peak_tick stays -1).
+  /// The buffers are sized by ClosedLoop::keepStill (before the run): nothing is allocated in the loop.
+  struct StillStates
+  {
+    int spec = 0;            ///< mjtState mask; 0: no still is kept
+    std::vector<double> start, peak; ///< mj_stateSize(spec) each
+    long start_tick = -1, peak_tick = -1;
+    double peak2 = 0.0;      ///< largest sum of tau_ext_i^2 so far [Nm^2]
+  };
+
   /// Outcome of ClosedLoop::act / run.
   enum class StepStatus : int
   {
@@ -140,6 +156,10 @@ namespace reflexarm
       qpos_records_ = qpos;
       mocap_records_ = mocap;
     }
+    /// Keep the states of a still (StillStates) with mj_getState's `spec` from the next tick sensed on;
+    /// `spec` 0 stops keeping them. Throws ConfigError for a spec MuJoCo does not know.
+    void keepStill(int spec);
+    const StillStates & still() const noexcept { return still_; }
     /// Motor torque currently applied (the tau_m of the next measurement, before noise).
     Eigen::VectorXd & appliedTorque() noexcept { return tau_applied_; }
 
@@ -160,6 +180,7 @@ namespace reflexarm
     void loadCompensatedWrench(double * out) noexcept;
     void applyForces() noexcept;
     void updatePush(SpringPush & push, long k) noexcept;
+    void watchStill(long k) noexcept;
 
     const mjModel * m_ = nullptr;
     mjData * d_ = nullptr;
@@ -173,6 +194,7 @@ namespace reflexarm
     std::vector<SpringPush> pushes_;
     std::vector<QposRecord> qpos_records_;
     std::vector<MocapRecord> mocap_records_;
+    StillStates still_;
     std::vector<int> parent_, dof_body_;
     std::vector<double> acc6_; // nbody x 6
     Eigen::VectorXd meas_, tau_applied_, zero_noise_;
