@@ -206,3 +206,34 @@ def test_noise_variances_of_the_wrong_count_and_joints_left_without_rows_are_ref
     with pytest.raises(IdentificationError, match=r"joint\(s\) 1 \(shoulder_pan_joint\), .*: no sample left with "
                        r"\|dq_j\| >= min_speed = 100 rad/s in 5,000 samples"):  # fmt: skip
         identify_dynamics(six_dof, log, method="combined", min_speed=100.0)
+
+
+def test_run_takes_one_joint_per_log_and_each_joint_once(six_dof: RobotModel, tmp_path: Path,
+                                                         capsys: pytest.CaptureFixture[str]) -> None:  # fmt: skip
+    arm = ["--robot", str(six_dof.source), "--ee-frame", SIX_DOF_TOOL, "--out", str(tmp_path / "fr"), "--quiet"]
+    runs = save_log(_runs_log(six_dof, 0), tmp_path / "runs_j1.csv")
+    assert main(["identify", "friction", *arm, "--run", f"1,2={runs}"]) == 2  # was: joint 1, joint 2 dropped
+    assert "--run expects one joint per log (JOINT=LOG, e.g. 3=runs_j3.csv); got '1,2=" in capsys.readouterr().err
+    assert main(["identify", "friction", *arm, "--run", f"1={runs}", "--run", f"1={runs}"]) == 2  # was: last wins
+    assert "--run: joint 1 has two logs (" in capsys.readouterr().err
+    assert main(["identify", "friction", *arm, "--joints", "2,2"]) == 2  # was: joint 2 simulated twice
+    assert "joint(s) [2] given more than once in '2,2'; give each joint once" in capsys.readouterr().err
+
+
+def test_a_loaded_excitation_keeps_its_optimizer_start(six_dof: RobotModel, tmp_path: Path) -> None:
+    """identify dynamics --excitation FILE: the study's condition_initial is the start's, not the optimum's."""
+    from reflexarm._cli.identify_dynamics import _load_excitation
+    from reflexarm.ident.excitation import regressor_condition
+
+    rng = np.random.default_rng(1)
+    start, best = (
+        FourierTrajectory(2 * np.pi * 0.1, 0.1 * rng.normal(size=(6, 3)), 0.1 * rng.normal(size=(6, 3)), np.zeros(6))
+        for _ in range(2)
+    )
+    path = tmp_path / "excitation.json"
+    path.write_text(json.dumps({"trajectory": best.to_dict(), "initial": start.to_dict(), "iterations": 5}))
+    design = _load_excitation(six_dof, str(path))
+    assert design.condition_initial == regressor_condition(six_dof, start) != design.condition_optimized
+    assert design.iterations == 5
+    path.write_text(json.dumps({"trajectory": best.to_dict()}))  # no start recorded: the trajectory for both
+    assert _load_excitation(six_dof, str(path)).condition_initial == regressor_condition(six_dof, best)

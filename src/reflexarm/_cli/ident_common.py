@@ -68,6 +68,9 @@ def parse_joints(text: str, n: int) -> list[int]:
     bad = [j + 1 for j in js if not 0 <= j < n]
     if bad:
         raise ConfigError(f"joint(s) {bad} out of range; the robot has joints 1..{n}")
+    twice = sorted({j + 1 for j in js if js.count(j) > 1})
+    if twice:
+        raise ConfigError(f"joint(s) {twice} given more than once in {text!r}; give each joint once")
     return js
 
 

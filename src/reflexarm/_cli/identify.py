@@ -90,7 +90,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--joints",
         default=None,
         help="joints to simulate, 1-based, comma-separated (default: the hydraulic joints 1-4 on the Atlas arm, "
-        "every joint on other arms)",
+        "every joint on other arms); friction.json has null (not identified) for the others, which 'identify "
+        "dynamics --friction' estimates",
     )
     f.add_argument("--speeds", default=None, help="comma-separated speeds [rad/s] (default 0.1,0.2,0.35,0.5,0.75,1)")
     f.add_argument("--scenario", choices=("table1", "stribeck"), default="table1", help="plant friction (simulation)")
@@ -278,7 +279,14 @@ def _identify_friction(args: argparse.Namespace) -> int:
             if "=" not in spec:
                 raise ConfigError(f"--run expects JOINT=LOG (e.g. 3=runs_j3.csv); got {spec!r}")
             js, path = spec.split("=", 1)
-            j = parse_joints(js, robot.n)[0]
+            joints = parse_joints(js, robot.n)
+            if len(joints) != 1:
+                raise ConfigError(f"--run expects one joint per log (JOINT=LOG, e.g. 3=runs_j3.csv); got {spec!r}")
+            j = joints[0]
+            if any(ft.joint == j for ft in fits):
+                raise ConfigError(
+                    f"--run: joint {j + 1} has two logs ({spec!r} and an earlier one); give one per joint"
+                )
             log = load_log_from_args(args, path, robot)
             from reflexarm.ident import preprocess_log
 

@@ -200,11 +200,24 @@ def _load_excitation(robot: Any, path: str) -> Any:
     try:
         d = json.loads(Path(path).read_text())
         tr = FourierTrajectory.from_dict(d["trajectory"])
+        initial = FourierTrajectory.from_dict(d["initial"]) if d.get("initial") is not None else None
     except (OSError, json.JSONDecodeError, KeyError) as e:
         raise ConfigError(f"cannot read excitation file {path!r} (from 'reflexarm excite'): {e}") from e
     cond = regressor_condition(robot, tr)
     limits = d.get("limits_optimized", {})
-    return ExcitationDesign(tr, tr, cond, cond, limits, limits, 0, f"read from {path}", d.get("bounds", {}))
+    if initial is None:  # a file without the optimizer's start: the trajectory stands for both
+        return ExcitationDesign(tr, tr, cond, cond, limits, limits, 0, f"read from {path}", d.get("bounds", {}))
+    return ExcitationDesign(
+        tr,
+        initial,
+        regressor_condition(robot, initial),
+        cond,
+        d.get("limits_initial", {}),
+        limits,
+        int(d.get("iterations", 0)),
+        f"read from {path}",
+        d.get("bounds", {}),
+    )
 
 
 def dynamics_study_command(args: argparse.Namespace) -> int:
