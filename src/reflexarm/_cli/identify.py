@@ -263,6 +263,7 @@ def _record(args: argparse.Namespace, robot: object, trajectory: object) -> Path
 # ---------------------------------------------------------------------------------------------- friction
 def _identify_friction(args: argparse.Namespace) -> int:
     from reflexarm.ident.joint_friction import (
+        FrictionFit,
         fit_friction,
         friction_from_fits,
         friction_points,
@@ -274,7 +275,7 @@ def _identify_friction(args: argparse.Namespace) -> int:
     robot = load_robot_arg(args)
     truth = None
     if args.run:
-        fits = []
+        fits: list[FrictionFit] = []
         for spec in args.run:
             if "=" not in spec:
                 raise ConfigError(f"--run expects JOINT=LOG (e.g. 3=runs_j3.csv); got {spec!r}")
