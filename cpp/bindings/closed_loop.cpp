@@ -283,8 +283,8 @@ NB_MODULE(_closed_loop, m)
       "keep_still", [](PyLoop & self, int spec) { self.loop.keepStill(spec); }, "spec"_a,
       "Keep MuJoCo's state (mj_getState with the mjtState mask `spec`; 0: stop) at the first tick sensed and at "
       "the tick of the largest sum of tau_ext_i^2 (strictly larger than any before; reflexarm::StillStates).")
-    .def_prop_ro(
-      "still",
+    .def(
+      "still_states",
       [](PyLoop & self) {
         const auto & s = self.loop.still();
         const auto arr = [](const std::vector<double> & v) {
@@ -295,7 +295,7 @@ NB_MODULE(_closed_loop, m)
         };
         return std::make_tuple(s.spec, s.start_tick, arr(s.start), s.peak_tick, arr(s.peak), s.peak2);
       },
-      "(spec, start tick, start state, peak tick (-1: none), peak state, peak sum of tau_ext_i^2), copied.")
+      nb::rv_policy::move, "(spec, start tick, start state, peak tick (-1: none), peak state, peak sum of tau_ext_i^2), copied.")
     .def("reset_controller", [](PyLoop & self) { self.loop.controller().reset(); })
     .def(
       "set_applied_torque",

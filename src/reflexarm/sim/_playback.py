@@ -16,6 +16,8 @@ tick is a function of time alone or nothing:
   the state then); afterwards its spring-damper on the end-effector position is evaluated in C++ every
   tick (``reflexarm::SpringPush``) from its rest travel, sampled per tick.
 
+:func:`hand_push_to` and :func:`hand_push_back` move a HandPush's state from Python to C++ and back.
+
 Not playable: any scene type not listed here that overrides ``update`` or ``observe``: those runs use the
 Python loop.
 """
@@ -23,11 +25,12 @@ Python loop.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import mujoco
 import numpy as np
 
+from reflexarm.sim._plant_forces import _AppliedForce
 from reflexarm.sim.cinderblock import Cinderblock
 from reflexarm.sim.elbow_stick import PARKED, ElbowStick
 from reflexarm.sim.end_effector_force import EndEffectorForce
@@ -37,6 +40,7 @@ from reflexarm.sim.scene import Scene
 
 if TYPE_CHECKING:
     from reflexarm.sim.plant import Plant
+    from reflexarm.sim.recording import _Recorder
 
 #: Scenes updated by ``Plant.step`` compare times with this slack [s] (``plant.time + 1e-9``).
 TIME_SLACK = 1e-9
@@ -113,3 +117,45 @@ def event_ticks(plays: list[ScenePlay], times: np.ndarray) -> dict[int, list[Sce
             if k < times.size:
                 out.setdefault(k, []).append(p)
     return out
+
+
+def hand_push_to(
+    loop: Any, plant: Plant, scene: Any, k: int, times: np.ndarray, rec: _Recorder, owned: set[int]
+) -> list[np.ndarray]:
+    """Hand a HandPush, just updated in Python at tick k, to C++ for the ticks after k; returns its arrays."""
+    N = times.size
+    rest, rest_v = np.full(N, np.nan), np.zeros(N)
+    for j in range(k + 1, N):
+        t = float(times[j]) + TIME_SLACK  # as HandPush.update: plant.time + 1e-9
+        if not (t < scene.t_start or t >= scene.t_release):
+            rest[j], rest_v[j] = scene._rest(t)
+    handle = scene._handle
+    local = plant._forces[handle].point_local if handle is not None else np.zeros(3)
+    if handle is not None:
+        owned.add(handle)
+    u = scene._u if scene._u is not None else np.zeros(3)
+    last = scene._last_x
+    loop.set_push(
+        plant._ee_body, plant._ee_site, tuple(u), tuple(scene._p0), scene.stiffness, scene.damping,
+        plant.control_period, rest, rest_v, rec.extras["hand_force"], rec.extras["hand_target"],
+        0.0 if last is None else last, last is not None, handle is not None,
+        tuple(scene._force), tuple(scene._target), tuple(local),
+    )  # fmt: skip
+    return [rest, rest_v]
+
+
+def hand_push_back(plant: Plant, scene: Any, state: tuple, owned: set[int]) -> None:
+    """The HandPush's Python state (and its force in the plant) as the Python loop would have left them."""
+    last_x, has_last, applied, force, target, local = state
+    scene._last_x = last_x if has_last else None
+    scene._force, scene._target = np.array(force), np.array(target)
+    if scene._handle is not None and scene._handle in owned:
+        plant._forces.pop(scene._handle, None)
+        owned.discard(scene._handle)
+    scene._handle = None
+    if applied:
+        handle = plant._next_force
+        plant._next_force += 1
+        plant._forces[handle] = _AppliedForce(plant._ee_body, np.array(force), np.array(local))
+        scene._handle = handle
+        owned.add(handle)

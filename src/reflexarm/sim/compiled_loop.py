@@ -12,30 +12,44 @@ switched on, a stick started) the loop stops, runs the scene's Python ``update``
 :func:`compiled_reason` says why a run cannot be compiled (None when it can); :func:`run_fast` uses the
 compiled loop when it can and :func:`run_closed_loop` otherwise. The Python ``controller`` object itself is
 not stepped by the compiled loop (its state after the run is its state before it).
+
+Run observers (:mod:`reflexarm.sim.run_observers`): stills stay compiled. C++ keeps MuJoCo's integration
+state at the first tick and at the tick of the largest true external joint torque (the criterion of
+:class:`~reflexarm.sim.video.StillCapture`, ``reflexarm::StillStates``) and :func:`run_fast` hands both to the
+observers after the run. A video needs a frame rendered during the run, so any observer that cannot take
+the recorded states (``accepts_compiled`` false, e.g. the CLI's ``--video``) sends the run to the Python loop.
 """
 
 from __future__ import annotations
 
 import importlib
-from dataclasses import fields
+from collections.abc import Callable
 from types import ModuleType
 from typing import Any
 
+import mujoco
 import numpy as np
 
 from reflexarm.errors import ConfigError, SimulationError
-from reflexarm.sim._plant_forces import _AppliedForce
-from reflexarm.sim._plant_sensors import _NOISE_BLOCK
-from reflexarm.sim._playback import TIME_SLACK, ScenePlay, event_ticks, playback
+from reflexarm.signals import Command
+from reflexarm.sim._compiled_inputs import _core_params, _draw_noise, _forces, _sample_reference, _tick_times
+from reflexarm.sim._playback import ScenePlay, event_ticks, hand_push_back, hand_push_to, playback
 from reflexarm.sim.plant import MAX_SPEED, Plant
 from reflexarm.sim.recording import _Recorder
-from reflexarm.sim.run_observers import observers_active
+from reflexarm.sim.run_observers import (
+    CompiledStill,
+    accepts_compiled,
+    make_observers,
+    observers_active,
+    using_observers,
+)
 from reflexarm.sim.runner import ControllerLike, TrajectoryLike, _check, run_closed_loop
 from reflexarm.sim.trace import Trace
-from reflexarm.sim.trajectory import JointTrajectory
 
 __all__ = ["compiled_reason", "run_compiled", "run_fast"]
 
+#: The MuJoCo state a still keeps (as StillCapture keeps it from the Python loop).
+_STILL_SPEC = int(mujoco.mjtState.mjSTATE_INTEGRATION)
 #: Mode names in the order of the C++ enum reflexarm::Mode (as reflexarm.control.controller.MODES).
 _MODES = np.array(["compliant", "precise_stiff", "precise_ee_compliant", "gravity_compensation", "fault"])
 
@@ -79,175 +93,31 @@ def run_fast(
     plant: Plant, controller: ControllerLike, trajectory: TrajectoryLike, duration: float, **kwargs: Any
 ) -> Trace:
     """:func:`run_compiled` when :func:`compiled_reason` finds nothing against it, else :func:`run_closed_loop`
-    (same arguments; ``progress``, ``callback`` and active run observers always take the Python loop).
-    ``trace.meta["loop"]`` says which."""
+    (same arguments; ``progress`` and ``callback`` always take the Python loop). Active run observers that
+    accept the compiled loop's recorded states (stills) get them after a compiled run; any other observer (a
+    video, which renders frames during the run) takes the Python loop. ``trace.meta["loop"]`` says which."""
     reset = bool(kwargs.get("reset_controller", True))
     if (
         kwargs.get("callback") is None
-        and not observers_active()  # stills and videos (reflexarm.sim.run_observers) watch every tick in Python
         and not kwargs.get("progress")
         and compiled_reason(plant, controller, reset_controller=reset) is None
     ):
-        return run_compiled(plant, controller, trajectory, duration)
-    trace = run_closed_loop(plant, controller, trajectory, duration, **kwargs)
+        if not observers_active():
+            return run_compiled(plant, controller, trajectory, duration)
+        observers = make_observers(plant)  # once per run, whichever loop runs it
+        if all(accepts_compiled(o) for o in observers):
+
+            def hand_over(record: CompiledStill) -> None:
+                for o in observers:
+                    o.take_compiled(plant, record)
+
+            return _run(plant, controller, trajectory, duration, reset_controller=True, still=hand_over)
+        with using_observers(plant, observers):  # a video: frames rendered every tick in Python
+            trace = run_closed_loop(plant, controller, trajectory, duration, **kwargs)
+    else:
+        trace = run_closed_loop(plant, controller, trajectory, duration, **kwargs)
     trace.meta["loop"] = "python"
     return trace
-
-
-def _core_params(controller: Any, core: ModuleType) -> Any:
-    """The core's ControllerParams of a (reset) Python Controller: those the Controller configures its own core
-    with (``control._setup.core_params``) when it has that function, with the switches it has now."""
-    setup = importlib.import_module("reflexarm.control._setup")
-    if hasattr(setup, "core_params"):
-        p = setup.core_params(controller, core)
-        p.kappa_f, p.kappa_eps, p.kappa_ext = (
-            int(controller.kappa_f),
-            int(controller.kappa_eps),
-            int(controller.kappa_ext),
-        )
-        return p
-    p = core.ControllerParams()
-    robot, imp = controller.robot, controller.impedance
-    gains = getattr(imp, "gains", imp)
-    p.stiffness = np.array(gains.stiffness, dtype=float)
-    p.damping_ratio = np.array(gains.damping_ratio, dtype=float)
-    p.observer_gain = np.array(controller.observer.observer_gain, dtype=float)
-    det = controller.detection_observer
-    p.detection_observer_gain = np.zeros(0) if det is None else np.array(det.observer_gain, dtype=float)
-    p.threshold = np.zeros(0) if controller.detector is None else np.array(controller.detector.threshold, dtype=float)
-    p.reaction = controller.reaction
-    p.kappa_f, p.kappa_eps, p.kappa_ext = int(controller.kappa_f), int(controller.kappa_eps), int(controller.kappa_ext)
-    p.residual_limit, p.switch_time, p.dt = controller.residual_limit, controller.switch_time, controller.dt
-    p.damping_update_period = int(imp.damping_update_period)
-    fr = robot.friction
-    p.friction_coulomb, p.friction_viscous = fr.coulomb.copy(), fr.viscous.copy()
-    p.friction_velocity_band = fr.velocity_band
-    if robot.has_springs:
-        p.spring_stiffness = np.array(robot.spring_stiffness, dtype=float)
-        p.spring_reference = np.array(robot.spring_reference, dtype=float)
-    p.sensor_frame_id = robot.sensor_frame_id
-    limit = controller.torque_limit
-    p.torque_limit = np.full(robot.n, np.inf) if limit is None else np.array(limit, dtype=float)
-    rate = controller.torque_rate_limit
-    p.torque_rate_limit = np.zeros(0) if rate is None else np.array(rate, dtype=float)
-    bounds = core.InputBounds()
-    for f in fields(controller.input_bounds):
-        setattr(bounds, f.name, float(getattr(controller.input_bounds, f.name)))
-    p.input_bounds = bounds
-    p.period_band_low, p.period_band_high = (float(x) for x in controller.period_band)
-    return p
-
-
-def _tick_times(plant: Plant, N: int) -> np.ndarray:
-    """MuJoCo's clock at each of the next N ticks (it adds ``opt.timestep`` once per physics step)."""
-    h = float(plant.model.opt.timestep)
-    steps = np.full(N * plant.substeps + 1, h)
-    steps[0] = float(plant.data.time)
-    # add.accumulate adds left to right, one step at a time: the very sums MuJoCo's clock makes
-    return np.add.accumulate(steps)[: N * plant.substeps : plant.substeps].copy()
-
-
-def _sample_reference(
-    trajectory: TrajectoryLike, times: np.ndarray, q_d: np.ndarray, dq_d: np.ndarray, ddq_d: np.ndarray
-) -> None:
-    """``trajectory.sample`` at every tick time into the (N, n) arrays.
-
-    Two shapes are evaluated as whole arrays (the per-call cost of ``sample`` is ~5 us, a quarter of a
-    tick's physics): a :class:`JointTrajectory`, with the operations of its sampling kernel in the same
-    order (so the same numbers to the bit), and a trajectory whose ``sample`` returns one and the same
-    Reference object at the first and last tick (a hold). Anything else is sampled tick by tick.
-    """
-    if type(trajectory) is JointTrajectory:
-        tr: Any = trajectory
-        starts, lengths, t_end = tr._starts_arr, tr._lengths_arr, float(tr._t_end)
-        i = np.clip(np.searchsorted(starts, times, side="right") - 1, 0, starts.size - 1)
-        T = lengths[i]
-        x = (times - starts[i]) / T
-        x2 = x * x
-        s = x2 * x * (10.0 - 15.0 * x + 6.0 * x2)
-        ds = 30.0 * x2 * (1.0 - 2.0 * x + x2) / T
-        dds = 60.0 * x * (1.0 - 3.0 * x + 2.0 * x2) / (T * T)
-        before, after = times <= starts[0], times >= t_end
-        i[before], s[before], ds[before], dds[before] = 0, 0.0, 0.0, 0.0
-        i[after], s[after], ds[after], dds[after] = starts.size - 1, 1.0, 0.0, 0.0
-        d = tr._deltas[i]
-        q_d[:] = tr._origins[i] + s[:, None] * d
-        dq_d[:] = ds[:, None] * d
-        ddq_d[:] = dds[:, None] * d
-        return
-    first = trajectory.sample(float(times[0]))
-    if trajectory.sample(float(times[-1])) is first:
-        q_d[:], dq_d[:], ddq_d[:] = first.q_d, first.dq_d, first.ddq_d
-        return
-    sample = trajectory.sample
-    for k in range(times.size):
-        r = sample(float(times[k]))
-        q_d[k], dq_d[k], ddq_d[k] = r.q_d, r.dq_d, r.ddq_d
-
-
-def _draw_noise(plant: Plant, N: int) -> np.ndarray | None:
-    """The noise rows of the next N measurements, drawn as N calls of ``Plant.measure`` would draw them."""
-    if not plant._noisy:
-        return None
-    out = np.empty((N, plant._dim))
-    k = 0
-    while k < N:
-        if plant._noise_i >= plant._noise_rows.shape[0]:
-            plant._noise_rows = plant._rng.uniform(-1.0, 1.0, (_NOISE_BLOCK, plant._dim)) * plant._levels
-            plant._noise_i = 0
-        take = min(N - k, plant._noise_rows.shape[0] - plant._noise_i)
-        out[k : k + take] = plant._noise_rows[plant._noise_i : plant._noise_i + take]
-        plant._noise_i += take
-        k += take
-    return out
-
-
-def _forces(plant: Plant, skip: set[int] | None = None) -> np.ndarray:
-    """The plant's applied forces as rows (body, force, point in the body frame), without the ``skip`` handles."""
-    rows = [[f.body, *f.force, *f.point_local] for h, f in plant._forces.items() if not skip or h not in skip]
-    return np.array(rows, dtype=float).reshape(-1, 7)
-
-
-def _push_to(
-    loop: Any, plant: Plant, scene: Any, k: int, times: np.ndarray, rec: _Recorder, owned: set[int]
-) -> list[np.ndarray]:
-    """Hand a HandPush, just updated in Python at tick k, to C++ for the ticks after k; returns its arrays."""
-    N = times.size
-    rest, rest_v = np.full(N, np.nan), np.zeros(N)
-    for j in range(k + 1, N):
-        t = float(times[j]) + TIME_SLACK  # as HandPush.update: plant.time + 1e-9
-        if not (t < scene.t_start or t >= scene.t_release):
-            rest[j], rest_v[j] = scene._rest(t)
-    handle = scene._handle
-    local = plant._forces[handle].point_local if handle is not None else np.zeros(3)
-    if handle is not None:
-        owned.add(handle)
-    u = scene._u if scene._u is not None else np.zeros(3)
-    last = scene._last_x
-    loop.set_push(
-        plant._ee_body, plant._ee_site, tuple(u), tuple(scene._p0), scene.stiffness, scene.damping,
-        plant.control_period, rest, rest_v, rec.extras["hand_force"], rec.extras["hand_target"],
-        0.0 if last is None else last, last is not None, handle is not None,
-        tuple(scene._force), tuple(scene._target), tuple(local),
-    )  # fmt: skip
-    return [rest, rest_v]
-
-
-def _push_back(plant: Plant, scene: Any, state: tuple, owned: set[int]) -> None:
-    """The HandPush's Python state (and its force in the plant) as the Python loop would have left them."""
-    last_x, has_last, applied, force, target, local = state
-    scene._last_x = last_x if has_last else None
-    scene._force, scene._target = np.array(force), np.array(target)
-    if scene._handle is not None and scene._handle in owned:
-        plant._forces.pop(scene._handle, None)
-        owned.discard(scene._handle)
-    scene._handle = None
-    if applied:
-        handle = plant._next_force
-        plant._next_force += 1
-        plant._forces[handle] = _AppliedForce(plant._ee_body, np.array(force), np.array(local))
-        scene._handle = handle
-        owned.add(handle)
 
 
 def run_compiled(
@@ -264,6 +134,20 @@ def run_compiled(
         ConfigError: this run cannot be compiled (the message says why; :func:`run_fast` falls back instead).
         SimulationError: the plant diverged (as in the Python loop; the trace so far is attached as ``.trace``).
     """
+    return _run(plant, controller, trajectory, duration, reset_controller=reset_controller, still=None)
+
+
+def _run(
+    plant: Plant,
+    controller: ControllerLike,
+    trajectory: TrajectoryLike,
+    duration: float,
+    *,
+    reset_controller: bool,
+    still: Callable[[CompiledStill], None] | None,
+) -> Trace:
+    """:func:`run_compiled`; with ``still``, the states of a still are kept in C++ and handed to ``still``
+    after the run (also when the run fails: the Python loop's observers have seen its ticks then too)."""
     N, meta = _check(plant, controller, trajectory, duration)
     reason = compiled_reason(plant, controller, reset_controller=reset_controller)
     if reason is not None:
@@ -292,6 +176,8 @@ def run_compiled(
         MAX_SPEED,
         tuple(float(g) for g in plant._gravity),
     )
+    if still is not None:
+        loop.keep_still(_STILL_SPEC)
     times = _tick_times(plant, N)
     rec = _Recorder(N, n)
     ddq_d = np.zeros((N, n))
@@ -347,7 +233,7 @@ def run_compiled(
         plant._tau[:] = loop.applied_torque
         plant._tick = tick0 + periods
         for i, p in enumerate(pushes):
-            _push_back(plant, p.scene, loop.push_state(i), owned)
+            hand_push_back(plant, p.scene, loop.push_state(i), owned)
 
     try:
         hold_constants(0)
@@ -371,7 +257,7 @@ def run_compiled(
                 fail(status)
             for p in events[k_event]:
                 if p.push and p not in pushes:
-                    keep.extend(_push_to(loop, plant, p.scene, k_event, times, rec, owned))
+                    keep.extend(hand_push_to(loop, plant, p.scene, k_event, times, rec, owned))
                     pushes.append(p)
             loop.set_forces(_forces(plant, owned))
     except BaseException as e:
@@ -379,14 +265,54 @@ def run_compiled(
         _texts(rec, mode, fault_code, fault_info, core)
         try:
             e.trace = rec.trace(meta | {"loop": "compiled", "error": f"{type(e).__name__}: {e}"})  # type: ignore[attr-defined]
+            if still is not None:
+                _hand_over_still(loop, rec, fault_code, still)
         except Exception:  # pragma: no cover - never mask the original error
             pass
         raise
     sync(acted)
     _texts(rec, mode, fault_code, fault_info, core)
+    if still is not None:
+        _hand_over_still(loop, rec, fault_code, still)
     if not np.array_equal(rec.t[: rec.done], times[: rec.done]):
         raise SimulationError("the compiled loop's clock differs from the sampled reference times; not returning it")
     return rec.trace(meta | {"loop": "compiled"})
+
+
+def _command(rec: _Recorder, fault_code: np.ndarray, k: int) -> Command:
+    """The Command of recorded row k (``saturated`` is not recorded: empty)."""
+    return Command(
+        tau=rec.tau[k].copy(),
+        residual=rec.residual[k].copy(),
+        collision=bool(rec.collision[k]),
+        collided_joints=tuple(int(j) for j in np.flatnonzero(rec.collided[k])),
+        mode=str(rec.mode[k]),
+        fault=str(rec.fault[k]),
+        fault_code=int(fault_code[k]),
+    )
+
+
+def _hand_over_still(loop: Any, rec: _Recorder, fault_code: np.ndarray, still: Callable[[CompiledStill], None]) -> None:
+    """The states C++ kept (``loop.still_states()``) as a :class:`CompiledStill`, given to ``still`` (nothing when no tick
+    was sensed)."""
+    spec, k0, start, kp, peak, peak2 = loop.still_states()
+    if k0 < 0:
+        return
+    has_peak = kp >= 0
+    still(
+        CompiledStill(
+            spec=int(spec),
+            start_tick=int(k0),
+            start_state=start,
+            start_time=float(rec.t[k0]),
+            start_command=_command(rec, fault_code, k0),
+            peak_tick=int(kp) if has_peak else None,
+            peak_state=peak if has_peak else None,
+            peak_time=float(rec.t[kp]) if has_peak else None,
+            peak_command=_command(rec, fault_code, kp) if has_peak else None,
+            peak2=float(peak2),
+        )
+    )
 
 
 def _advance(loop: Any, k0: int, k1: int, rec: _Recorder) -> int:

@@ -36,6 +36,7 @@ from reflexarm.sim._rendering import (
 if TYPE_CHECKING:
     from reflexarm.signals import Command, Measurement
     from reflexarm.sim.plant import Plant
+    from reflexarm.sim.run_observers import CompiledStill
 
 __all__ = ["CameraView", "StillCapture", "VideoRecorder", "frame_scene", "render_frame", "save_still"]
 
@@ -72,8 +73,20 @@ class StillCapture:
     joint torque (the norm |tau_ext| over the joints, :meth:`Plant.true_external_torque`): the moment the
     scene presses hardest on the arm. :meth:`save` renders the contact state when the peak reached
     :data:`CONTACT_TORQUE`, else the first tick. One capture per run; per tick it costs one evaluation of
-    tau_ext and a dot product, and a copy of the state into a buffer when a new peak is reached.
+    tau_ext and a sum of squares, and a copy of the state into a buffer when a new peak is reached.
+
+    The criterion, to the bit (the compiled loop applies the same one in C++, ``reflexarm::StillStates``):
+    s_k = sum over the joints of tau_ext_i^2, each square rounded, summed left to right from 0.0; tick k is
+    the new peak when s_k > the largest s so far (starting at 0), so a tie keeps the earlier tick and a run
+    without external torque has no peak. The state is taken when the callback is called at tick k: after
+    the measurement and the command of tick k, before its physics step.
+
+    A compiled run (:func:`~reflexarm.sim.compiled_loop.run_fast`) calls no callback per tick: it keeps
+    these states in C++ and hands them over with :meth:`take_compiled` (``accepts_compiled`` is True).
     """
+
+    #: A compiled run may hand over its recorded states (:mod:`reflexarm.sim.run_observers`).
+    accepts_compiled = True
 
     def __init__(self) -> None:
         self.plant: Plant | None = None
@@ -93,12 +106,35 @@ class StillCapture:
             self._start, self._peak = np.empty(size), np.empty(size)
             mujoco.mj_getState(plant.model, plant.data, self._start, _STATE)
             self._start_cmd = command
-        tau = plant.true_external_torque(out=self._buf)
-        peak2 = float(tau @ tau)
+        peak2 = 0.0
+        for x in plant.true_external_torque(out=self._buf).tolist():
+            peak2 += x * x  # left to right, as the compiled loop sums (a BLAS dot may sum in another order)
         if peak2 > self._peak2:
             self._peak2, self.peak_torque, self.peak_time = peak2, math.sqrt(peak2), plant.time
             mujoco.mj_getState(plant.model, plant.data, self._peak, _STATE)
             self._peak_cmd = command
+
+    def take_compiled(self, plant: Plant, record: CompiledStill) -> None:
+        """Take the states a compiled run kept (instead of being called every tick); the same criterion.
+
+        Raises:
+            SimulationError: this capture has already seen a run, or the states were taken with another
+                ``mjtState`` mask than this capture keeps.
+        """
+        if self.plant is not None:
+            raise SimulationError("this StillCapture has already seen a run; one capture per run")
+        if record.spec != int(_STATE):
+            raise SimulationError(
+                f"the compiled loop kept states with mjtState mask {record.spec}; a still needs {int(_STATE)} "
+                "(mjSTATE_INTEGRATION)"
+            )
+        self.plant, self._buf = plant, np.zeros(plant.n)
+        self._start, self._start_cmd = record.start_state.copy(), record.start_command
+        self._peak = np.empty_like(self._start)
+        if record.peak_tick is not None and record.peak_state is not None:
+            self._peak2, self.peak_torque, self.peak_time = record.peak2, math.sqrt(record.peak2), record.peak_time
+            self._peak[:] = record.peak_state
+            self._peak_cmd = record.peak_command
 
     @property
     def contact(self) -> bool:

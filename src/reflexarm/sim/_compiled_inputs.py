@@ -1,0 +1,131 @@
+"""What the compiled loop (:mod:`reflexarm.sim.compiled_loop`) hands to C++ before a run: the controller's
+core parameters, MuJoCo's clock at every tick, the reference sampled at those times, the sensor noise drawn
+from the plant's generator and the plant's applied forces (private)."""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import fields
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+
+from reflexarm.sim._plant_sensors import _NOISE_BLOCK
+from reflexarm.sim.plant import Plant
+from reflexarm.sim.runner import TrajectoryLike
+from reflexarm.sim.trajectory import JointTrajectory
+
+
+def _core_params(controller: Any, core: ModuleType) -> Any:
+    """The core's ControllerParams of a (reset) Python Controller: those the Controller configures its own core
+    with (``control._setup.core_params``) when it has that function, with the switches it has now."""
+    setup = importlib.import_module("reflexarm.control._setup")
+    if hasattr(setup, "core_params"):
+        p = setup.core_params(controller, core)
+        p.kappa_f, p.kappa_eps, p.kappa_ext = (
+            int(controller.kappa_f),
+            int(controller.kappa_eps),
+            int(controller.kappa_ext),
+        )
+        return p
+    p = core.ControllerParams()
+    robot, imp = controller.robot, controller.impedance
+    gains = getattr(imp, "gains", imp)
+    p.stiffness = np.array(gains.stiffness, dtype=float)
+    p.damping_ratio = np.array(gains.damping_ratio, dtype=float)
+    p.observer_gain = np.array(controller.observer.observer_gain, dtype=float)
+    det = controller.detection_observer
+    p.detection_observer_gain = np.zeros(0) if det is None else np.array(det.observer_gain, dtype=float)
+    p.threshold = np.zeros(0) if controller.detector is None else np.array(controller.detector.threshold, dtype=float)
+    p.reaction = controller.reaction
+    p.kappa_f, p.kappa_eps, p.kappa_ext = int(controller.kappa_f), int(controller.kappa_eps), int(controller.kappa_ext)
+    p.residual_limit, p.switch_time, p.dt = controller.residual_limit, controller.switch_time, controller.dt
+    p.damping_update_period = int(imp.damping_update_period)
+    fr = robot.friction
+    p.friction_coulomb, p.friction_viscous = fr.coulomb.copy(), fr.viscous.copy()
+    p.friction_velocity_band = fr.velocity_band
+    if robot.has_springs:
+        p.spring_stiffness = np.array(robot.spring_stiffness, dtype=float)
+        p.spring_reference = np.array(robot.spring_reference, dtype=float)
+    p.sensor_frame_id = robot.sensor_frame_id
+    limit = controller.torque_limit
+    p.torque_limit = np.full(robot.n, np.inf) if limit is None else np.array(limit, dtype=float)
+    rate = controller.torque_rate_limit
+    p.torque_rate_limit = np.zeros(0) if rate is None else np.array(rate, dtype=float)
+    bounds = core.InputBounds()
+    for f in fields(controller.input_bounds):
+        setattr(bounds, f.name, float(getattr(controller.input_bounds, f.name)))
+    p.input_bounds = bounds
+    p.period_band_low, p.period_band_high = (float(x) for x in controller.period_band)
+    return p
+
+
+def _tick_times(plant: Plant, N: int) -> np.ndarray:
+    """MuJoCo's clock at each of the next N ticks (it adds ``opt.timestep`` once per physics step)."""
+    h = float(plant.model.opt.timestep)
+    steps = np.full(N * plant.substeps + 1, h)
+    steps[0] = float(plant.data.time)
+    # add.accumulate adds left to right, one step at a time: the very sums MuJoCo's clock makes
+    return np.add.accumulate(steps)[: N * plant.substeps : plant.substeps].copy()
+
+
+def _sample_reference(
+    trajectory: TrajectoryLike, times: np.ndarray, q_d: np.ndarray, dq_d: np.ndarray, ddq_d: np.ndarray
+) -> None:
+    """``trajectory.sample`` at every tick time into the (N, n) arrays.
+
+    Two shapes are evaluated as whole arrays (the per-call cost of ``sample`` is ~5 us, a quarter of a
+    tick's physics): a :class:`JointTrajectory`, with the operations of its sampling kernel in the same
+    order (so the same numbers to the bit), and a trajectory whose ``sample`` returns one and the same
+    Reference object at the first and last tick (a hold). Anything else is sampled tick by tick.
+    """
+    if type(trajectory) is JointTrajectory:
+        tr: Any = trajectory
+        starts, lengths, t_end = tr._starts_arr, tr._lengths_arr, float(tr._t_end)
+        i = np.clip(np.searchsorted(starts, times, side="right") - 1, 0, starts.size - 1)
+        T = lengths[i]
+        x = (times - starts[i]) / T
+        x2 = x * x
+        s = x2 * x * (10.0 - 15.0 * x + 6.0 * x2)
+        ds = 30.0 * x2 * (1.0 - 2.0 * x + x2) / T
+        dds = 60.0 * x * (1.0 - 3.0 * x + 2.0 * x2) / (T * T)
+        before, after = times <= starts[0], times >= t_end
+        i[before], s[before], ds[before], dds[before] = 0, 0.0, 0.0, 0.0
+        i[after], s[after], ds[after], dds[after] = starts.size - 1, 1.0, 0.0, 0.0
+        d = tr._deltas[i]
+        q_d[:] = tr._origins[i] + s[:, None] * d
+        dq_d[:] = ds[:, None] * d
+        ddq_d[:] = dds[:, None] * d
+        return
+    first = trajectory.sample(float(times[0]))
+    if trajectory.sample(float(times[-1])) is first:
+        q_d[:], dq_d[:], ddq_d[:] = first.q_d, first.dq_d, first.ddq_d
+        return
+    sample = trajectory.sample
+    for k in range(times.size):
+        r = sample(float(times[k]))
+        q_d[k], dq_d[k], ddq_d[k] = r.q_d, r.dq_d, r.ddq_d
+
+
+def _draw_noise(plant: Plant, N: int) -> np.ndarray | None:
+    """The noise rows of the next N measurements, drawn as N calls of ``Plant.measure`` would draw them."""
+    if not plant._noisy:
+        return None
+    out = np.empty((N, plant._dim))
+    k = 0
+    while k < N:
+        if plant._noise_i >= plant._noise_rows.shape[0]:
+            plant._noise_rows = plant._rng.uniform(-1.0, 1.0, (_NOISE_BLOCK, plant._dim)) * plant._levels
+            plant._noise_i = 0
+        take = min(N - k, plant._noise_rows.shape[0] - plant._noise_i)
+        out[k : k + take] = plant._noise_rows[plant._noise_i : plant._noise_i + take]
+        plant._noise_i += take
+        k += take
+    return out
+
+
+def _forces(plant: Plant, skip: set[int] | None = None) -> np.ndarray:
+    """The plant's applied forces as rows (body, force, point in the body frame), without the ``skip`` handles."""
+    rows = [[f.body, *f.force, *f.point_local] for h, f in plant._forces.items() if not skip or h not in skip]
+    return np.array(rows, dtype=float).reshape(-1, 7)
