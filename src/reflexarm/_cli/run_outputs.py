@@ -26,6 +26,7 @@ if TYPE_CHECKING:
 
     from reflexarm.signals import Command, Measurement
     from reflexarm.sim import Plant, Trace
+    from reflexarm.sim.run_observers import CompiledStill
     from reflexarm.sim.video import StillCapture, VideoRecorder
 
 __all__ = ["SceneCapture", "add_output_options", "frame_size", "number_joints", "slug", "write_json", "write_traces"]
@@ -123,6 +124,14 @@ class _RunObserver:
         self.still(k, plant, m, cmd)
         if self.video is not None:
             self.video(k, plant, m, cmd)
+
+    @property
+    def accepts_compiled(self) -> bool:
+        """A compiled run may hand over its recorded still states; a video needs the Python loop."""
+        return self.video is None
+
+    def take_compiled(self, plant: Plant, record: CompiledStill) -> None:
+        self.still.take_compiled(plant, record)
 
 
 class SceneCapture:
