@@ -256,3 +256,143 @@ def test_divergence_raises_as_in_the_python_loop(robot):
     for f in ("q", "tau", "residual"):
         np.testing.assert_allclose(getattr(tb, f), getattr(ta, f), rtol=0, atol=TOL, err_msg=f)
     assert "failed earlier" in str(compiled_reason(pb, Controller(robot)))
+
+
+# ------------------------------------------------------------------------------------------------ stills
+def _stills(make_plant, make_controller, trajectory, duration, tmp_path=None):
+    """[(trace, StillCapture, still info or None)] of the Python loop and of run_fast with a still observer."""
+    import reflexarm  # noqa: F401  (sets MUJOCO_GL for offscreen rendering)
+    from reflexarm.sim.run_observers import observing_runs
+    from reflexarm.sim.video import StillCapture
+
+    out = []
+    for name, run in (("python", run_closed_loop), ("compiled", run_fast)):
+        cap = StillCapture()
+        made: list[object] = []
+        with observing_runs(lambda plant, c=cap, seen=made: seen.append(plant) or c):
+            tr = run(make_plant(), make_controller(), trajectory, duration)
+        assert len(made) == 1  # the factory is called once per run, whichever loop runs it
+        info = None if tmp_path is None else cap.save(tmp_path / f"{name}.png", width=320, height=240)
+        out.append((tr, cap, info))
+    assert out[1][0].meta["loop"] == "compiled"
+    return out
+
+
+def _assert_same_still(py, cc):
+    """The same tick, MuJoCo state bitwise (both loops are bitwise equal), and the same corner text."""
+    from reflexarm.sim._rendering import _status
+
+    (_, a, _), (_, b, _) = py, cc
+    assert b.plant is not None and a.plant is not None
+    assert b.contact is a.contact
+    assert b.peak_time == a.peak_time and b.peak_torque == a.peak_torque
+    np.testing.assert_array_equal(b._start, a._start)
+    assert _status(b.plant, 0.0, b._start_cmd) == _status(a.plant, 0.0, a._start_cmd)
+    if a.contact:
+        np.testing.assert_array_equal(b._peak, a._peak)
+        assert _status(b.plant, 0.0, b._peak_cmd) == _status(a.plant, 0.0, a._peak_cmd)
+
+
+def test_demo_still_from_the_compiled_loop_is_the_python_loops(robot, tmp_path):
+    """The CLI demo's first run (Stiff against the cinderblock): the still's tick and MuJoCo state from the
+    compiled loop equal the Python loop's bit for bit, so the PNGs are the same pixels (tolerance 0: the same
+    state rendered by the same renderer in the same process)."""
+    cm, _ = C.controller_model(robot, None, 0, None)
+    traj = C.ee_collision_trajectory()
+
+    def plant():
+        p = Plant(robot, scene=Cinderblock(**C._block("paper")), noise=PAPER_NOISE, seed=0)
+        p.reset(traj.sample(0.0).q_d)
+        return p
+
+    py, cc = _stills(plant, lambda: C.EE_SETTINGS[0].controller(cm), traj, traj.duration, tmp_path)
+    _assert_same_still(py, cc)
+    assert cc[1].contact and cc[1].peak_time is not None and cc[1].peak_time > 3.0  # the block is hit at ~3.7 s
+    k = int(np.flatnonzero(cc[0].t == cc[1].peak_time)[0])  # the peak is the recorded row of largest |tau_ext|
+    assert k == int(np.argmax(np.sum(cc[0].tau_ext ** 2, axis=1)))
+    assert cc[2] == py[2] | {"file": "compiled.png"}
+    import matplotlib.image
+
+    np.testing.assert_array_equal(
+        matplotlib.image.imread(tmp_path / "compiled.png"), matplotlib.image.imread(tmp_path / "python.png")
+    )
+
+
+def test_elbow_stick_still_keeps_the_mocap_state(robot):
+    """The stick is a mocap body played by C++: its pose is part of the kept state and equals the Python loop's."""
+    cm, _ = C.controller_model(robot, None, 0, None)
+    traj = C.link_collision_trajectory()
+
+    def plant():
+        p = Plant(robot, scene=ElbowStick(body="l_larm", t_start=5.0), noise=PAPER_NOISE, seed=0)
+        p.reset(traj.sample(0.0).q_d)
+        return p
+
+    py, cc = _stills(plant, lambda: C.LINK_SETTING.controller(cm), traj, traj.duration)
+    _assert_same_still(py, cc)
+    assert cc[1].contact and cc[1].peak_time is not None and cc[1].peak_time > 5.0
+
+
+def test_no_contact_still_is_the_start(robot):
+    """A run that ends before the arm reaches the block: no peak in either loop, the same start state."""
+    cm, _ = C.controller_model(robot, None, 0, None)
+    traj = C.ee_collision_trajectory()
+
+    def plant():
+        p = Plant(robot, scene=Cinderblock(**C._block("paper")), noise=PAPER_NOISE, seed=0)
+        p.reset(traj.sample(0.0).q_d)
+        return p
+
+    py, cc = _stills(plant, lambda: C.EE_SETTINGS[0].controller(cm), traj, 0.3)
+    _assert_same_still(py, cc)
+    assert not cc[1].contact and cc[1].peak_time is None and cc[1].peak_torque == 0.0
+
+
+def test_a_failed_compiled_run_still_hands_over_its_still(robot):
+    """A diverging run raises in both loops; the still observer has seen its ticks in both (same states)."""
+    from reflexarm.control import Controller
+    from reflexarm.errors import SimulationError
+    from reflexarm.sim import LinkForce
+
+    def plant():
+        p = Plant(robot, scene=LinkForce(magnitude=1e7, t_on=0.05, t_off=10.0), noise=SensorNoise.none())
+        p.reset(robot.home)
+        return p
+
+    from reflexarm.sim.run_observers import observing_runs
+    from reflexarm.sim.video import StillCapture
+
+    caps, traces = [], []
+    for run in (run_closed_loop, run_fast):
+        cap = StillCapture()
+        with observing_runs(lambda p, c=cap: c), pytest.raises(SimulationError, match="diverged") as info:
+            run(plant(), Controller(robot), _GlitchyHold(robot.home), 1.0)
+        caps.append(cap)
+        traces.append(info.value.trace)  # type: ignore[attr-defined]
+    assert traces[1].meta["loop"] == "compiled"
+    a, b = caps
+    assert b.plant is not None  # handed over although the run raised
+    # the force acts from the failing tick's step on: no sensed tick had external torque, in either loop
+    assert not a.contact and not b.contact and b.peak_time is a.peak_time is None
+    np.testing.assert_array_equal(b._start, a._start)
+
+
+def test_an_observer_that_needs_every_tick_takes_the_python_loop(robot):
+    """A video-like observer (no take_compiled) sends run_fast to the Python loop, created once and called
+    every tick; stills alone keep the compiled loop."""
+    from reflexarm.control import Controller
+    from reflexarm.sim.run_observers import observing_runs
+    from reflexarm.sim.video import StillCapture
+
+    ticks: list[int] = []
+    made: list[int] = []
+
+    def video_like(plant):
+        made.append(1)
+        return lambda k, p, m, cmd: ticks.append(k)
+
+    with observing_runs(video_like), observing_runs(lambda plant: StillCapture()):
+        tr = run_fast(Plant(robot), Controller(robot), _GlitchyHold(robot.home), 0.01)
+    assert tr.meta["loop"] == "python" and made == [1] and ticks == list(range(10))
+    with observing_runs(lambda plant: StillCapture()):
+        assert run_fast(Plant(robot), Controller(robot), _GlitchyHold(robot.home), 0.01).meta["loop"] == "compiled"
