@@ -21,6 +21,7 @@ from reflexarm.experiments.efc_step import efc_step
 from reflexarm.experiments.metrics import msie, msie_per_joint, normalize_by_max, window_mean
 from reflexarm.experiments.mode_table import mode_table
 from reflexarm.experiments.plots import compliance_loss_figure, compliance_sweep_figure, efc_step_figure
+from reflexarm.robots import RobotModel
 
 pytestmark = pytest.mark.slow
 
@@ -90,8 +91,11 @@ def test_efc_step_meets_the_issue_targets_on_the_papers_plant(paper):
     # steady state under the 50 N load, default setup (+-10 % model errors, paper noise, smooth friction):
     # joint-1 residual below 10 % of DC-without-EFC's; DC without EFC leaves less than half the no-DC
     # displacement. The EE displacement ratio EFC / no DC is not asserted on this run: measured 0.948
-    # against a static prediction of 1.000, because two of its joints never come to rest (see
-    # test_efc_step_static_ratio_under_model_error and test_efc_step_overcompensated_friction_keeps_joints_moving)
+    # against a static prediction of 1.000, because the runs are not at rest in the windows: joints 1 and
+    # 4 oscillate (over-compensated friction), the velocity noise dithers the friction compensation, and
+    # the pre-load window (0.3-0.5 s) is still in the start-up transient (see the three tests below).
+    # Measured on this draw: load on at 2 s instead of 0.5 s -> 0.990; no velocity noise -> 0.993;
+    # model friction = true friction and no velocity noise -> 1.000 (prediction 1.0001)
     s = paper.summary
     assert s["efc_vs_dc_residual1"] < 0.10
     assert s["dc_vs_nodc_displacement"] < 0.5
@@ -133,6 +137,39 @@ def test_efc_step_static_ratio_under_model_error(paper):
 
 
 NO_VELOCITY_NOISE = ("q", "gravity", "tau_m", "force", "torque")
+
+
+def test_efc_step_no_dc_displacement_matches_the_statics(monkeypatch):
+    # The derivation checked on a run that does come to rest: the controller model's friction
+    # coefficients set to the true ones (its in-band damping is then D_ii > 0 on every joint), no velocity
+    # noise, and the load switched on at 2 s instead of 0.5 s (at 0.3-0.5 s the arm is still settling from
+    # the reset: observer time constant 0.1 s, joint-1 impedance decay ~0.26 s). Model draw of seed 2, on
+    # which the no-DC posture before the load sits 7 mrad (joint 2) below q_d, which turns the force and
+    # makes the static ratio 1.014 rather than 1: the statics (tests/efc_statics.py) give the no-DC
+    # displacement to 0.01 mm (measured 70.59 mm, predicted 70.58 mm).
+    from reflexarm.experiments import compensation
+
+    perturbed = compensation.controller_model
+
+    def exact_friction(setup: CompensationSetup, model_error: float | None = None, model_seed: int = 0) -> RobotModel:
+        return perturbed(setup, model_error, model_seed).with_friction(true_robot(setup).friction)
+
+    monkeypatch.setattr(compensation, "controller_model", exact_friction)
+    setup = dataclasses.replace(
+        CompensationSetup(), noise_channels=NO_VELOCITY_NOISE, t_on=2.0, t_off=5.0, duration=5.0
+    )
+    res = efc_step(setup, seed=2)
+    robot = true_robot(setup)
+    model = exact_friction(setup, model_seed=res.summary["model_seed"])
+    predicted, q0, q1 = static_displacement(robot, model, setup.stiffness, held_posture(setup, robot), setup.force)
+    assert abs(_static_ratio(setup, res.summary["model_seed"]) - 1.0) > 0.01  # the posture offset matters here
+    measured = rows(res)["no DC"]["ee_displacement_mm"]
+    # 0.2 mm: the remaining sensor noise (q, tau_m, gravity) moves the window means by < 0.1 mrad per joint
+    # (measured 0.05), < 0.1 mm at the < 1 m lever
+    assert measured == pytest.approx(1000 * predicted, abs=0.2)
+    tr = res.traces["no DC"]
+    np.testing.assert_allclose(window_mean(tr.t, tr.q, *setup.pre_window), q0, atol=2e-4)
+    np.testing.assert_allclose(window_mean(tr.t, tr.q, *setup.load_window), q1, atol=2e-4)
 
 
 def test_efc_step_overcompensated_friction_keeps_joints_moving(paper):
