@@ -168,3 +168,26 @@ def test_progress_bar_only_on_a_terminal(robot, monkeypatch):
     monkeypatch.setattr(sys, "stderr", tty)
     run_closed_loop(_plant(robot), HoldGravity(robot), Hold(robot.home), 0.2, progress=True)
     assert "simulating" in tty.getvalue()
+
+
+def test_take_compiled_refuses_a_used_capture_or_another_state_mask(robot):
+    """One capture per run, and only states taken with the mask a still renders (mjSTATE_INTEGRATION)."""
+    import mujoco
+
+    from reflexarm.sim.run_observers import CompiledStill
+
+    plant = _plant(robot)
+    cmd = Command(np.zeros(robot.n), np.zeros(robot.n), False, (), "hold", "")
+    size = mujoco.mj_stateSize(plant.model, mujoco.mjtState.mjSTATE_INTEGRATION)
+    record = CompiledStill(
+        spec=int(mujoco.mjtState.mjSTATE_INTEGRATION), start_tick=0, start_state=np.zeros(size), start_time=0.0,
+        start_command=cmd, peak_tick=None, peak_state=None, peak_time=None, peak_command=None, peak2=0.0,
+    )  # fmt: skip
+    wrong = CompiledStill(**{**record.__dict__, "spec": int(mujoco.mjtState.mjSTATE_PHYSICS)})
+    with pytest.raises(SimulationError, match=f"mask {int(mujoco.mjtState.mjSTATE_PHYSICS)}.*needs"):
+        StillCapture().take_compiled(plant, wrong)
+    cap = StillCapture()
+    cap.take_compiled(plant, record)
+    assert cap.plant is plant and not cap.contact and cap.peak_time is None
+    with pytest.raises(SimulationError, match="already seen a run"):
+        cap.take_compiled(plant, record)
