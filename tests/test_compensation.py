@@ -115,7 +115,8 @@ def test_efc_step_static_ratio_under_model_error(paper):
     # The lead's hypothesis: without DC the gravity-stiffness error d(g - g_hat)/dq changes the load's
     # displacement (K - de/dq)^-1 J^T F, with DC + EFC it is K^-1 J^T F. Derived at rest from (2) on the
     # run's own model draw (tests/efc_statics.py): the ratio is 1.0001, and the gravity error moves it by
-    # 1e-4 (+-10 % errors give |de/dq| ~ 0.02 Nm/rad against k = 150 Nm/rad), so it cannot explain 0.948.
+    # 1e-4 (over the load's ~0.1 rad displacement e changes by < 0.02 Nm per joint, against k = 150 Nm/rad),
+    # so it cannot explain 0.948.
     setup, seed = paper.setup, paper.summary["model_seed"]
     ratio = _static_ratio(setup, seed)
     # 2e-3: the prediction is exact statics (no simulation); the model errors move the no-DC posture
@@ -164,7 +165,8 @@ def test_efc_step_no_dc_displacement_matches_the_statics(monkeypatch):
     predicted, q0, q1 = static_displacement(robot, model, setup.stiffness, held_posture(setup, robot), setup.force)
     assert abs(_static_ratio(setup, res.summary["model_seed"]) - 1.0) > 0.01  # the posture offset matters here
     measured = rows(res)["no DC"]["ee_displacement_mm"]
-    # 0.2 mm: the remaining sensor noise (q, tau_m, gravity) moves the window means by < 0.1 mrad per joint
+    # 0.2 mm: the remaining sensor noise (q and gravity enter the no-DC torque) moves the window means by
+    # < 0.1 mrad per joint
     # (measured 0.05), < 0.1 mm at the < 1 m lever
     assert measured == pytest.approx(1000 * predicted, abs=0.2)
     tr = res.traces["no DC"]
@@ -204,7 +206,8 @@ def test_efc_step_overcompensated_friction_keeps_joints_moving(paper):
 def test_efc_step_without_model_error_meets_the_target(paper):
     # the exact model (static ratio 1 exactly: e = 0 and the same force at the same posture) and no
     # velocity noise: every joint rests, and the measured ratio is 1 to 1 % (measured 1.0000; over noise
-    # seeds 0-2: 1.0000, 1.0050, 0.9982 - the remaining sensor noise averaged over the 0.5 s window).
+    # seeds 0-2: 1.0000, 1.0050, 0.9982: in the DC+EFC run the observer output is fed back, and its noise
+    # below k_o = 10 1/s (tau_m and wrench channels) moves the joints by ~0.5 mrad over a 0.5 s window).
     # With the paper's velocity noise (sigma_dq ~ 0.28 rad/s, 14x the band) the friction compensation
     # becomes a random +-mu_C_hat torque (the 7e-4 kg m^2 wrist roll chatters at ~2 rad/s RMS): the 5 %
     # then holds for seed 0 (measured 0.9963) but is not a derived bound (seed 1: 1.031)
