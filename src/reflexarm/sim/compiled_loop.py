@@ -293,8 +293,8 @@ def _command(rec: _Recorder, fault_code: np.ndarray, k: int) -> Command:
 
 
 def _hand_over_still(loop: Any, rec: _Recorder, fault_code: np.ndarray, still: Callable[[CompiledStill], None]) -> None:
-    """The states C++ kept (``loop.still_states()``) as a :class:`CompiledStill`, given to ``still`` (nothing when no tick
-    was sensed)."""
+    """The states C++ kept (``loop.still_states()``) as a :class:`CompiledStill`, given to ``still`` (nothing
+    when no tick was sensed)."""
     spec, k0, start, kp, peak, peak2 = loop.still_states()
     if k0 < 0:
         return

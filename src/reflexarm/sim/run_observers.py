@@ -93,7 +93,8 @@ def observing_runs(factory: ObserverFactory) -> Iterator[None]:
 
 def observers_active() -> bool:
     """True inside :func:`observing_runs`: a loop that cannot call Python per tick (the compiled loop) must
-    give way to :func:`~reflexarm.sim.run_closed_loop`, or the observers would silently see nothing."""
+    hand its recorded states to observers that accept them (:func:`accepts_compiled`) or give way to
+    :func:`~reflexarm.sim.run_closed_loop`, or the observers would silently see nothing."""
     return bool(_ACTIVE.get())
 
 
