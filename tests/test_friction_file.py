@@ -237,3 +237,32 @@ def test_a_loaded_excitation_keeps_its_optimizer_start(six_dof: RobotModel, tmp_
     assert design.iterations == 5
     path.write_text(json.dumps({"trajectory": best.to_dict()}))  # no start recorded: the trajectory for both
     assert _load_excitation(six_dof, str(path)).condition_initial == regressor_condition(six_dof, best)
+
+
+def test_atlas_hydraulic_friction_only_estimates_the_wrist_in_the_sequential_method(atlas: RobotModel) -> None:
+    """The Atlas default (single-joint runs of the hydraulic joints 1-4): the wrist's friction, 3.1 Nm
+    Coulomb on wry2 (Table I), is estimated with beta_b, not corrected with 0."""
+    from reflexarm.experiments.identification import hydraulic_joints
+
+    truth = FrictionParameters.from_model(atlas.friction)
+    hydraulic = truth.restricted_to(hydraulic_joints(atlas))
+    res = identify_dynamics(atlas, _exact_log(atlas), method="sequential", friction=hydraulic, noise_variance=None)
+    assert res.friction_estimated == (4, 5, 6)
+    np.testing.assert_allclose(res.friction.coulomb, truth.coulomb, rtol=EXACT_RTOL, err_msg="mu_C")
+    np.testing.assert_allclose(res.friction.viscous, truth.viscous, rtol=EXACT_RTOL, err_msg="d_v")
+    assert any(
+        "none for joint(s) 5 (l_arm_wry), 6 (l_arm_wrx), 7 (l_arm_wry2) (not identified)" in x for x in res.notes
+    )
+
+
+@pytest.mark.slow  # ~40 s: constant-velocity runs of four joints on the plant
+def test_atlas_default_friction_file_marks_the_wrist_not_identified(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "fr"
+    assert main(["identify", "friction", "--speeds", "0.2,0.5", "--out", str(out), "--quiet"]) == 0
+    doc = json.loads((out / "friction.json").read_text())
+    assert doc["identified_joints"] == [1, 2, 3, 4] and doc["coulomb"][4:] == [None, None, None]
+    assert (
+        "friction.json: joint(s) 5 (l_arm_wry), 6 (l_arm_wrx), 7 (l_arm_wry2) were not run (default on the Atlas "
+        "arm: the hydraulic joints, as Fig. 4 of the paper): their d_v, mu_C are null (not identified, not 0). "
+        "'identify dynamics --friction' estimates them" in capsys.readouterr().out
+    )
