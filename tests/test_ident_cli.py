@@ -41,6 +41,8 @@ def test_identify_friction_from_user_logs(tmp_path, capsys, atlas):
     doc = json.loads((tmp_path / "fr" / "friction.json").read_text())
     # exact data, segments found from the data itself (the plan is not given)
     assert doc["coulomb"][0] == pytest.approx(2.0, rel=0.01) and doc["viscous"][0] == pytest.approx(1.3, rel=0.01)
+    # joints 2-7 had no run: not identified (null), never a friction of 0 (tests/test_friction_file.py)
+    assert doc["identified_joints"] == [1] and doc["coulomb"][1:] == [None] * 6 and doc["viscous"][1:] == [None] * 6
     assert (tmp_path / "fr" / "fig4_friction.png").exists()
     assert "mu_C [Nm]" in capsys.readouterr().out
 
