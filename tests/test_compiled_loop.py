@@ -293,10 +293,12 @@ def _assert_same_still(py, cc):
         assert _status(b.plant, 0.0, b._peak_cmd) == _status(a.plant, 0.0, a._peak_cmd)
 
 
-def test_demo_still_from_the_compiled_loop_is_the_python_loops(robot, tmp_path):
-    """The CLI demo's first run (Stiff against the cinderblock): the still's tick and MuJoCo state from the
-    compiled loop equal the Python loop's bit for bit, so the PNGs are the same pixels (tolerance 0: the same
-    state rendered by the same renderer in the same process)."""
+@pytest.mark.parametrize("setting", [0, 2], ids=["Stiff", "Coll.Det"])
+def test_demo_still_from_the_compiled_loop_is_the_python_loops(robot, tmp_path, setting):
+    """The CLI demo's runs against the cinderblock (Stiff: the still the CLI writes; Coll.Det: its still shows
+    the detection in the corner text): the still's tick and MuJoCo state from the compiled loop equal the
+    Python loop's bit for bit, so the PNGs are the same pixels (tolerance 0: the same state rendered by the
+    same renderer in the same process)."""
     cm, _ = C.controller_model(robot, None, 0, None)
     traj = C.ee_collision_trajectory()
 
@@ -305,8 +307,9 @@ def test_demo_still_from_the_compiled_loop_is_the_python_loops(robot, tmp_path):
         p.reset(traj.sample(0.0).q_d)
         return p
 
-    py, cc = _stills(plant, lambda: C.EE_SETTINGS[0].controller(cm), traj, traj.duration, tmp_path)
+    py, cc = _stills(plant, lambda: C.EE_SETTINGS[setting].controller(cm), traj, traj.duration, tmp_path)
     _assert_same_still(py, cc)
+    assert cc[1]._peak_cmd is not None and cc[1]._peak_cmd.collision is (setting == 2)
     assert cc[1].contact and cc[1].peak_time is not None and cc[1].peak_time > 3.0  # the block is hit at ~3.7 s
     k = int(np.flatnonzero(cc[0].t == cc[1].peak_time)[0])  # the peak is the recorded row of largest |tau_ext|
     assert k == int(np.argmax(np.sum(cc[0].tau_ext ** 2, axis=1)))
