@@ -215,3 +215,20 @@ def test_a_traces_recorded_residual_is_tuned_on_as_it_is(atlas, tmp_path):
     assert any("--model and the observer options were not applied" in note for note in doc["notes"])
     with pytest.raises(DataError, match="a recorded residual is read from a reflexarm trace"):
         recorded_residual(save_log(_static_log(atlas, np.zeros((10, n))), tmp_path / "log.parquet"), n)
+
+
+def test_the_report_prints_each_joint_with_its_full_name(atlas):
+    """Long joint names (a UR arm's ``shoulder_pan_joint``) are printed whole, beside the 1-based number,
+    and every row of the table is as wide as its header."""
+    from dataclasses import replace
+
+    log = _static_log(atlas, _random_disturbance(atlas.n, 60.0, seed=7))
+    prop = tune_thresholds(log, atlas, rate_per_hour=60.0, contact_rate_per_hour=600.0, gap_s=0.1, n_boot=20)
+    names = [f"a_rather_long_joint_name_{j + 1}_joint" for j in range(atlas.n)]
+    prop.joints = [replace(jt, name=name) for jt, name in zip(prop.joints, names, strict=True)]
+    table = prop.report().splitlines()
+    header = next(i for i, line in enumerate(table) if line.lstrip().startswith("joint"))
+    rows = table[header + 1 : header + 1 + atlas.n]
+    for j, (row, name) in enumerate(zip(rows, names, strict=True)):
+        assert row.lstrip().startswith(f"{j + 1} ({name}) "), row
+    assert {len(row) for row in rows} == {len(table[header])}

@@ -7,7 +7,13 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from reflexarm.tuning.study import ThresholdProposal
 
-__all__ = ["format_report"]
+__all__ = ["format_report", "joint_label"]
+
+
+def joint_label(joint: int, name: str) -> str:
+    """A joint as printed: 1-based number and full name, ``joint_label(0, "shoulder_pan_joint")`` ->
+    ``"1 (shoulder_pan_joint)"`` (``joint`` is the 0-based index)."""
+    return f"{joint + 1} ({name})" if name else str(joint + 1)
 
 
 def format_report(proposal: ThresholdProposal) -> str:
@@ -27,14 +33,16 @@ def format_report(proposal: ThresholdProposal) -> str:
         f"delay of a {proposal.step_torque:g} Nm step: t_d = -T_o ln(1 - (zeta - b)/s), "
         f"T_o = {proposal.time_constant:.4f} s, b = 0 / b = -q95 (unfavourable)\n"
     )
+    labels = [joint_label(jt.joint, jt.name) for jt in proposal.joints]
+    w = max([len("joint"), *(len(x) for x in labels)])
     lines = [
-        f"{'joint':>5} {'name':>12} {'max|r|':>7} {'collision [Nm]':>23} {'contact [Nm]':>23} "
+        f"{'joint':>{w}} {'max|r|':>7} {'collision [Nm]':>25} {'contact [Nm]':>25} "
         f"{'delay coll. [s]':>15} {'delay cont. [s]':>15}"
     ]
-    for jt in proposal.joints:
+    for jt, label in zip(proposal.joints, labels, strict=True):
         d = jt.delays
         lines.append(
-            f"{jt.joint + 1:>5} {jt.name[-12:]:>12} {jt.fit.x_max:7.3f} "
+            f"{label:>{w}} {jt.fit.x_max:7.3f} "
             f"{jt.collision:8.3f} [{jt.collision_interval[0]:6.3f}, {jt.collision_interval[1]:6.3f}] "
             f"{jt.contact:8.3f} [{jt.contact_interval[0]:6.3f}, {jt.contact_interval[1]:6.3f}] "
             f"{sec(d['collision_delay_s']):>7}/{sec(d['collision_delay_unfavourable_s']):>7} "
