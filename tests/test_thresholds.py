@@ -187,7 +187,7 @@ def test_force_step_torques_are_the_virtual_work_of_the_force(atlas):
             assert r["first_joint"] is None and r["delay_s"] is None
 
 
-def test_a_traces_recorded_residual_is_tuned_on_as_it_is(atlas, tmp_path):
+def test_a_traces_recorded_residual_is_tuned_on_as_it_is(atlas, tmp_path, capsys):
     """``--recorded-residual``: the residual column of a trace, not a replay, goes into the study."""
     from reflexarm.tuning import recorded_residual
 
@@ -208,11 +208,20 @@ def test_a_traces_recorded_residual_is_tuned_on_as_it_is(atlas, tmp_path):
     assert np.all(prop.collision > np.quantile(np.abs(r), 0.99, axis=0))
     out = tmp_path / "out"
     args = f"tune-thresholds {path} --recorded-residual --rate 60 --contact-rate 600 --gap 0.1 --no-figure --out {out}"
-    assert main(args.split()) == 0
+    assert main([*args.split(), "--model-error", "10"]) == 0
     doc = json.loads((out / "thresholds.json").read_text())
     np.testing.assert_allclose(doc["collision_Nm"], prop.collision, rtol=1e-12)
     assert doc["logs"] == ["run.parquet (recorded residual)"]
-    assert any("--model and the observer options were not applied" in note for note in doc["notes"])
+    assert any("--model, --model-error and the observer options were not applied" in n for n in doc["notes"])
+    # the header names the model the residual came from (the run's), not the --model-error that was ignored
+    printed = capsys.readouterr()
+    assert (
+        "controller model: the one each trace's run used (its residual was recorded online); --model and "
+        "--model-error are ignored" in printed.err
+    )
+    assert "model errors" not in printed.err
+    assert "residual recorded online by each run's controller, with the model and observer that run used" in printed.out
+    assert "kappa_f" not in printed.out.splitlines()[0]
     with pytest.raises(DataError, match="a recorded residual is read from a reflexarm trace"):
         recorded_residual(save_log(_static_log(atlas, np.zeros((10, n))), tmp_path / "log.parquet"), n)
 

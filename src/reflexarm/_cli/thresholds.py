@@ -97,11 +97,19 @@ def _tune(args: argparse.Namespace) -> int:
     from reflexarm.tuning import ObserverSettings, ThresholdWarning, tune_thresholds
 
     robot = load_robot_from_args(args)
-    choice = model_choice(args)
-    model = choice.build(robot)
-    print(f"robot {robot.name} ({robot.n} joints); controller model: {choice.label()}", file=sys.stderr)
-    if model is not robot:
-        print(model_error_line(robot, model), file=sys.stderr)
+    if args.recorded_residual:  # the residual is the run's: its model, not --model (kinematics for J^T F only)
+        model = robot
+        print(
+            f"robot {robot.name} ({robot.n} joints); controller model: the one each trace's run used (its residual "
+            "was recorded online); --model and --model-error are ignored",
+            file=sys.stderr,
+        )
+    else:
+        choice = model_choice(args)
+        model = choice.build(robot)
+        print(f"robot {robot.name} ({robot.n} joints); controller model: {choice.label()}", file=sys.stderr)
+        if model is not robot:
+            print(model_error_line(robot, model), file=sys.stderr)
     settings = ObserverSettings(
         observer_gain=args.observer_gain,
         detection_observer_gain=args.detection_observer_gain,
@@ -131,8 +139,8 @@ def _tune(args: argparse.Namespace) -> int:
     proposal.notes.extend(str(w.message) for w in caught if str(w.message) not in proposal.notes)
     if args.recorded_residual:
         proposal.notes.append(
-            "residuals recorded online by the traces' controllers: --model and the observer options were not applied "
-            "(the delays use --observer-gain)"
+            "residuals recorded online by the traces' controllers, with the model and observer each run used: "
+            "--model, --model-error and the observer options were not applied (the delays use --observer-gain)"
         )
     files = proposal.write(args.out, figure=not args.no_figure)
     print(proposal.report())

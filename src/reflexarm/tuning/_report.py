@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from reflexarm.tuning.replay import RECORDED_RESIDUAL
+
 if TYPE_CHECKING:
     from reflexarm.tuning.study import ThresholdProposal
 
@@ -23,10 +25,17 @@ def format_report(proposal: ThresholdProposal) -> str:
         return "never" if v is None else f"{v:.3f}"
 
     st, n = proposal.settings, len(proposal.joints)
+    if any(s.endswith(RECORDED_RESIDUAL) for s in proposal.sources):
+        observer = (
+            "residual recorded online by each run's controller, with the model and observer that run used "
+            "(--model, --model-error and the observer options are not applied; "
+            f"delays with k_o = {st.detection_gain:g} 1/s)"
+        )
+    else:
+        observer = f"observer k_o = {st.detection_gain:g} 1/s, kappa_f = {st.kappa_f}, EFC = {st.kappa_ext}"
     head = (
         f"{len(proposal.sources)} log(s), {proposal.duration_s / 60:.1f} min; "
-        f"observer k_o = {st.detection_gain:g} 1/s, "
-        f"kappa_f = {st.kappa_f}, EFC = {st.kappa_ext}; {proposal.fault_ticks} rejected samples\n"
+        f"{observer}; {proposal.fault_ticks} rejected samples\n"
         f"collision level: {proposal.rate_per_hour:g} false alarms/h for the arm "
         f"({proposal.rate_per_hour / n:.3g}/h per joint); contact level: {proposal.contact_rate_per_hour:g}/h\n"
         f"tail: {proposal.method} fit of the declustered |residual| above u (90 % bootstrap interval in brackets); "

@@ -23,6 +23,7 @@ from reflexarm.robots.robot_model import RobotModel
 from reflexarm.signals import Measurement, Reference
 
 __all__ = [
+    "RECORDED_RESIDUAL",
     "ObserverSettings",
     "ResidualReplay",
     "ThresholdWarning",
@@ -31,6 +32,9 @@ __all__ = [
     "recorded_residual",
     "replay_residual",
 ]
+
+#: Suffix of a source's name when its residual was recorded online (:func:`recorded_residual`), not replayed.
+RECORDED_RESIDUAL = "(recorded residual)"
 
 
 class ThresholdWarning(UserWarning):
@@ -247,4 +251,4 @@ def recorded_residual(path: str | os.PathLike[str], n: int) -> ResidualReplay:
     r = np.column_stack([table.column(c).to_numpy() for c in cols[1:]])
     if t.size < 2:
         raise DataError(f"{p.name}: a trace needs at least 2 samples; got {t.size}")
-    return ResidualReplay(f"{p.name} (recorded residual)", t, r, float(np.median(np.diff(t))), 0, ())
+    return ResidualReplay(f"{p.name} {RECORDED_RESIDUAL}", t, r, float(np.median(np.diff(t))), 0, ())
