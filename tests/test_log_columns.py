@@ -59,7 +59,9 @@ def test_joint_named_columns_are_mapped_by_name(tmp_path, pq, pdq, ptau, time):
     df.to_csv(p, index=False, float_format="%.17g")
     back = load_log(p, joint_names=NAMES)
     _same(back, log)
-    assert any("position from joint-named columns" in n for n in back.notes)
+    # the note spells the columns as they are in the file (not the normalized form they were matched in)
+    assert f"named.csv: position from joint-named columns {pq.format(joint='<joint>')}" in back.notes
+    assert f"named.csv: measured torque from joint-named columns {ptau.format(joint='<joint>')}" in back.notes
 
 
 def test_joint_state_layout_is_mapped_by_name_row_by_row(tmp_path):

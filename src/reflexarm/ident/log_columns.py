@@ -314,15 +314,18 @@ def _find_joint_signal(
         found = [idx.find(template_.format(joint=name)) for name in joint_names]
         hits = sum(f is not None for f in found)
         if hits == n:
-            notes.append(f"{where}: {_MEANING[s]} from joint-named columns {template_.format(joint='<joint>')}")
-            return tuple(f for f in found if f is not None)
+            cols = tuple(f for f in found if f is not None)
+            notes.append(f"{where}: {_MEANING[s]} from joint-named columns {_matched_pattern(cols, joint_names)}")
+            return cols
         if hits and (best is None or hits > best[0]):
             best = (hits, template_, found)
     if best is not None and s in _REQUIRED:
         _, template_, found = best
         missing = [joint_names[j] for j, f in enumerate(found) if f is None]
+        present = [(f, name) for f, name in zip(found, joint_names, strict=True) if f is not None]
+        pattern = _matched_pattern(tuple(f for f, _ in present), tuple(name for _, name in present))
         raise DataError(
-            f"{where}: {_MEANING[s]} columns {template_.format(joint='<joint>')!r} found for "
+            f"{where}: {_MEANING[s]} columns {pattern!r} found for "
             f"{n - len(missing)} of the {n} joints; missing for joint(s) {', '.join(map(repr, missing))} "
             f"(looked for {', '.join(repr(template_.format(joint=m)) for m in missing[:3])})",
             source=where,
@@ -330,6 +333,18 @@ def _find_joint_signal(
             joint=missing[0],
         )
     return None
+
+
+def _matched_pattern(columns: tuple[str, ...], joint_names: tuple[str, ...]) -> str:
+    """The columns as they are spelled, with each joint's name replaced by ``<joint>``
+    (``shoulder_pan_joint/position`` -> ``<joint>/position``); differing spellings are listed."""
+    patterns: list[str] = []
+    for column, name in zip(columns, joint_names, strict=True):
+        i = column.lower().rfind(name.lower())
+        pattern = column if i < 0 else f"{column[:i]}<joint>{column[i + len(name) :]}"
+        if pattern not in patterns:
+            patterns.append(pattern)
+    return " / ".join(patterns)
 
 
 def _name_templates(s: str) -> list[str]:
