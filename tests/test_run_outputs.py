@@ -12,7 +12,7 @@ import matplotlib.image
 import pytest
 
 import reflexarm
-from reflexarm._cli.run_outputs import frame_size, number_joints, slug
+from reflexarm._cli.run_outputs import SceneCapture, frame_size, number_joints, slug
 from reflexarm.cli import main
 from reflexarm.errors import ConfigError
 
@@ -93,13 +93,24 @@ COMMANDS = [
 
 @pytest.mark.parametrize(("command", "traces", "summary", "figure", "name"), COMMANDS)
 def test_every_closed_loop_command_writes_trace_summary_figure_and_still(
-    command, traces, summary, figure, name, tmp_path, capsys
+    command, traces, summary, figure, name, tmp_path, capsys, monkeypatch
 ):
     out = tmp_path / "out"
+    run_names: list[list[str]] = []
+    finish = SceneCapture.finish
+
+    def record_run_names(self, names=None, **kw):
+        run_names.append(list(names or []))
+        return finish(self, names, **kw)
+
+    monkeypatch.setattr(SceneCapture, "finish", record_run_names)
     code = main([*command, "--out", str(out), "--quiet", "--frame-size", "320x240"])
     printed = capsys.readouterr().out
     assert code in (0, 1)  # mode-table: 1 when a measured mark disagrees with the paper's
     assert sorted(out.glob(traces)), f"no trace {traces} in {sorted(p.name for p in out.iterdir())}"
+    if traces.endswith("_*.npz"):  # one trace per run, named as its video would be: <name>_<slug(run)>
+        assert len(run_names) == 1
+        assert sorted(p.stem for p in out.glob(traces)) == sorted(f"{name}_{slug(r)}" for r in run_names[0])
     assert (out / figure).is_file()
     still = out / f"{name}_still.png"
     assert matplotlib.image.imread(still).shape[:2] == (240, 320)

@@ -132,8 +132,7 @@ def _efc_step(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     with SceneCapture(args, out, "efc_step") as scene:
         res = efc_step(setup, seed=args.seed, model_seed=args.model_seed, progress=not args.quiet)
-    for name, tr in res.traces.items():
-        tr.save(out / f"efc_step_{name.replace(' ', '_').replace(',', '').replace('+', 'plus')}.npz")
+    write_traces(out, "efc_step", res.traces)
     fig = plot_efc_step(res, out / "fig12_efc_step.png")
     write_json(out / "efc_step.json", {"setup": setup.as_dict(), "rows": res.rows, "summary": res.summary})
     pictures = scene.finish(list(res.traces), summary=out / "efc_step.json")

@@ -17,7 +17,7 @@ from reflexarm._cli.common import (
     out_dir,
 )
 from reflexarm._cli.robot_options import add_robot_options, load_robot_from_args
-from reflexarm._cli.run_outputs import SceneCapture, add_output_options, number_joints, write_json
+from reflexarm._cli.run_outputs import SceneCapture, add_output_options, number_joints, write_json, write_traces
 
 _PAPER_COLUMNS = [("quantity", "", "{}"), ("paper", "paper", "{}"), ("ours", "ours", "{}")]
 
@@ -137,7 +137,6 @@ def _demo(args: argparse.Namespace) -> int:
         compare_with_paper,
         run_ee_collision,
         summarize_ee_collision,
-        write_outputs,
     )
     from reflexarm.experiments.plots import plot_fig8
 
@@ -173,9 +172,11 @@ def _demo(args: argparse.Namespace) -> int:
         tr.meta["controller_model"] = choice.describe()
         traces.append(tr)
         rows.append(number_joints(summarize_ee_collision(tr), robot.joint_names))
-    write_outputs(out, "ee_collision", traces, rows)
+    runs = [s.name for s in EE_SETTINGS]  # one name per run for the traces and the videos (run_outputs.slug)
+    write_traces(out, "ee_collision", dict(zip(runs, traces, strict=True)))
+    write_json(out / "ee_collision_summary.json", rows)
     _print_placement(traces[0].meta.get("placement"))
-    pictures = scene.finish([s.name for s in EE_SETTINGS], summary=out / "ee_collision_summary.json")
+    pictures = scene.finish(runs, summary=out / "ee_collision_summary.json")
     fig = plot_fig8(traces, out / "fig8_ee_collision.png")
     print(
         format_table(
@@ -237,7 +238,6 @@ def _link(args: argparse.Namespace) -> int:
         model_torque,
         run_link_collision,
         summarize_link_collision,
-        write_outputs,
     )
     from reflexarm.experiments.plots import plot_fig10
 
@@ -253,7 +253,8 @@ def _link(args: argparse.Namespace) -> int:
         )
     tr.meta["controller_model"] = choice.describe()
     row = number_joints(summarize_link_collision(tr), robot.joint_names)
-    write_outputs(out, "link_collision", [tr], [row])
+    write_traces(out, "link_collision", {"link collision": tr})
+    write_json(out / "link_collision_summary.json", [row])
     _print_placement(tr.meta.get("placement"))
     pictures = scene.finish(["link collision"], summary=out / "link_collision_summary.json")
     # tau_mdl of Fig. 10 is the controller's model torque
@@ -353,9 +354,9 @@ def _velocity(args: argparse.Namespace) -> int:
     out = out_dir(args)
     with SceneCapture(args, out, "velocity_tracking") as scene:
         res = run_velocity_tracking(setup, model=model, seed=args.seed, progress=not args.quiet, robot=robot)
-    for name, tr in res.traces.items():
+    for tr in res.traces.values():
         tr.meta["controller_model"] = choice.describe()
-        tr.save(out / f"velocity_tracking_{name.lower()}.npz")
+    write_traces(out, "velocity_tracking", res.traces)
     doc = res.as_dict()
     doc["controller_model"] = choice.describe()
     doc["setup"] = {**doc["setup"], "joint": j + 1, "joint_name": robot.joint_names[j]}  # 1-based, as --joint
