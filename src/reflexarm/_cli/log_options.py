@@ -8,7 +8,10 @@ import argparse
 import warnings
 from typing import Any
 
-from reflexarm.ident.logs import TIME_UNITS
+#: The units of ``--time-unit``: the keys of :data:`reflexarm.ident.logs.TIME_UNITS`, spelled out here so
+#: that registering the option does not import the identification package (tests/test_cli_startup.py
+#: checks that the two agree).
+TIME_UNIT_CHOICES = ("s", "ms", "us", "ns")
 
 
 def add_log_options(p: argparse.ArgumentParser) -> None:
@@ -25,7 +28,7 @@ def add_log_options(p: argparse.ArgumentParser) -> None:
     )
     g.add_argument(
         "--time-unit",
-        choices=tuple(TIME_UNITS),
+        choices=TIME_UNIT_CHOICES,
         default=None,
         help="unit of the log's time stamps (default: from the column name, e.g. t_ns, else from their "
         "magnitude and spacing); times are always made relative to the first sample",

@@ -20,7 +20,8 @@ _SWITCH = (0, 1)
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``tune-thresholds`` to the top-level parser."""
-    from reflexarm.tuning import DEFAULT_CONTACT_RATE, DEFAULT_METHOD, DEFAULT_RATE, METHODS
+    from reflexarm.tuning.defaults import DEFAULT_CONTACT_RATE, DEFAULT_METHOD, DEFAULT_RATE
+    from reflexarm.tuning.tail import METHODS
 
     p = sub.add_parser(
         "tune-thresholds",

@@ -4,30 +4,38 @@
 fits the tail of each joint's |residual| (:mod:`reflexarm.tuning.tail`) and proposes a collision and a
 lower contact level per joint for false-alarm rates the user gives, with the detection delay each implies.
 :func:`record_free_motion_log` writes such logs in simulation (the built-in Atlas arm).
+
+The names below are imported from their modules on first use: the study pulls in SciPy and the
+identification package, while ``reflexarm tune-thresholds`` registers its options from
+:mod:`reflexarm.tuning.defaults` alone.
 """
 
-from reflexarm.tuning.delays import FORCE_DIRECTIONS, detection_delay, force_step_delays
-from reflexarm.tuning.free_motion_log import FreeMotionRun, record_free_motion_log
-from reflexarm.tuning.replay import (
-    ObserverSettings,
-    ResidualReplay,
-    ThresholdWarning,
-    is_trace_file,
-    load_free_motion_log,
-    recorded_residual,
-    replay_residual,
-)
-from reflexarm.tuning.study import (
-    DEFAULT_CONTACT_RATE,
-    DEFAULT_METHOD,
-    DEFAULT_RATE,
-    MAX_EXTRAPOLATION,
-    JointThresholds,
-    LogTooShortError,
-    ThresholdProposal,
-    tune_thresholds,
-)
-from reflexarm.tuning.tail import METHODS, TailFit, cluster_maxima, fit_tail
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from reflexarm.tuning.defaults import DEFAULT_CONTACT_RATE, DEFAULT_METHOD, DEFAULT_RATE
+    from reflexarm.tuning.delays import FORCE_DIRECTIONS, detection_delay, force_step_delays
+    from reflexarm.tuning.free_motion_log import FreeMotionRun, record_free_motion_log
+    from reflexarm.tuning.replay import (
+        ObserverSettings,
+        ResidualReplay,
+        ThresholdWarning,
+        is_trace_file,
+        load_free_motion_log,
+        recorded_residual,
+        replay_residual,
+    )
+    from reflexarm.tuning.study import (
+        MAX_EXTRAPOLATION,
+        JointThresholds,
+        LogTooShortError,
+        ThresholdProposal,
+        tune_thresholds,
+    )
+    from reflexarm.tuning.tail import METHODS, TailFit, cluster_maxima, fit_tail
 
 __all__ = [
     "DEFAULT_CONTACT_RATE",
@@ -55,3 +63,39 @@ __all__ = [
     "replay_residual",
     "tune_thresholds",
 ]
+
+#: The module of each public name.
+_SOURCES = {
+    **dict.fromkeys(("FORCE_DIRECTIONS", "detection_delay", "force_step_delays"), "delays"),
+    **dict.fromkeys(("DEFAULT_CONTACT_RATE", "DEFAULT_METHOD", "DEFAULT_RATE"), "defaults"),
+    **dict.fromkeys(("FreeMotionRun", "record_free_motion_log"), "free_motion_log"),
+    **dict.fromkeys(
+        (
+            "ObserverSettings",
+            "ResidualReplay",
+            "ThresholdWarning",
+            "is_trace_file",
+            "load_free_motion_log",
+            "recorded_residual",
+            "replay_residual",
+        ),
+        "replay",
+    ),
+    **dict.fromkeys(
+        ("MAX_EXTRAPOLATION", "JointThresholds", "LogTooShortError", "ThresholdProposal", "tune_thresholds"), "study"
+    ),
+    **dict.fromkeys(("METHODS", "TailFit", "cluster_maxima", "fit_tail"), "tail"),
+}
+
+
+def __getattr__(name: str) -> object:
+    module = _SOURCES.get(name)
+    if module is None:
+        raise AttributeError(f"module 'reflexarm.tuning' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"reflexarm.tuning.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})

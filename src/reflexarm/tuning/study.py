@@ -43,6 +43,7 @@ from reflexarm.errors import ConfigError, DataError
 from reflexarm.ident.robot_log import RobotLog
 from reflexarm.robots.robot_model import RobotModel
 from reflexarm.tuning._log_check import count_crossings, lowest_level_crossed_at_most
+from reflexarm.tuning.defaults import DEFAULT_CONTACT_RATE, DEFAULT_METHOD, DEFAULT_RATE
 from reflexarm.tuning.delays import detection_delay, force_step_delays
 from reflexarm.tuning.replay import (
     ObserverSettings,
@@ -64,23 +65,12 @@ __all__ = [
     "tune_thresholds",
 ]
 
-#: Default false-alarm rate of the collision level for the whole arm [1/h].
-DEFAULT_RATE = 1.0
-#: Default rate of the contact level [1/h] (one a minute, as a lower libfranka-style level).
-DEFAULT_CONTACT_RATE = 60.0
 #: Largest return period of a level, in multiples of the logs' span: a tail fit is trusted to about an
 #: order of magnitude beyond the data (Coles 2001, Sec. 4.4: return-level intervals widen quickly past it).
 MAX_EXTRAPOLATION = 10.0
 #: Declustering gap in observer time constants: excursions closer than 5 / k_o (1 s at k_o = 5 1/s, where
 #: the observer's step response has settled to 99.3 %) are one alarm, as a latched detector sees them.
 GAP_TIME_CONSTANTS = 5.0
-#: Default tail model: exponential (xi = 0). The residual's noise is a low-passed sum of many small bounded
-#: contributions (sensor noise through M_hat(q), model errors along the motion), a tail in the Gumbel domain
-#: (xi = 0); a shape fitted from the ~30 largest excursions comes out negative (-0.2 to -0.6 on the Atlas
-#: free-motion logs) and puts a false end to the tail just above the logs' maximum: measured on a held-out
-#: 10-minute run, such GPD levels were crossed on 1-2 joints, the exponential ones not (see the report of
-#: issue 9). "gpd" stays available.
-DEFAULT_METHOD = "exponential"
 #: A level is flagged when the logs cross it more often than this quantile of the Poisson count its rate
 #: predicts over the logs' span (1 % false flags on a well-fitted tail).
 CONSISTENCY_QUANTILE = 0.99
