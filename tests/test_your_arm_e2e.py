@@ -30,6 +30,7 @@ import pytest
 
 from conftest import SHARED
 from reflexarm.cli import main
+from reflexarm.errors import ReflexArmError
 from reflexarm.experiments.collision import free_motion_trajectory
 from reflexarm.experiments.collision_summary import CONTACT_FORCE_N
 from reflexarm.ident import load_identified_model
@@ -62,6 +63,50 @@ FRICTION_RTOL = 0.02
 #: same log (sensor noise, 10 Hz filtering, Coulomb friction at velocity reversals): within 5 %
 #: (measured 0.996-1.015 on the four arms; the +-10 % model of the experiments: 1.03-1.16).
 FLOOR_FACTOR = 1.05
+
+
+class KnownFinding(AssertionError):
+    """A step that fails for a finding in /work/briefs/s12/H_findings.md (the other steps still run)."""
+
+
+#: (arm, step) pairs that fail today, with the finding: the arm's test is xfail(strict) for exactly this
+#: error (raises=KnownFinding); any other failure fails it, and a fixed step makes it XPASS (strict: fails).
+KNOWN_FINDINGS = {
+    ("panda", "robot copies"): "F5: the MJCF copy writes a lumped body (Panda's 'tool') as fullinertia='0 0 0 0 0 0', "
+    "which MuJoCo refuses ('inertia must have positive eigenvalues')",
+    ("atlas_cut", "demo"): "F7: the self-placed block is hit by the forearm's stand-in box before the wrist: no "
+    "force at the wrist sensor, contact 'before the wrist' only",
+}
+
+
+def arm_param(arm: str) -> Any:
+    """The arm as a test parameter, xfail(strict) for its known finding if it has one."""
+    reasons = [reason for (known_arm, _), reason in KNOWN_FINDINGS.items() if known_arm == arm]
+    if not reasons:
+        return arm
+    return pytest.param(arm, marks=pytest.mark.xfail(strict=True, raises=KnownFinding, reason="; ".join(reasons)))
+
+
+class Steps:
+    """Runs the checks of one arm; a check failing for a known finding is kept and raised at the end."""
+
+    def __init__(self, arm: str) -> None:
+        self.arm = arm
+        self.known: list[str] = []
+
+    def check(self, step: str, check: Any, *args: Any) -> Any:
+        reason = KNOWN_FINDINGS.get((self.arm, step))
+        if reason is None:
+            return check(*args)
+        try:
+            return check(*args)
+        except (AssertionError, ReflexArmError) as e:
+            self.known.append(f"{step}: {reason} ({type(e).__name__}: {str(e)[:300]})")
+            return None
+
+    def finish(self) -> None:
+        if self.known:
+            raise KnownFinding("; ".join(self.known))
 
 
 def robot_options(arm: str, folder: Path) -> list[str]:
@@ -267,33 +312,34 @@ def check_efc_step(out: Path) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("arm", ARMS)
+@pytest.mark.parametrize("arm", [arm_param(arm) for arm in ARMS])
 def test_the_whole_workflow_from_the_command_line(arm, tmp_path):
     options = robot_options(arm, tmp_path)
+    steps = Steps(arm)
     robot = load_from_options(options)
     exc, val, fr, dyn = (tmp_path / name for name in ("exc", "val", "friction", "dyn"))
     # the excitation optimizer, briefly: coefficients and the trajectory a robot plays (CSV)
     run(["excite", *options, "--harmonics", "3", "--maxiter", "5", "--periods", "1", "--out", str(tmp_path / "opt"),
          "--csv", str(tmp_path / "opt" / "traj.csv"), "--quiet"])  # fmt: skip
-    check_excitation(tmp_path / "opt", robot)
+    steps.check("excite", check_excitation, tmp_path / "opt", robot)
     # the identification log: an excitation run on the plant. Its seeded random start (--maxiter 0), as an
     # optimized one depends on the machine's floating point (as 'identify dynamics --help' says)
     run(["excite", *options, "--harmonics", "3", "--maxiter", "0", "--seed", "0", "--periods", "1", "--out", str(exc),
          "--record", str(exc / "log.csv"), "--csv", str(exc / "traj.csv"), "--quiet"])  # fmt: skip
-    check_recorded_log(exc, robot)
+    steps.check("excite --record", check_recorded_log, exc, robot)
     # a held-out log: another seeded start, other sensor noise
     run(["excite", *options, "--harmonics", "3", "--maxiter", "0", "--seed", "1", "--periods", "1",
          "--out", str(val), "--record", str(val / "log.csv"), "--quiet"])  # fmt: skip
     speeds = ",".join(f"{v:g}" for v in FRICTION_SPEEDS)
     run(["identify", "friction", *options, "--speeds", speeds, "--out", str(fr), "--quiet"])
-    check_friction(fr, robot, FRICTION_SPEEDS)
+    steps.check("identify friction", check_friction, fr, robot, FRICTION_SPEEDS)
     run(["identify", "dynamics", *options, "--log", str(exc / "log.csv"), "--split", "0.7", "--friction",
          str(fr / "friction.json"), "--method", "both", "--out", str(dyn), "--quiet"])  # fmt: skip
-    models = check_model_files(dyn, options, robot)
+    models = steps.check("model files", check_model_files, dyn, options, robot)
     model = str(dyn / "model_sequential.json")
     run(["validate", *options, "--model", model, "--log", str(val / "log.csv"), "--out", str(tmp_path / "vd"),
          "--quiet"])  # fmt: skip
-    check_validation(tmp_path / "vd", val / "log.csv", robot, models["sequential"])
+    steps.check("validate", check_validation, tmp_path / "vd", val / "log.csv", robot, models["sequential"])
     # thresholds from a free-motion log of the arm under the identified model
     fm, tt = tmp_path / "free", tmp_path / "thresholds"
     duration = FREE_MOTION_CYCLES * free_motion_trajectory(1.0, "demo", robot).duration  # one cycle at least
@@ -302,16 +348,17 @@ def test_the_whole_workflow_from_the_command_line(arm, tmp_path):
     free_motion = json.loads((fm / "free_motion.json").read_text())
     run(["tune-thresholds", str(fm / "free_motion_trace.parquet"), *options, "--model", model,
          "--recorded-residual", "--allow-extrapolation", "--no-figure", "--out", str(tt)])  # fmt: skip
-    check_thresholds(tt, free_motion, robot.n)
+    steps.check("tune-thresholds", check_thresholds, tt, free_motion, robot.n)
     # the closed-loop experiments with the identified model
     run(["demo", *options, "--model", model, "--out", str(tmp_path / "demo"), "--quiet"])
-    check_demo(tmp_path / "demo")
+    steps.check("demo", check_demo, tmp_path / "demo")
     run(["simulate", "link-collision", *options, "--model", model, "--out", str(tmp_path / "link"), "--quiet"])
-    check_link_collision(tmp_path / "link", robot.n)
+    steps.check("link-collision", check_link_collision, tmp_path / "link", robot.n)
     # efc-step with the experiments' +-10 % model: disturbance compensation feeds the residual back, and a
     # 7 s random-start excitation leaves M(q) poorly determined (iiwa14: eigenvalues of M^-1 M_hat down to
     # 0.02, the DC runs diverge); the torques validate regardless, as gravity dominates them
     run(["efc-step", *options, "--out", str(tmp_path / "efc"), "--quiet"])
-    check_efc_step(tmp_path / "efc")
+    steps.check("efc-step", check_efc_step, tmp_path / "efc")
     # last, as it is no input of the steps above: the robot file copies (write-back)
-    check_robot_copies(dyn, options, robot, models)
+    steps.check("robot copies", check_robot_copies, dyn, options, robot, models)
+    steps.finish()
