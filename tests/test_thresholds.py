@@ -114,7 +114,7 @@ def test_study_and_command_agree_and_number_joints_from_one(atlas, tmp_path):
         assert (out / name).is_file()
 
 
-def test_a_log_too_short_for_the_rate_is_refused_with_the_minimum(atlas):
+def test_a_log_too_short_for_the_rate_is_refused_with_the_minimum(atlas, tmp_path):
     log = _static_log(atlas, _random_disturbance(atlas.n, 30.0, seed=8))
     with pytest.raises(LogTooShortError) as info:
         tune_thresholds(log, atlas, rate_per_hour=1.0, contact_rate_per_hour=60.0, gap_s=0.1)
@@ -129,6 +129,12 @@ def test_a_log_too_short_for_the_rate_is_refused_with_the_minimum(atlas):
             log, atlas, rate_per_hour=1.0, contact_rate_per_hour=600.0, gap_s=0.1, allow_extrapolation=True, n_boot=20
         )
     assert any("extrapolated" in note for note in prop.notes)
+    out = tmp_path / "out"
+    path = save_log(log, tmp_path / "short.parquet")
+    args = f"tune-thresholds {path} --rate 1 --contact-rate 600 --gap 0.1 --allow-extrapolation --no-figure --out {out}"
+    assert main(args.split()) == 0
+    notes = json.loads((out / "thresholds.json").read_text())["notes"]
+    assert sum("needs at least 42.0 min" in note for note in notes) == 1, notes  # noted once, not twice
 
 
 def test_bad_settings_are_refused(atlas):

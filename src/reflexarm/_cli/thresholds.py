@@ -137,7 +137,9 @@ def _tune(args: argparse.Namespace) -> int:
         finally:  # what the study warned about is printed even when it then fails
             for w in caught:
                 print(f"warning: {w.message}", file=sys.stderr)
-    proposal.notes.extend(str(w.message) for w in caught if str(w.message) not in proposal.notes)
+    for w in caught:  # a warning the study also noted (e.g. "... -- extrapolating as asked") is noted once
+        if not any(str(w.message).split(" -- ")[0] in note for note in proposal.notes):
+            proposal.notes.append(str(w.message))
     if args.recorded_residual:
         proposal.notes.append(
             "residuals recorded online by the traces' controllers, with the model and observer each run used: "
