@@ -351,6 +351,7 @@ def test_the_whole_workflow_from_the_command_line(arm, tmp_path):
     run(["tune-thresholds", str(fm / "free_motion_trace.parquet"), *options, "--model", model,
          "--recorded-residual", "--allow-extrapolation", "--no-figure", "--out", str(tt)])  # fmt: skip
     steps.check("tune-thresholds", check_thresholds, tt, free_motion, robot.n)
+    (fm / "free_motion_trace.parquet").unlink()  # ~0.5 MB per simulated second; pytest keeps 3 runs' tmp_path
     # the closed-loop experiments with the identified model
     run(["demo", *options, "--model", model, "--out", str(tmp_path / "demo"), "--quiet"])
     steps.check("demo", check_demo, tmp_path / "demo")
