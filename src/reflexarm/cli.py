@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+import warnings
 from collections.abc import Sequence
 
 from reflexarm import __version__
@@ -42,11 +43,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``reflexarm`` script; returns the exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
+
+    def format_warning(message: Warning | str, category: type[Warning], *_: object, **__: object) -> str:
+        # a user reads "reflexarm CMD: warning: RobotFileWarning: ...", not the source line that warned
+        return f"reflexarm {args.command}: warning: {category.__name__}: {message}\n"
+
+    default_format = warnings.formatwarning
+    warnings.formatwarning = format_warning  # type: ignore[assignment]
     try:
         return int(args.func(args) or 0)
     except ReflexArmError as e:
         print(f"reflexarm {args.command}: error: {e}", file=sys.stderr)
         return 2
+    finally:
+        warnings.formatwarning = default_format
 
 
 if __name__ == "__main__":  # pragma: no cover

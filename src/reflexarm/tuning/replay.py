@@ -238,6 +238,8 @@ def recorded_residual(path: str | os.PathLike[str], n: int) -> ResidualReplay:
     import pyarrow.parquet as pq
 
     p = Path(path)
+    if not p.is_file():
+        raise DataError(f"{str(p)!r}: no such file (a recorded residual is read from a reflexarm trace, .parquet)")
     if not is_trace_file(p):
         raise DataError(
             f"{p.name}: a recorded residual is read from a reflexarm trace (.parquet); this file is not one"
