@@ -206,3 +206,26 @@ def test_an_arm_cut_from_its_file_keeps_the_locked_gripper_and_reloads_with_the_
     identified = projected.to_robot_model(true)
     for qq, _ in _random_states(back, 20, seed=7):
         np.testing.assert_allclose(back.compute_mass_matrix(qq), identified.compute_mass_matrix(qq), atol=ATOL)
+
+
+def test_an_mjcf_with_a_fixed_body_lumped_into_its_link_compiles_and_matches(tmp_path: Path) -> None:
+    # the built-in Panda's `tool` body (0.25 kg) is fixed to link 7: the copy lumps it into link 7 and leaves
+    # `tool` massless; MuJoCo refuses an all-zero fullinertia, so the copy must still compile (found end to end)
+    true = load_robot("panda")
+    nominal = perturb_model(true, 0.3, seed=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = identify_dynamics(
+            nominal,
+            _exact_log(true, FrictionParameters.from_model(true.friction)),
+            method="combined",
+            noise_variance=None,
+        )
+        out, _ = write_identified_robot(res, nominal, tmp_path / "panda_identified.xml")
+        back = load_robot(out, ee_frame="ee")
+        Plant(back)  # MuJoCo compiles the copy
+    consistent, _ = with_consistent_links(res, nominal)
+    identified = consistent.to_robot_model(nominal)
+    for q, _dq in _random_states(back, 20):
+        np.testing.assert_allclose(back.compute_mass_matrix(q), identified.compute_mass_matrix(q), atol=ATOL)
+        np.testing.assert_allclose(back.compute_gravity(q), identified.compute_gravity(q), atol=ATOL)

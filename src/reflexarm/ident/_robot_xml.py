@@ -112,7 +112,12 @@ def set_inertial(fmt: str, el: ET.Element, mass: float, com: np.ndarray, inertia
     inertial.set("pos", " ".join(_fmt(x) for x in com))
     inertial.set("mass", _fmt(mass))
     full = (inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2])
-    inertial.set("fullinertia", " ".join(_fmt(x) for x in full))
+    if any(full[3:]):
+        inertial.set("fullinertia", " ".join(_fmt(x) for x in full))
+    else:
+        # MuJoCo refuses an all-zero fullinertia ("inertia must have positive eigenvalues") but takes a zero
+        # diaginertia: the massless body a fixed link leaves when its inertia is lumped into its parent
+        inertial.set("diaginertia", " ".join(_fmt(x) for x in full[:3]))
 
 
 def behind_locked_joint(root: ET.Element, fmt: str, link: str, main: str, locked: set[str]) -> bool:
