@@ -72,8 +72,6 @@ class KnownFinding(AssertionError):
 #: (arm, step) pairs that fail today, with the finding: the arm's test is xfail(strict) for exactly this
 #: error (raises=KnownFinding); any other failure fails it, and a fixed step makes it XPASS (strict: fails).
 KNOWN_FINDINGS = {
-    ("panda", "robot copies"): "F5: the MJCF copy writes a lumped body (Panda's 'tool') as fullinertia='0 0 0 0 0 0', "
-    "which MuJoCo refuses ('inertia must have positive eigenvalues')",
     ("atlas_cut", "demo"): "F7: the self-placed block is hit by the forearm's stand-in box before the wrist: no "
     "force at the wrist sensor, contact 'before the wrist' only",
 }
