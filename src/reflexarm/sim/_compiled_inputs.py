@@ -4,8 +4,6 @@ from the plant's generator and the plant's applied forces (private)."""
 
 from __future__ import annotations
 
-import importlib
-from dataclasses import fields
 from types import ModuleType
 from typing import Any
 
@@ -19,45 +17,15 @@ from reflexarm.sim.trajectory import JointTrajectory
 
 def _core_params(controller: Any, core: ModuleType) -> Any:
     """The core's ControllerParams of a (reset) Python Controller: those the Controller configures its own core
-    with (``control._setup.core_params``) when it has that function, with the switches it has now."""
-    setup = importlib.import_module("reflexarm.control._setup")
-    if hasattr(setup, "core_params"):
-        p = setup.core_params(controller, core)
-        p.kappa_f, p.kappa_eps, p.kappa_ext = (
-            int(controller.kappa_f),
-            int(controller.kappa_eps),
-            int(controller.kappa_ext),
-        )
-        return p
-    p = core.ControllerParams()
-    robot, imp = controller.robot, controller.impedance
-    gains = getattr(imp, "gains", imp)
-    p.stiffness = np.array(gains.stiffness, dtype=float)
-    p.damping_ratio = np.array(gains.damping_ratio, dtype=float)
-    p.observer_gain = np.array(controller.observer.observer_gain, dtype=float)
-    det = controller.detection_observer
-    p.detection_observer_gain = np.zeros(0) if det is None else np.array(det.observer_gain, dtype=float)
-    p.threshold = np.zeros(0) if controller.detector is None else np.array(controller.detector.threshold, dtype=float)
-    p.reaction = controller.reaction
-    p.kappa_f, p.kappa_eps, p.kappa_ext = int(controller.kappa_f), int(controller.kappa_eps), int(controller.kappa_ext)
-    p.residual_limit, p.switch_time, p.dt = controller.residual_limit, controller.switch_time, controller.dt
-    p.damping_update_period = int(imp.damping_update_period)
-    fr = robot.friction
-    p.friction_coulomb, p.friction_viscous = fr.coulomb.copy(), fr.viscous.copy()
-    p.friction_velocity_band = fr.velocity_band
-    if robot.has_springs:
-        p.spring_stiffness = np.array(robot.spring_stiffness, dtype=float)
-        p.spring_reference = np.array(robot.spring_reference, dtype=float)
-    p.sensor_frame_id = robot.sensor_frame_id
-    limit = controller.torque_limit
-    p.torque_limit = np.full(robot.n, np.inf) if limit is None else np.array(limit, dtype=float)
-    rate = controller.torque_rate_limit
-    p.torque_rate_limit = np.zeros(0) if rate is None else np.array(rate, dtype=float)
-    bounds = core.InputBounds()
-    for f in fields(controller.input_bounds):
-        setattr(bounds, f.name, float(getattr(controller.input_bounds, f.name)))
-    p.input_bounds = bounds
-    p.period_band_low, p.period_band_high = (float(x) for x in controller.period_band)
+    with (``control._setup.core_params``), with the switches it has now."""
+    from reflexarm.control._setup import core_params
+
+    p = core_params(controller, core)
+    p.kappa_f, p.kappa_eps, p.kappa_ext = (
+        int(controller.kappa_f),
+        int(controller.kappa_eps),
+        int(controller.kappa_ext),
+    )
     return p
 
 
