@@ -127,7 +127,7 @@ def test_efc_step_on_the_arm(arm, tmp_path):
     rows = {r["run"]: r for r in doc["rows"]}
     assert doc["setup"]["robot"] != "atlas_v5_left_arm"
     # the 50 N step acts (the true external torque is not zero) and the arm yields to it without DC
-    tr = Trace.load(out / "efc_step_no_DC.npz")
+    tr = Trace.load(out / "efc_step_no_dc.npz")
     assert np.abs(tr.tau_ext).max() > 1.0
     assert rows["no DC"]["ee_displacement_mm"] > 1.0
     # DC stiffens the arm (10) and EFC gives the compliance back (11): the paper's Fig. 12 on this arm.
