@@ -23,6 +23,7 @@ import numpy as np
 import pinocchio as pin
 import scipy.linalg
 
+from _pinocchio_floor import floor_data
 from reflexarm import Measurement, Reference, load_robot
 from reflexarm.control import Controller
 
@@ -68,13 +69,10 @@ def time_per_call(fn: Callable[[Measurement, Reference], object], seq, reset: Ca
 
 def make_floor(robot, efc: bool):
     """The Pinocchio calls Controller.step makes, and nothing else."""
-    model = robot.pin_model.copy()
-    d_g, d_c, d_j = model.createData(), model.createData(), model.createData()
-    model0 = model.copy()
-    model0.gravity.linear = np.zeros(3)
-    d_p, d_ff = model0.createData(), model0.createData()
-    zeros = np.zeros(robot.n)
-    fid = robot.sensor_frame_id
+    f = floor_data(robot)
+    model, model0, d_g, d_c, d_j, d_p, d_ff, zeros, fid = (
+        f.model, f.model0, f.d_g, f.d_c, f.d_j, f.d_p, f.d_ff, f.zeros, f.fid
+    )
 
     def floor(m: Measurement, r: Reference) -> None:
         pin.computeGeneralizedGravity(model, d_g, m.q)

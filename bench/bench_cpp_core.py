@@ -24,6 +24,7 @@ import numpy as np
 import pinocchio as pin
 import reflexarm._core as core
 
+from _pinocchio_floor import floor_data
 from reflexarm import Measurement, Reference, load_robot
 from reflexarm.control import Controller
 from reflexarm.control._setup import core_params
@@ -67,13 +68,10 @@ def make_controller(robot, efc: bool) -> Controller:
 
 def make_floor(robot, efc: bool) -> Callable[..., None]:
     """The Pinocchio calls of one tick, made from Python, and nothing else."""
-    model = robot.pin_model.copy()
-    d_g, d_c, d_j = model.createData(), model.createData(), model.createData()
-    model0 = model.copy()
-    model0.gravity.linear = np.zeros(3)
-    d_p, d_ff = model0.createData(), model0.createData()
-    zeros = np.zeros(robot.n)
-    fid = robot.sensor_frame_id
+    f = floor_data(robot)
+    model, model0, d_g, d_c, d_j, d_p, d_ff, zeros, fid = (
+        f.model, f.model0, f.d_g, f.d_c, f.d_j, f.d_p, f.d_ff, f.zeros, f.fid
+    )
 
     def floor(t, q, dq, tau_m, wrench, gravity, q_d, dq_d, ddq_d) -> None:  # type: ignore[no-untyped-def]
         pin.computeGeneralizedGravity(model, d_g, q)
