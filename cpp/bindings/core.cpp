@@ -2,9 +2,11 @@
 //
 // The model crosses the language boundary as text (pin.Model.saveToString() in Python, Boost
 // serialization): the Python `pin.Model` is a Boost.Python object that nanobind cannot take directly.
-// Inputs are float64 C-contiguous vectors read through the buffer protocol (anything else raises TypeError
-// instead of being copied silently: the caller converts once). update() returns a status (negative fault code,
-// else n_over + (n_saturated << 8)); the command lives in buffers sized once, read through numpy views.
+// Inputs are float64 C-contiguous vectors read in place (tick_io.hpp: plain numpy arrays from their fields,
+// other objects through the buffer protocol; anything else raises TypeError instead of being copied silently:
+// the caller converts once). update() returns a status (negative fault code, else n_over + (n_saturated << 8));
+// the command lives in buffers sized once, read through numpy views. step_signals(measurement, reference) is
+// Controller.step's fast path: the Measurement and Reference tuples read here, the plain Command built here.
 #include <cmath>
 #include <cstring>
 #include <initializer_list>
@@ -18,6 +20,7 @@
 
 #include "reflexarm/model_io.hpp"
 #include "reflexarm/reflexarm.hpp"
+#include "tick_io.hpp"
 
 namespace nb = nanobind;
 using namespace nb::literals;
@@ -26,7 +29,10 @@ void registerTiming(nb::module_ & m); // timing.cpp: time_tick_in_cpp, for bench
 
 namespace
 {
-  using Map = Eigen::Map<const Eigen::VectorXd>;
+  using reflexarm_bindings::Map;
+  using reflexarm_bindings::newArrayCopy;
+  using reflexarm_bindings::readFloat;
+  using reflexarm_bindings::TickInputs;
   template<typename T>
   using View = nb::ndarray<nb::numpy, const T, nb::ndim<1>>;
   using MatView = nb::ndarray<nb::numpy, const double, nb::ndim<2>>;
@@ -38,7 +44,7 @@ namespace
     reflexarm::Controller ctrl;
     reflexarm::Command cmd;
     // step(): the Python Command type and the constant parts of a plain command, made once
-    nb::object command_type, empty_tuple, empty_str, zero, tau_copy, residual_copy;
+    nb::object command_type, empty_tuple, empty_str, zero;
     nb::object mode_names[5];
   };
 
@@ -53,58 +59,9 @@ namespace
     throw reflexarm::ConfigError("unknown reaction '" + name + "'; choose one of: gravity, compliant, none");
   }
 
-  /// The eight input vectors of a tick, read through the buffer protocol: C-contiguous, one dimension, native
-  /// float64 ("d"), read-only accepted, never copied. Anything else raises TypeError (the Python Controller then
-  /// converts once). Cheaper than nanobind's ndarray caster, which builds a DLPack tensor per argument.
-  class InputBuffers
+  /// One tick on inputs already read; returns a negative fault code, else n_collided + (n_saturated << kSatShift).
+  int tick(PyController & c, double t, double period, const TickInputs & in)
   {
-  public:
-    InputBuffers(std::initializer_list<nb::handle> objects)
-    {
-      for (nb::handle h : objects)
-      {
-        Py_buffer & v = views_[count_];
-        if (PyObject_GetBuffer(h.ptr(), &v, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) != 0)
-        {
-          PyErr_Clear();
-          fail();
-        }
-        ++count_;
-        const bool ok = v.ndim == 1 && v.itemsize == 8 && v.format != nullptr
-                        && (std::strcmp(v.format, "d") == 0 || std::strcmp(v.format, "=d") == 0);
-        if (!ok)
-          fail();
-      }
-    }
-    ~InputBuffers() { release(); }
-    InputBuffers(const InputBuffers &) = delete;
-    InputBuffers & operator=(const InputBuffers &) = delete;
-    Map operator[](int i) const
-    {
-      return Map(static_cast<const double *>(views_[i].buf), static_cast<Eigen::Index>(views_[i].shape[0]));
-    }
-
-  private:
-    void release() noexcept
-    {
-      for (int i = 0; i < count_; ++i)
-        PyBuffer_Release(&views_[i]);
-      count_ = 0;
-    }
-    [[noreturn]] void fail()
-    {
-      release(); // a throwing constructor runs no destructor
-      throw nb::type_error("tick inputs must be C-contiguous float64 vectors");
-    }
-
-    Py_buffer views_[8];
-    int count_ = 0;
-  };
-
-  int tick(PyController & c, double t, double period, nb::handle q, nb::handle dq, nb::handle tau_m,
-           nb::handle wrench, nb::handle gravity, nb::handle q_d, nb::handle dq_d, nb::handle ddq_d)
-  {
-    const InputBuffers in{q, dq, tau_m, wrench, gravity, q_d, dq_d, ddq_d};
     const Map mq = in[0], mdq = in[1], mtau = in[2], mw = in[3], mg = in[4], mqd = in[5], mdqd = in[6],
               mddqd = in[7];
     const reflexarm::State s{mq, mdq, mtau, mw, mg};
@@ -113,6 +70,71 @@ namespace
     if (code != reflexarm::FaultCode::None)
       return static_cast<int>(code);
     return c.cmd.n_collided + (c.cmd.n_saturated << kSatShift);
+  }
+
+  /// One tick on eight vectors given one by one: C-contiguous float64 vectors, else TypeError (the Python
+  /// Controller then converts once).
+  int tick(PyController & c, double t, double period, nb::handle q, nb::handle dq, nb::handle tau_m,
+           nb::handle wrench, nb::handle gravity, nb::handle q_d, nb::handle dq_d, nb::handle ddq_d)
+  {
+    PyObject * const objects[TickInputs::kCount] = {q.ptr(),       dq.ptr(),      tau_m.ptr(), wrench.ptr(),
+                                                    gravity.ptr(), q_d.ptr(),     dq_d.ptr(),  ddq_d.ptr()};
+    TickInputs in;
+    if (!in.read(objects))
+      throw nb::type_error("tick inputs must be C-contiguous float64 vectors");
+    return tick(c, t, period, in);
+  }
+
+  /// The Command of a plain tick (accepted, no threshold crossing, nothing bounded), tau and residual in new
+  /// arrays of their own.
+  nb::object plainCommand(PyController & c)
+  {
+    nb::object tau = nb::steal(newArrayCopy(c.cmd.tau));
+    if (!tau.is_valid())
+      throw nb::python_error();
+    nb::object residual = nb::steal(newArrayCopy(c.cmd.residual));
+    if (!residual.is_valid())
+      throw nb::python_error();
+    // a Command is a tuple subclass: allocate it with its 8 items directly (what tuple.__new__ does)
+    // (no Python allocation between tp_alloc and the last item: the half-filled tuple is never seen)
+    auto * type = reinterpret_cast<PyTypeObject *>(c.command_type.ptr());
+    PyObject * out = type->tp_alloc(type, 8);
+    if (!out)
+      throw nb::python_error();
+    PyTuple_SET_ITEM(out, 0, tau.release().ptr());
+    PyTuple_SET_ITEM(out, 1, residual.release().ptr());
+    PyTuple_SET_ITEM(out, 2, nb::bool_(c.cmd.collision).release().ptr()); // Py_True/Py_False
+    PyTuple_SET_ITEM(out, 3, c.empty_tuple.inc_ref().ptr());
+    PyTuple_SET_ITEM(out, 4, c.mode_names[static_cast<int>(c.cmd.mode)].inc_ref().ptr());
+    PyTuple_SET_ITEM(out, 5, c.empty_str.inc_ref().ptr());
+    PyTuple_SET_ITEM(out, 6, c.empty_tuple.inc_ref().ptr());
+    PyTuple_SET_ITEM(out, 7, c.zero.inc_ref().ptr());
+    return nb::steal(out);
+  }
+
+  /// step(measurement, reference): the tick straight from a Measurement (t, q, dq, tau_m, wrench, gravity) and
+  /// a Reference (q_d, dq_d, ddq_d), both tuples (NamedTuples are tuple subclasses), t a float or numpy.float64
+  /// and the vectors readable by TickInputs. Returns the Command of a plain tick, the status int of update()
+  /// otherwise, and None without touching the controller when the inputs are not of these types (the Python
+  /// Controller then unpacks, converts or raises as for any other input).
+  nb::object stepSignals(PyController & c, nb::handle measurement, nb::handle reference)
+  {
+    PyObject * m = measurement.ptr();
+    PyObject * r = reference.ptr();
+    double t = 0.0;
+    if (!PyTuple_Check(m) || PyTuple_GET_SIZE(m) != 6 || !PyTuple_Check(r) || PyTuple_GET_SIZE(r) != 3
+        || !readFloat(PyTuple_GET_ITEM(m, 0), t) || !c.command_type.is_valid())
+      return nb::none();
+    PyObject * const objects[TickInputs::kCount] = {
+      PyTuple_GET_ITEM(m, 1), PyTuple_GET_ITEM(m, 2), PyTuple_GET_ITEM(m, 3), PyTuple_GET_ITEM(m, 4),
+      PyTuple_GET_ITEM(m, 5), PyTuple_GET_ITEM(r, 0), PyTuple_GET_ITEM(r, 1), PyTuple_GET_ITEM(r, 2)};
+    TickInputs in;
+    if (!in.read(objects))
+      return nb::none();
+    const int status = tick(c, t, 0.0, in);
+    if (status != 0)
+      return nb::int_(status);
+    return plainCommand(c);
   }
 
   template<typename T>
@@ -125,6 +147,7 @@ namespace
 NB_MODULE(_core, m)
 {
   m.doc() = "reflexarm's real-time core (C++): the control tick of eqs. (2), (4)-(6), (9)-(13)";
+  reflexarm_bindings::importNumpy();
   registerTiming(m);
   m.attr("SAT_SHIFT") = kSatShift;
 
@@ -205,14 +228,6 @@ NB_MODULE(_core, m)
         c.empty_tuple = nb::steal(PyTuple_New(0));
         c.empty_str = nb::str("");
         c.zero = nb::int_(0);
-        // views without an owner (they live inside this object; an owner would be a reference cycle), and
-        // their bound copy methods
-        const auto policy = nb::rv_policy::reference;
-        c.tau_copy = nb::cast(View<double>(c.cmd.tau.data(), {static_cast<size_t>(c.cmd.tau.size())}), policy)
-                       .attr("copy");
-        c.residual_copy =
-          nb::cast(View<double>(c.cmd.residual.data(), {static_cast<size_t>(c.cmd.residual.size())}), policy)
-            .attr("copy");
         for (int m = 0; m < 5; ++m)
           c.mode_names[m] = nb::str(reflexarm::modeName(static_cast<reflexarm::Mode>(m)));
       },
@@ -224,27 +239,15 @@ NB_MODULE(_core, m)
         const int status = tick(c, t, 0.0, q, dq, tau_m, wrench, gravity, q_d, dq_d, ddq_d);
         if (status != 0 || !c.command_type.is_valid())
           return nb::int_(status);
-        // the plain command (no threshold crossing, nothing bounded): built here, the copies by numpy
-        nb::object tau = c.tau_copy(), residual = c.residual_copy();
-        // a Command is a tuple subclass: allocate it with its 8 items directly (what tuple.__new__ does)
-        // (no Python allocation between tp_alloc and the last item: the half-filled tuple is never seen)
-        auto * type = reinterpret_cast<PyTypeObject *>(c.command_type.ptr());
-        PyObject * out = type->tp_alloc(type, 8);
-        if (!out)
-          throw nb::python_error();
-        PyTuple_SET_ITEM(out, 0, tau.release().ptr());
-        PyTuple_SET_ITEM(out, 1, residual.release().ptr());
-        PyTuple_SET_ITEM(out, 2, nb::bool_(c.cmd.collision).release().ptr()); // Py_True/Py_False
-        PyTuple_SET_ITEM(out, 3, c.empty_tuple.inc_ref().ptr());
-        PyTuple_SET_ITEM(out, 4, c.mode_names[static_cast<int>(c.cmd.mode)].inc_ref().ptr());
-        PyTuple_SET_ITEM(out, 5, c.empty_str.inc_ref().ptr());
-        PyTuple_SET_ITEM(out, 6, c.empty_tuple.inc_ref().ptr());
-        PyTuple_SET_ITEM(out, 7, c.zero.inc_ref().ptr());
-        return nb::steal(out);
+        return plainCommand(c);
       },
       "t"_a.noconvert(), "q"_a, "dq"_a, "tau_m"_a, "wrench"_a, "gravity"_a, "q_d"_a, "dq_d"_a, "ddq_d"_a,
       "One tick as update(); returns the Command (of set_command_type) of an accepted tick without events, "
       "else the status int of update().")
+    .def("step_signals", &stepSignals, "measurement"_a, "reference"_a,
+         "One tick from a Measurement and a Reference: the Command of an accepted tick without events, else the "
+         "status int of update(); None (nothing done) for inputs other than tuples of a float time and "
+         "C-contiguous float64 vectors.")
     .def("reset", [](PyController & c) {
       c.ctrl.reset();
       c.cmd.fault_code = reflexarm::FaultCode::None; // the last command's fault text is cleared as well

@@ -200,6 +200,7 @@ class Controller:
         self._update = c.update
         c.set_command_type(Command)
         self._step = c.step  # returns the Command of a plain tick, else the status
+        self._step_signals = c.step_signals  # the same from (measurement, reference); None for other types
         self._tau, self._residual, self._saturated, self._collided = c.tau, c.residual, c.saturated, c.collided
         self._sat_shift = int(core.SAT_SHIFT)
         self._g_norm = float(np.linalg.norm(self.robot.pin_model.gravity.linear))
@@ -301,6 +302,16 @@ class Controller:
         type or shape raises :class:`~reflexarm.errors.SignalError`. No NaN torque and no torque beyond
         ``torque_limit`` ever leaves this method.
         """
+        out = self._step_signals(measurement, reference)  # the Command, a status int, or None: other types
+        if out.__class__ is int:  # threshold crossings, a bounded torque or a fault
+            return self._finish(out, measurement[0])
+        if out is None:
+            return self._step_unpacked(measurement, reference)
+        return out  # type: ignore[no-any-return]
+
+    def _step_unpacked(self, measurement: Measurement, reference: Reference) -> Command:
+        """The tick for inputs the core's ``step_signals`` does not read (not tuples, t not a float, vectors
+        that are not float64 buffers): unpacked here, converted once if needed, or SignalError."""
         try:
             t, q, dq, tau_m, wrench, gravity = measurement
             q_d, dq_d, ddq_d = reference
@@ -309,7 +320,7 @@ class Controller:
             out = self._step(t, q, dq, tau_m, wrench, gravity, q_d, dq_d, ddq_d)
         except (TypeError, ValueError):  # not contiguous float64 vectors (or not unpackable): convert or raise
             return self._step_converted(measurement, reference)
-        if out.__class__ is int:  # threshold crossings, a bounded torque or a fault
+        if out.__class__ is int:
             return self._finish(out, t)
         return out  # type: ignore[no-any-return]
 
