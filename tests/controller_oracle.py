@@ -38,6 +38,10 @@ from reflexarm.robots.robot_model import RobotModel
 DT = 1e-3
 N_TICKS = 300
 
+#: Accepted ticks over which the core spreads one computation of the modal damping (at most): the contract of
+#: ControllerParams.damping_update_period / Controller.kDampingParts (cpp/include/reflexarm/params.hpp).
+DAMPING_TICKS = 5
+
 BOUNDS = {
     "margin": 0.2,
     "velocity_factor": 10.0,
@@ -105,6 +109,8 @@ class Oracle:
         self.reacted = self.detected = False
         self.obs = [np.zeros((3, self.n)), np.zeros((3, self.n))]  # integral, p0, residual per observer
         self.started, self.last_t, self.invalid, self.countdown = False, None, False, 0
+        self.pending: tuple[np.ndarray | None, int] | None = None  # (next D, accepted ticks until it is used)
+        self.full = True
         self.eps_w = float(self.kappa_eps)
 
     def set_switches(self, kappa_eps: int) -> None:
@@ -187,12 +193,24 @@ class Oracle:
         if eps_w != self.kappa_eps:
             inc = DT / self.switch_time
             eps_w = min(eps_w + inc, 1.0) if self.kappa_eps > eps_w else max(eps_w - inc, 0.0)
+        # D from M(q) every damping_update_period accepted ticks, put in use min(DAMPING_TICKS, period) - 1 ticks
+        # later (the core spreads the computation over that many ticks); whole on the first tick after a reset
         D: np.ndarray | None = self.D
-        if self.countdown == 0 and not self.gravity_mode:
+        pending, full = self.pending, self.full
+        if self.gravity_mode:
+            pending = None
+        elif self.countdown == 0:
             Mu = pin.crba(model, self.data, q)
-            D = self.modal_damping(np.triu(Mu) + np.triu(Mu, 1).T)
+            new_D = self.modal_damping(np.triu(Mu) + np.triu(Mu, 1).T)
+            span = 1 if full else min(DAMPING_TICKS, self.damping_update_period)
+            D, pending = (new_D, None) if span == 1 else (D, (new_D, span - 1))
+            full = False
+        elif pending is not None:
+            pending = (pending[0], pending[1] - 1)
+            if pending[1] == 0:
+                D, pending = pending[0], None
         assert D is not None and all(np.all(np.isfinite(x)) for x in (g, C, p, ff, J))
-        self.D, self.last_q = D, q.copy()
+        self.D, self.last_q, self.pending, self.full = D, q.copy(), pending, full
         h = DT if self.last_t is None else min(max(t - self.last_t, 0.5 * DT), 2.0 * DT)
         self.last_t = t
         if self.invalid:

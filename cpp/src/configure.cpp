@@ -265,6 +265,8 @@ namespace reflexarm
     first_time_ = std::numeric_limits<double>::quiet_NaN();
     first_joints_.setZero();
     damping_countdown_ = 0;
+    damping_next_part_ = -1;
+    damping_full_ = true;
     started_ = false;
     has_t_ = false;
     last_t_ = 0.0;

@@ -23,6 +23,7 @@ namespace reflexarm
     double t, double period, const State & s, const Reference & r, Command & cmd) noexcept
   {
     damping_updated_ = false;
+    damping_parts_run_ = 0;
     if (!commandFits(cmd))
       return notReady(cmd);
     FaultCode code = checkPeriod(period);
@@ -34,13 +35,13 @@ namespace reflexarm
     if (code != FaultCode::None)
       return reject(code, cmd);
     stageGravity(s.gravity);
-    const bool update_damping = damping_countdown_ == 0 && !gravity_mode_;
-    computeDynamics(s, r, update_damping);
-    code = checkModelTerms(update_damping);
+    const DampingParts parts = dampingParts();
+    computeDynamics(s, r, parts.first == 0);
+    code = checkModelTerms(parts);
     if (code != FaultCode::None)
       return reject(code, cmd);
     // ---------------------------------------------------------------- accepted: commit from here on
-    commitInputs(s.q, update_damping);
+    commitInputs(s.q, parts);
     const double h = advanceClock(t, period);
     if (obs_invalid_)
       return reject(FaultCode::ObserverInvalid, cmd);
@@ -106,7 +107,7 @@ namespace reflexarm
 
   // argument types as in libpinocchio_default's explicit instantiations (Eigen::Ref vectors, a VectorXd for
   // the frame Jacobian): other types would compile the algorithms in this file again
-  void Controller::computeDynamics(const State & s, const Reference & r, bool update_damping) noexcept
+  void Controller::computeDynamics(const State & s, const Reference & r, bool factorize) noexcept
   {
     const ConstVectorRef zeros(zeros_);
     g_ = pinocchio::computeGeneralizedGravity(model_, data_g_, s.q);
@@ -123,11 +124,39 @@ namespace reflexarm
       pinocchio::computeFrameJacobian(
         model_, data_j_, q_buf_, static_cast<pinocchio::FrameIndex>(params_.sensor_frame_id), pinocchio::LOCAL, J_);
     }
-    if (update_damping)
+    if (factorize)
       M_ = pinocchio::crba(model_, data_m_, s.q); // upper triangle
   }
 
-  FaultCode Controller::checkModelTerms(bool update_damping) noexcept
+  // The modal damping of a new M(q) is computed in five parts: 0 factorize (crba, M = L L^T, A = L^-1 K L^-T; it
+  // needs this tick's M(q)), 1 project A on the previous eigenvectors + one Jacobi sweep, 2 one more sweep, 3 the
+  // sweeps left + the new eigenvectors, 4 assemble D. They are spread over min(5, damping_update_period)
+  // consecutive accepted ticks (the last one runs all parts left) so that no tick carries the whole cost: part 0
+  // on the tick the countdown reaches 0, the new D used from the tick of the last part on. The first tick after configure()
+  // / reset() runs all three at once (there is no D for this posture yet). In gravity compensation (13) D is
+  // not used and nothing is computed.
+  Controller::DampingParts Controller::dampingParts() const noexcept
+  {
+    DampingParts p;
+    if (gravity_mode_)
+      return p;
+    if (damping_countdown_ == 0) // a new M(q): start (again)
+    {
+      p.first = 0;
+      p.span = damping_full_ ? 1 : std::min(kDampingParts, params_.damping_update_period);
+    }
+    else if (damping_next_part_ > 0) // a computation under way
+    {
+      p.first = damping_next_part_;
+      p.span = damping_span_;
+    }
+    else
+      return p;
+    p.last = p.first == p.span - 1 ? kDampingParts - 1 : p.first;
+    return p;
+  }
+
+  FaultCode Controller::checkModelTerms(const DampingParts & parts) noexcept
   {
     const Eigen::MatrixXd & C = data_c_.C;
     double acc = 0.0;
@@ -142,18 +171,65 @@ namespace reflexarm
     }
     if (!std::isfinite(acc))
       return fault(FaultCode::ModelNonFinite, Signal::Model, -1, acc, 0.0, 0.0);
-    if (update_damping && !computeModalDamping(M_, K_, xi_, modal_, D_new_))
+    bool ok = true;
+    for (int part = parts.first; ok && part >= 0 && part <= parts.last; ++part)
+      switch (part)
+      {
+      case 0:
+        ok = modalFactorize(M_, K_, modal_);
+        break;
+      case 1: // a non-finite W from the previous basis: start cold
+        ok = modalProject(modal_);
+        if (!ok)
+        {
+          modal_.has_basis = false;
+          ok = modalProject(modal_);
+        }
+        if (ok)
+          modalSweep(modal_, 1);
+        break;
+      case 2:
+        modalSweep(modal_, 1);
+        break;
+      case 3: // not converged from the previous basis (never seen): once more, cold
+        ok = modalFinish(modal_) || (modalProject(modal_) && modalFinish(modal_));
+        break;
+      default:
+        modalAssemble(xi_, modal_, D_new_);
+      }
+    if (!ok)
+    {
+      // M(q) of this tick not positive definite (part 0; the next accepted tick tries its own), or, never seen,
+      // the rotations of a later part did not converge: start again from the next tick's M(q)
+      damping_next_part_ = -1;
+      damping_countdown_ = 0;
       return fault(FaultCode::MassNotPositiveDefinite, Signal::Model, -1, 0.0, 0.0, 0.0);
+    }
     return FaultCode::None;
   }
 
-  void Controller::commitInputs(const ConstVectorRef & q, bool update_damping) noexcept
+  void Controller::commitInputs(const ConstVectorRef & q, const DampingParts & parts) noexcept
   {
     last_q_ = q;
     has_last_q_ = true;
-    if (update_damping)
+    damping_parts_run_ = 0;
+    for (int part = parts.first; part >= 0 && part <= parts.last; ++part)
+      damping_parts_run_ |= 1 << part;
+    damping_updated_ = parts.last == kDampingParts - 1;
+    if (parts.first == 0)
+    {
+      damping_full_ = false;
+      damping_span_ = parts.span;
+    }
+    if (damping_updated_)
+    {
       D_ = D_new_;
-    damping_updated_ = update_damping;
+      damping_next_part_ = -1;
+    }
+    else if (parts.first >= 0)
+      damping_next_part_ = parts.last + 1;
+    else if (gravity_mode_)
+      damping_next_part_ = -1;
   }
 
   double Controller::advanceClock(double t, double period) noexcept

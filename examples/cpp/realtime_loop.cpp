@@ -4,8 +4,7 @@
 // the loop starts (on_activate), update() every period (update). The plant is MuJoCo through its C API
 // (two 0.5 ms steps per tick, joint friction of the file); a 60 N push on the hand from t = 1.5 s is
 // detected and answered by gravity compensation (13). Prints the median/p99/max time of update() (all ticks,
-// and split into the ticks that recompute the modal damping and the others) and fails if update() allocated on
-// the heap.
+// and split by the part of the modal damping each tick ran, if any) and fails if update() allocated on the heap.
 //
 //   realtime_loop [robot.xml] [seconds] [options]
 //     --busy        no wait between ticks (and time the bare Pinocchio calls for the ratio update()/calls)
@@ -218,9 +217,10 @@ int main(int argc, char ** argv)
   Eigen::Matrix<double, 6, 1> wrench = Eigen::Matrix<double, 6, 1>::Zero();
   Eigen::Vector3d gravity(m->opt.gravity[0], m->opt.gravity[1], m->opt.gravity[2]);
   const long ticks = static_cast<long>(seconds / dt);
-  std::vector<double> durations(static_cast<std::size_t>(ticks)), floor_durations, damping_ticks, other_ticks;
-  damping_ticks.reserve(static_cast<std::size_t>(ticks));
-  other_ticks.reserve(static_cast<std::size_t>(ticks));
+  std::vector<double> durations(static_cast<std::size_t>(ticks)), floor_durations;
+  std::vector<double> by_parts[32]; // tick durations by the parts of the modal damping the tick ran (bits)
+  for (auto & v : by_parts)
+    v.reserve(static_cast<std::size_t>(ticks));
   // --busy also times the tick's bare Pinocchio calls (g, C, two RNEAs) on the same state, alternating
   // which goes first, for the ratio update() / floor inside C++
   pinocchio::Model model0 = model;
@@ -272,7 +272,7 @@ int main(int argc, char ** argv)
     g_counting.store(false, std::memory_order_relaxed);
     allocations += g_allocations.load(std::memory_order_relaxed);
     durations[static_cast<std::size_t>(k)] = t1 - t0;
-    (controller.dampingUpdated() ? damping_ticks : other_ticks).push_back(t1 - t0);
+    by_parts[controller.dampingPartsRun()].push_back(t1 - t0);
     faults += code != reflexarm::FaultCode::None;
     if (busy && k % 2 == 1)
       floor_calls();
@@ -306,15 +306,24 @@ int main(int argc, char ** argv)
       clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &next, nullptr);
   }
 
-  const Stats all = stats(durations), with_damping = stats(damping_ticks), other = stats(other_ticks);
+  const Stats all = stats(durations);
   std::printf("robot: %s (%d joints), %ld ticks at 1 kHz, %d MuJoCo step(s) of %.4g s per tick, wait: %s\n",
               path.c_str(), n, ticks, substeps, m->opt.timestep, busy ? "none (--busy)" : opt.spin ? "spin" : "sleep");
   std::printf("update(): median %.2f us, p99 %.2f us, max %.2f us (p99/median %.2f)\n", all.median, all.p99, all.max,
               all.p99 / all.median);
-  std::printf("  ticks without a damping update (%zu): median %.2f us, p99 %.2f us (p99/median %.2f)\n", other.count,
-              other.median, other.p99, other.p99 / other.median);
-  std::printf("  ticks with a damping update (%zu): median %.2f us, p99 %.2f us\n", with_damping.count,
-              with_damping.median, with_damping.p99);
+  // the modal damping is computed in parts on consecutive ticks (Controller::kDampingParts)
+  const char * part_names[5] = {"factorize M(q)", "project + 1 sweep", "1 sweep", "finish eigenvectors", "assemble D"};
+  for (int b = 0; b < 32; ++b)
+    if (!by_parts[b].empty())
+    {
+      std::string what;
+      for (int k = 0; k < 5; ++k)
+        if (b & (1 << k))
+          what += std::string(what.empty() ? "" : ", ") + part_names[k];
+      const Stats st = stats(by_parts[b]);
+      std::printf("  ticks with %s (%zu): median %.2f us, p99 %.2f us\n", b ? what.c_str() : "no damping work",
+                  st.count, st.median, st.p99);
+    }
   std::printf("late periods: %ld, faults: %ld, collision detected at t = %.3f s, mode %s\n", late, faults,
               controller.firstDetectionTime(), reflexarm::modeName(controller.mode()));
   if (busy)

@@ -95,8 +95,15 @@ namespace reflexarm
     bool observerInvalid() const noexcept { return obs_invalid_; }
     const TimingStats & timing() const noexcept { return timing_; }
     const Eigen::MatrixXd & damping() const noexcept { return D_; }
-    /// True if the last update() recomputed the damping matrix (every damping_update_period accepted ticks).
+    /// True if the last update() put a new damping matrix in use (every damping_update_period accepted ticks;
+    /// computed from M(q) of the tick min(kDampingParts, damping_update_period) - 1 accepted ticks earlier).
     bool dampingUpdated() const noexcept { return damping_updated_; }
+    /// Which parts of the modal damping the last update() ran, as bits (bit k: part k): 0 factorize (crba,
+    /// Cholesky), 1 project on the previous eigenvectors + a Jacobi sweep, 2 a sweep, 3 the sweeps left and the
+    /// eigenvectors, 4 assemble D; 0 if none.
+    int dampingPartsRun() const noexcept { return damping_parts_run_; }
+    /// Parts of one computation of the modal damping, run on as many consecutive accepted ticks (at most).
+    static constexpr int kDampingParts = 5;
     /// The residual the detector looks at (the detection observer's if there is one).
     const Eigen::VectorXd & detectionResidual() const noexcept
     {
@@ -129,9 +136,16 @@ namespace reflexarm
     FaultCode notReady(Command & cmd) const noexcept;
     FaultCode checkPeriod(double period) noexcept;
     void stageGravity(const ConstVectorRef & gravity) noexcept;
-    void computeDynamics(const State & s, const Reference & r, bool update_damping) noexcept;
-    FaultCode checkModelTerms(bool update_damping) noexcept;
-    void commitInputs(const ConstVectorRef & q, bool update_damping) noexcept;
+    /// The parts of the modal damping a tick runs: first..last of 0..kDampingParts-1 (first = -1: none), in a
+    /// computation spread over `span` ticks.
+    struct DampingParts
+    {
+      int first = -1, last = -1, span = 1;
+    };
+    DampingParts dampingParts() const noexcept;
+    void computeDynamics(const State & s, const Reference & r, bool factorize) noexcept;
+    FaultCode checkModelTerms(const DampingParts & parts) noexcept;
+    void commitInputs(const ConstVectorRef & q, const DampingParts & parts) noexcept;
     double advanceClock(double t, double period) noexcept;
     void updateObservers(const State & s, double h) noexcept;
     bool observersFinite() const noexcept;
@@ -184,7 +198,11 @@ namespace reflexarm
     bool reacted_ = false, gravity_mode_ = false, detected_ = false;
     double first_time_ = 0.0;
     int damping_countdown_ = 0;
+    int damping_next_part_ = -1; // the part the next accepted tick runs of a computation under way (-1: none)
+    int damping_span_ = 1;       // ticks of the computation under way
+    bool damping_full_ = true;   // the next computation runs whole in its first tick (after configure/reset)
     bool damping_updated_ = false;
+    int damping_parts_run_ = 0;
     Mode mode_ = Mode::Compliant;
     FaultInfo fault_;
   };

@@ -66,7 +66,11 @@ namespace reflexarm
     double residual_limit = 30.0; ///< cut-off of the compensated residual [Nm]
     double switch_time = 0.1;     ///< kappa_eps ramp time [s]; 0 switches at once
     double dt = 1e-3;             ///< nominal control period [s]
-    int damping_update_period = 10; ///< recompute the modal damping every this many accepted ticks
+    /// Recompute the modal damping from M(q) every this many accepted ticks. The computation is spread over
+    /// min(5, damping_update_period) ticks (Controller::kDampingParts), so the new D is used from that many
+    /// ticks - 1 after the M(q) it comes from (1: every tick, whole, no delay; the first tick after
+    /// configure()/reset() always computes whole).
+    int damping_update_period = 10;
     /// Friction model tau_f = coulomb * clip(dq / velocity_band, -1, 1) + viscous * dq.
     Eigen::VectorXd friction_coulomb = Eigen::VectorXd::Zero(1); ///< [Nm], >= 0
     Eigen::VectorXd friction_viscous = Eigen::VectorXd::Zero(1); ///< [Nms/rad], >= 0
