@@ -76,7 +76,7 @@ NB_MODULE(_closed_loop, m)
   m.def(
     "replay_torques",
     [](std::uintptr_t model_address, std::uintptr_t data_address, const Arr<const double> & tau, const IntArr & vadr,
-       int substeps) {
+       int substeps, bool quiet_timers) {
       const auto * mm = reinterpret_cast<const mjModel *>(model_address);
       auto * dd = reinterpret_cast<mjData *>(data_address);
       const std::vector<int> adr = ints(vadr);
@@ -88,11 +88,13 @@ NB_MODULE(_closed_loop, m)
       {
         for (long i = 0; i < n; ++i)
           dd->qfrc_applied[adr[i]] = t[k * n + i];
-        reflexarm::stepSensingLast(mm, dd, substeps); // as both loops step
+        const reflexarm::QuietTimers quiet(quiet_timers); // as ClosedLoop::act
+        reflexarm::stepSensingLast(mm, dd, substeps);     // as both loops step
       }
     },
-    "model_address"_a, "data_address"_a, "tau"_a, "vadr"_a, "substeps"_a,
-    "MuJoCo stepping alone (the benchmark's baseline): each row of tau held for `substeps` physics steps.");
+    "model_address"_a, "data_address"_a, "tau"_a, "vadr"_a, "substeps"_a, "quiet_timers"_a = false,
+    "MuJoCo stepping alone (the benchmark's baseline): each row of tau held for `substeps` physics steps; "
+    "quiet_timers: MuJoCo's profiling timers read a clock of 0 meanwhile (reflexarm::QuietTimers).");
 
   nb::class_<PyLoop>(m, "ClosedLoop")
     .def(
@@ -297,6 +299,10 @@ NB_MODULE(_closed_loop, m)
       },
       nb::rv_policy::move, "(spec, start tick, start state, peak tick (-1: none), peak state, peak sum of tau_ext_i^2), copied.")
     .def("reset_controller", [](PyLoop & self) { self.loop.controller().reset(); })
+    .def_prop_rw(
+      "quiet_timers", [](PyLoop & self) { return self.loop.quietTimers(); },
+      [](PyLoop & self, bool on) { self.loop.setQuietTimers(on); },
+      "Step the physics with MuJoCo's profiling timers on a clock of 0 (reflexarm::QuietTimers; default False).")
     .def(
       "set_applied_torque",
       [](PyLoop & self, const Arr<const double> & tau) {

@@ -21,7 +21,24 @@ namespace reflexarm
       out[4] = i[6] * v[2] - i[8] * v[0] + i[9] * v[4];
       out[5] = i[7] * v[0] - i[6] * v[1] + i[9] * v[5];
     }
+    // The clock of MuJoCo's profiling timers under QuietTimers.
+    mjtNum noClock() noexcept { return 0.0; }
   } // namespace
+
+  QuietTimers::QuietTimers(bool on) noexcept : on_(on)
+  {
+    if (on_)
+    {
+      prev_ = mjcb_time;
+      mjcb_time = &noClock;
+    }
+  }
+
+  QuietTimers::~QuietTimers()
+  {
+    if (on_ && mjcb_time == &noClock) // a callback set meanwhile by someone else stays
+      mjcb_time = prev_;
+  }
 
   void stepSensingLast(const mjModel * m, mjData * d, int steps) noexcept
   {
@@ -360,7 +377,10 @@ namespace reflexarm
     }
     const double period = lay_.substeps * m_->opt.timestep;
     const double t_end = d_->time + period;
-    stepSensingLast(m_, d_, lay_.substeps);
+    {
+      const QuietTimers quiet(quiet_timers_);
+      stepSensingLast(m_, d_, lay_.substeps);
+    }
     double vv = 0.0;
     for (int i = 0; i < m_->nv; ++i)
       vv += d_->qvel[i] * d_->qvel[i];

@@ -133,6 +133,26 @@ namespace reflexarm
   /// and the readings are the same to the bit. The model's disable flags are restored.
   void stepSensingLast(const mjModel * m, mjData * d, int steps) noexcept;
 
+  /// While alive and `on`, MuJoCo's profiling timers (mjData.timer) read a clock that returns 0 instead of
+  /// mjcb_time (restored at the end). The Python mujoco package installs a time callback that reads the
+  /// system clock at every start and end of a timer, dozens of times per step (~1.2 us of a ~15 us step of the
+  /// demo plant, measured); the timers feed nothing in the dynamics, so the state is the same to the bit and
+  /// mjData.timer still counts the steps, with no duration. Callers turn it on only when nobody asked for the
+  /// timings (Python: mujoco.get_mjcb_time() is None). mjcb_time is global: not for concurrent plants whose
+  /// timings someone reads.
+  class QuietTimers
+  {
+  public:
+    explicit QuietTimers(bool on) noexcept;
+    ~QuietTimers();
+    QuietTimers(const QuietTimers &) = delete;
+    QuietTimers & operator=(const QuietTimers &) = delete;
+
+  private:
+    mjfTime prev_ = nullptr;
+    bool on_ = false;
+  };
+
   class ClosedLoop
   {
   public:
@@ -160,6 +180,9 @@ namespace reflexarm
     /// `spec` 0 stops keeping them. Throws ConfigError for a spec MuJoCo does not know.
     void keepStill(int spec);
     const StillStates & still() const noexcept { return still_; }
+    /// Step the physics under QuietTimers (default off).
+    void setQuietTimers(bool on) noexcept { quiet_timers_ = on; }
+    bool quietTimers() const noexcept { return quiet_timers_; }
     /// Motor torque currently applied (the tau_m of the next measurement, before noise).
     Eigen::VectorXd & appliedTorque() noexcept { return tau_applied_; }
 
@@ -195,6 +218,7 @@ namespace reflexarm
     std::vector<QposRecord> qpos_records_;
     std::vector<MocapRecord> mocap_records_;
     StillStates still_;
+    bool quiet_timers_ = false;
     std::vector<int> parent_, dof_body_;
     std::vector<double> acc6_; // nbody x 6
     Eigen::VectorXd meas_, tau_applied_, zero_noise_;
