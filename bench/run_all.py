@@ -13,7 +13,14 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-BENCHES = ("bench_controller", "bench_cpp_core", "bench_closed_loop", "bench_ident", "bench_sweeps")
+BENCHES = (
+    "bench_controller",
+    "bench_cpp_core",
+    "bench_realtime_loop",
+    "bench_closed_loop",
+    "bench_ident",
+    "bench_sweeps",
+)
 
 
 def main() -> int:
