@@ -351,3 +351,151 @@ def test_float64_arrays_with_an_equal_but_distinct_dtype_object_take_the_fast_pa
 def test_contract_parameters_are_checked(atlas, kwargs, message):
     with pytest.raises(ConfigError, match=message):
         Controller(atlas, **kwargs)
+
+
+# ---------------------------------------------------------------- one tick, two paths (issue 10)
+# Controller.step reads a Measurement and a Reference of float time and plain float64 arrays in the C++ core
+# (step_signals); every other input takes the Python path (unpack, convert once, or SignalError). Both paths
+# must give the same Command, bit for bit: the same float64 values enter the same C++ tick.
+class _StampedMeasurement(Measurement):
+    """A user's subclass of Measurement (a NamedTuple subclass is still a tuple)."""
+
+    @property
+    def stamp_ms(self) -> float:
+        return 1e3 * self.t
+
+
+class _TaggedArray(np.ndarray):
+    """A user's ndarray subclass (read through the buffer protocol, not from the array's fields)."""
+
+
+def _each_vector(m: Measurement, r: Reference, f) -> tuple[Measurement, Reference]:  # type: ignore[no-untyped-def]
+    return Measurement(m.t, *(f(v) for v in m[1:])), Reference(*(f(v) for v in r))
+
+
+def _read_only(v: np.ndarray) -> np.ndarray:
+    out = v.copy()
+    out.flags.writeable = False
+    return out
+
+
+EQUIVALENT_INPUTS = {
+    "Measurement subclass": lambda m, r: (_StampedMeasurement(*m), r),
+    "plain tuples": lambda m, r: (tuple(m), tuple(r)),
+    "lists": lambda m, r: _each_vector(m, r, lambda v: v.tolist()),
+    "numpy.float64 t": lambda m, r: (m._replace(t=np.float64(m.t)), r),
+    "0-d array t": lambda m, r: (m._replace(t=np.array(m.t)), r),
+    "float subclass t": lambda m, r: (m._replace(t=type("Stamp", (float,), {})(m.t)), r),
+    "big-endian float64": lambda m, r: _each_vector(m, r, lambda v: v.astype(">f8")),
+    "ndarray subclass": lambda m, r: _each_vector(m, r, lambda v: v.copy().view(_TaggedArray)),
+    "memoryview": lambda m, r: _each_vector(m, r, memoryview),
+    "read-only arrays": lambda m, r: _each_vector(m, r, _read_only),
+    "strided views": lambda m, r: _each_vector(m, r, lambda v: np.repeat(v, 2)[::2]),
+}
+
+
+def _ticks(robot) -> list[tuple[Measurement, Reference]]:  # type: ignore[no-untyped-def]
+    """Plain ticks, a fault (NaN dq), then a 40 Nm push on joint 2 that crosses the 11 Nm threshold."""
+    ref = Reference(robot.home.copy(), np.zeros(robot.n), np.zeros(robot.n))
+    out = []
+    for k in range(14):
+        m = good(robot, k)
+        if k == 4:
+            m = m._replace(dq=np.full(robot.n, np.nan))
+        if k >= 6:
+            tau_m = m.tau_m.copy()
+            tau_m[1] += 40.0
+            m = m._replace(tau_m=tau_m)
+        out.append((m, ref))
+    return out
+
+
+def _assert_same_command(got, want, where: str) -> None:  # type: ignore[no-untyped-def]
+    assert type(got) is type(want), where
+    np.testing.assert_array_equal(got.tau, want.tau, err_msg=f"{where}: tau")  # exact: the same tick
+    np.testing.assert_array_equal(got.residual, want.residual, err_msg=f"{where}: residual")
+    assert got[2:] == want[2:], where
+
+
+@pytest.mark.parametrize("variant", list(EQUIVALENT_INPUTS))
+def test_every_input_form_gives_the_same_command_as_plain_float64_arrays(atlas, variant):
+    # observer_gain 50 1/s: the push crosses the threshold within a few ticks (event path); the NaN is a fault
+    make = lambda: Controller(atlas, observer_gain=50.0, threshold=11.0, reaction="gravity")  # noqa: E731
+    ctrl, plain = make(), make()
+    modes, collisions = set(), []
+    for k, (m, r) in enumerate(_ticks(atlas)):
+        want = plain.step(m, r)
+        _assert_same_command(ctrl.step(*EQUIVALENT_INPUTS[variant](m, r)), want, f"{variant}, tick {k}")
+        modes.add(want.mode)
+        collisions.append(want.collided_joints)
+    # the sequence did go through the plain, fault and collision paths
+    assert {"compliant", "fault", "gravity_compensation"} <= modes
+    assert (1,) in collisions
+    np.testing.assert_array_equal(ctrl.observer_state, plain.observer_state)
+
+
+def test_integer_time_stamps_give_the_same_command_as_float_ones(atlas):
+    # dt = 1 s (observer_gain * dt * period_band[1] = 0.4 * 1 * 2 < 1): every stamp is an integer
+    make = lambda: Controller(atlas, dt=1.0, observer_gain=0.4)  # noqa: E731
+    ctrl, plain = make(), make()
+    ref = Reference.hold(atlas.home)
+    for k in range(6):
+        m = good(atlas, k, t=float(k))
+        stamp = k if k % 2 else np.int64(k)  # a Python int and a numpy integer in turn
+        _assert_same_command(ctrl.step(m._replace(t=stamp), ref), plain.step(m, ref), f"tick {k}")
+
+
+@pytest.mark.parametrize(
+    "t, message",
+    [
+        (True, r"measurement t must be a real number \[s\]; got bool"),
+        (np.array([0.0]), r"measurement t must be a real number \[s\]; got float64 array of shape \(1,\)"),
+        (1j, r"measurement t must be a real number \[s\]; got complex"),
+    ],
+)
+def test_a_time_stamp_that_is_not_a_real_number_raises_as_before(atlas, t, message):
+    ctrl = Controller(atlas)
+    ref = Reference.hold(atlas.home)
+    ctrl.step(good(atlas, 0), ref)
+    before = ctrl.observer_state
+    with pytest.raises(SignalError, match=message) as e:
+        ctrl.step(good(atlas, 1, t=t), ref)
+    assert e.value.signal == "measurement t"
+    np.testing.assert_array_equal(ctrl.observer_state, before)
+
+
+@pytest.mark.parametrize("field, n", [("q", 6), ("wrench", 5), ("q_d", 8)])
+@pytest.mark.parametrize("form", ["float64 array", "list"])
+def test_a_wrong_length_raises_the_same_error_on_both_paths(atlas, field, n, form):
+    ctrl = Controller(atlas)
+    m, r = good(atlas), Reference.hold(atlas.home)
+    bad = np.zeros(n) if form == "float64 array" else [0.0] * n
+    expected = atlas.n if field != "wrench" else 6
+    signal = f"{'reference' if field == 'q_d' else 'measurement'} {field}"
+    message = rf"^{signal} must be a real vector of shape \({expected},\); got shape \({n},\)$"
+    with pytest.raises(SignalError, match=message):
+        if field == "q_d":
+            ctrl.step(m, r._replace(q_d=bad))
+        else:
+            ctrl.step(m._replace(**{field: bad}), r)
+    np.testing.assert_array_equal(ctrl.observer_state, np.zeros((6, atlas.n)))
+
+
+def test_each_command_owns_its_arrays(atlas):
+    # users keep Commands: a later tick must never write into an earlier Command's tau or residual
+    # at most 1 Nm of change per tick: the compensated push (kappa_eps = 1) is rate-limited (event path)
+    ctrl = Controller(atlas, observer_gain=50.0, kappa_eps=1, switch_time=0.0, reaction="none", torque_rate_limit=1e3)
+    kept, values = [], []
+    for m, r in _ticks(atlas):
+        cmd = ctrl.step(m, r)
+        kept.append(cmd)
+        values.append((cmd.tau.copy(), cmd.residual.copy()))
+    assert any(c.saturated for c in kept) and any(not c.saturated and not c.fault for c in kept)  # both paths
+    for k, (cmd, (tau, residual)) in enumerate(zip(kept, values, strict=True)):
+        np.testing.assert_array_equal(cmd.tau, tau, err_msg=f"tick {k}: tau changed after later ticks")
+        np.testing.assert_array_equal(cmd.residual, residual, err_msg=f"tick {k}: residual changed after later ticks")
+        for a in (cmd.tau, cmd.residual):
+            assert a.dtype == np.float64 and a.shape == (atlas.n,) and a.flags.owndata and a.flags.writeable
+        assert not np.shares_memory(cmd.tau, cmd.residual)
+    assert not np.shares_memory(kept[0].tau, kept[1].tau)
+    assert len({id(c.tau) for c in kept}) == len(kept)

@@ -201,3 +201,39 @@ def test_warm_started_damping_equals_a_fresh_decomposition_after_many_updates(at
     fresh = core.modal_damping(atlas.compute_mass_matrix(q), ctrl.impedance.stiffness, ctrl.impedance.damping_ratio)
     # tolerance: both are one eigen-decomposition's round-off (~1e-15 relative) away from the exact D
     np.testing.assert_allclose(ctrl.damping, fresh, rtol=0, atol=1e-12 * np.abs(fresh).max())
+
+
+def test_step_signals_takes_tuples_of_float64_arrays_and_leaves_everything_else_untouched(atlas):
+    """The core's step(measurement, reference) path of Controller.step: the same tick as update() on plain
+    float64 inputs; None, with the controller unchanged, for inputs it does not read (the Python side converts)."""
+    from reflexarm.signals import Command
+
+    o = Oracle(atlas, threshold=11.0)
+    ctrl, twin = core_controller(core, atlas, o), core_controller(core, atlas, o)
+    ctrl.set_command_type(Command)
+    kinds = set()
+    for k, (t, *rest) in ticks(atlas, push=40.0):
+        m, r = Measurement(t, *rest[:5]), Reference(*rest[5:])
+        # not read here: a list, an int t, a float32 vector, a non-tuple, a wrong number of items
+        for other in (
+            (m._replace(q=list(m.q)), r),
+            (m._replace(t=k), r),
+            (m, r._replace(ddq_d=r.ddq_d.astype(np.float32))),
+            (list(m), r),
+            (m[:5], r),
+            (m, tuple(r) + (r.q_d,)),
+        ):
+            before = np.array(ctrl.observer_arrays)
+            assert ctrl.step_signals(*other) is None, f"tick {k}"
+            np.testing.assert_array_equal(np.array(ctrl.observer_arrays), before, err_msg=f"tick {k}")
+        out = ctrl.step_signals(m, r)
+        status = twin.update(t, *rest)
+        kinds.add(type(out))
+        if out.__class__ is int:
+            assert out == status, f"tick {k}"
+        else:
+            assert status == 0 and type(out) is Command, f"tick {k}"
+            np.testing.assert_array_equal(out.tau, twin.tau, err_msg=f"tick {k}")  # exact: the same tick
+            np.testing.assert_array_equal(out.residual, twin.residual, err_msg=f"tick {k}")
+        np.testing.assert_array_equal(ctrl.tau, twin.tau, err_msg=f"tick {k}")
+    assert kinds == {int, Command}  # plain ticks and ticks with events or faults were both seen
