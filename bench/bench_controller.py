@@ -6,13 +6,16 @@ depend on how fast this machine is. Run with ``make bench`` (or ``python bench/b
 ``python bench/bench_controller.py --baseline DIR`` times Controller.step of this checkout against the
 one of another checkout ``DIR`` (e.g. ``git worktree add /tmp/base <commit>``): two subprocesses, one
 per checkout, time one pass of the same states in turn, ``--rounds`` times per configuration; it prints
-the medians and the median of the paired ratios (this checkout / DIR).
+the medians and the median of the paired ratios (this checkout / DIR). Each subprocess imports reflexarm
+from its checkout's ``src/`` and the C++ core built in its ``build/<wheel tag>/`` (bench/_checkout.py),
+not from the editable install; DIR therefore needs its own build, made once with
+``python -m pip wheel --no-build-isolation --no-deps -w DIR/build/wheel DIR`` (this checkout has one after
+``make install``). The files each side loaded are printed, and a build older than its C++ sources is flagged.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
 import subprocess
 import sys
 import time
@@ -23,6 +26,7 @@ import numpy as np
 import pinocchio as pin
 import scipy.linalg
 
+from _checkout import check_loaded, compiled_modules, loaded_files, stale_sources
 from _pinocchio_floor import floor_data
 from reflexarm import Measurement, Reference, load_robot
 from reflexarm.control import Controller
@@ -72,7 +76,7 @@ def make_floor(robot, efc: bool):
     f = floor_data(robot)
     model, model0, d_g, d_c, d_j, d_p, d_ff, zeros, fid = (
         f.model, f.model0, f.d_g, f.d_c, f.d_j, f.d_p, f.d_ff, f.zeros, f.fid
-    )
+    )  # fmt: skip
 
     def floor(m: Measurement, r: Reference) -> None:
         pin.computeGeneralizedGravity(model, d_g, m.q)
@@ -169,7 +173,8 @@ def serve() -> None:
     ctrls = [Controller(robot, stiffness=300, observer_gain=5, threshold=11, **kw) for _, kw in CONFIGS]
     for c in ctrls:
         time_per_call(c.step, seq[:500], c.reset)
-    print("ready", flush=True)
+    package, core = loaded_files()
+    print(f"ready\t{package}\t{core}", flush=True)
     for line in sys.stdin:
         c = ctrls[int(line)]
         print(float(np.median(time_per_call(c.step, seq, c.reset)) * 1e6), flush=True)
@@ -179,15 +184,30 @@ def compare(baseline: Path, rounds: int) -> dict[str, float]:
     """This checkout's step medians against ``baseline``'s: two subprocesses time one pass each in turn
     (order alternating), so drifts in machine load hit both alike; the ratio is the median of the paired
     per-pass ratios."""
-    here = Path(__file__).resolve().parents[1] / "src"
+    here = Path(__file__).resolve().parents[1]
+    checkouts = {"baseline": baseline.resolve(), "this": here}
+    for name, checkout in checkouts.items():
+        stale = stale_sources(checkout, compiled_modules(checkout))  # CheckoutError if it has no build
+        if stale:
+            print(f"WARNING: the {name} build in {checkout}/build is older than {len(stale)} of its C++ sources "
+                  f"(e.g. {stale[-1]}): rebuild it for a meaningful comparison")  # fmt: skip
+    launcher = Path(__file__).with_name("_checkout.py")
     procs = {}
-    for name, src in (("baseline", baseline / "src"), ("this", here)):
-        env = dict(os.environ, PYTHONPATH=str(src))
+    for name, checkout in checkouts.items():
         procs[name] = subprocess.Popen(
-            [sys.executable, __file__, "--serve"], env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+            [sys.executable, str(launcher), str(checkout), Path(__file__).stem, "--serve"],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
         )
-    for proc in procs.values():
-        assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
+    for name, proc in procs.items():
+        assert proc.stdout is not None
+        line = proc.stdout.readline().rstrip("\n").split("\t")
+        if line[0] != "ready":
+            raise SystemExit(f"the {name} subprocess ({checkouts[name]}) did not start; see its error above")
+        package, core = Path(line[1]), None if line[2] == "None" else Path(line[2])
+        check_loaded(checkouts[name], package, core)
+        print(f"{name:8s} = {checkouts[name]}: reflexarm from {package}, _core {core}")
     times: dict[str, dict[int, list[float]]] = {name: {i: [] for i in range(len(CONFIGS))} for name in procs}
     order = list(procs)
     for k in range(rounds):
@@ -203,7 +223,6 @@ def compare(baseline: Path, rounds: int) -> dict[str, float]:
         proc.stdin.close()
         proc.wait()
     print(f"Controller.step median [us] over {rounds} paired passes of {N_STATES * REPEATS} calls")
-    print(f"this = {here.parent}, baseline = {baseline}")
     print(f"{'configuration':34s} {'baseline':>9s} {'this':>9s} {'this/baseline':>14s} {'(quartiles)':>14s}")
     ratios = {}
     for i, (label, _) in enumerate(CONFIGS):
