@@ -58,8 +58,9 @@ class Controller:
        signal): ``measurement`` unpacks to ``(t, q, dq, tau_m, wrench, gravity)`` and ``reference`` to
        ``(q_d, dq_d, ddq_d)``; t is a real number; q, dq, tau_m, q_d, dq_d, ddq_d have shape (n,), wrench
        (6,), gravity (3,); values are real (integer or floating dtypes, lists of numbers). Complex, bool,
-       str and object values raise. Contiguous float64 arrays (read-only or not) and a float t go straight
-       into the C++ tick; anything else is converted once to contiguous float64 first (some 10-20 us more).
+       str and object values raise. C-contiguous float64 arrays (read-only or not) and a float or
+       ``numpy.float64`` t go straight into the C++ tick, read in place; anything else is converted once to
+       contiguous float64 first (some 10-20 us more). The Command's arrays are new ones each tick (keep them).
     2. *Values* (run-time faults: the tick returns the **safe command**, ``Command.mode == "fault"``,
        ``Command.fault`` naming the signal, the component, the value and the bound, ``fault_code`` one of
        :data:`~reflexarm.control.contract.FAULT_CODES`): t finite and strictly later than the last accepted
