@@ -26,7 +26,7 @@ import numpy as np
 import pinocchio as pin
 import scipy.linalg
 
-from _checkout import check_loaded, compiled_modules, loaded_files, stale_sources
+from _checkout import CheckoutError, check_loaded, compiled_modules, loaded_files, stale_sources
 from _pinocchio_floor import floor_data
 from reflexarm import Measurement, Reference, load_robot
 from reflexarm.control import Controller
@@ -243,6 +243,9 @@ if __name__ == "__main__":
     if args.serve:
         serve()
     elif args.baseline is not None:
-        compare(args.baseline, args.rounds)
+        try:
+            compare(args.baseline, args.rounds)
+        except CheckoutError as e:
+            raise SystemExit(f"bench_controller.py --baseline: {e}") from e
     else:
         main()
