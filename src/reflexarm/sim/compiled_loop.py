@@ -177,7 +177,7 @@ def _run(
         tuple(float(g) for g in plant._gravity),
     )
     # MuJoCo's profiling timers read the clock dozens of times per step through the mujoco package's time
-    # callback (~8 % of a step); unless someone installed a callback to read them, they read 0 in the loop
+    # callback (5-8 % of a step); unless someone installed a callback to read them, they read 0 in the loop
     # (no effect on the state; reflexarm::QuietTimers)
     loop.quiet_timers = mujoco.get_mjcb_time() is None
     if still is not None:
