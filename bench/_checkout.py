@@ -53,7 +53,12 @@ def compiled_modules(checkout: Path) -> dict[str, Path]:
     suffix = sysconfig.get_config_var("EXT_SUFFIX")
     found: dict[str, Path] = {}
     for name in COMPILED:
-        files = sorted((checkout / "build").glob(f"*/{name}{suffix}"), key=lambda p: p.stat().st_mtime)
+        # build/<wheel tag>/ (scikit-build-core), or src/reflexarm/ (where early checkouts' cpp/build.sh put it)
+        built = [
+            *(checkout / "build").glob(f"*/{name}{suffix}"),
+            *(checkout / "src" / "reflexarm").glob(f"{name}{suffix}"),
+        ]
+        files = sorted(built, key=lambda p: p.stat().st_mtime)
         if files:
             found[f"reflexarm.{name}"] = files[-1]  # the newest build folder's
     if "reflexarm._core" not in found:
@@ -104,12 +109,12 @@ def loaded_files() -> tuple[Path, Path | None]:
 
 
 def check_loaded(checkout: Path, package: Path, core: Path | None) -> None:
-    """CheckoutError unless the package came from ``checkout/src`` and the core from ``checkout/build``."""
+    """CheckoutError unless the package and its core came from ``checkout``."""
     checkout = checkout.resolve()
     if not package.is_relative_to(checkout / "src"):
         raise CheckoutError(f"reflexarm was imported from {package}, not from the checkout {checkout}")
-    if core is not None and not core.is_relative_to(checkout / "build"):
-        raise CheckoutError(f"reflexarm._core was imported from {core}, not from the build of {checkout}")
+    if core is not None and not core.is_relative_to(checkout):
+        raise CheckoutError(f"reflexarm._core was imported from {core}, not from a build of {checkout}")
 
 
 if __name__ == "__main__":
