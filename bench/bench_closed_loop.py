@@ -1,7 +1,7 @@
 """Closed-loop simulation speed on the demo contact run (Figs. 7-8, Coll.Det, cinderblock), as a multiple of
 real time: the compiled loop (reflexarm.sim.compiled_loop) next to MuJoCo stepping alone with the same
 physics step, and the Python loop (run_closed_loop), in one process; the runs alternate (compiled, alone,
-...) and each number is the median of REPEATS runs.
+...) for REPEATS rounds: speeds are medians over the rounds, ratios medians of the ratios within a round.
 
 "MuJoCo alone" replays the compiled run's recorded torques into the same plant from the same state
 (``_closed_loop.replay_torques``: the torque written to ``qfrc_applied``, then the physics steps, in C++), so
@@ -36,7 +36,7 @@ from reflexarm.experiments import collision as C
 from reflexarm.sim import PAPER_NOISE, Cinderblock, Plant, run_closed_loop
 from reflexarm.sim.compiled_loop import run_compiled
 
-REPEATS = 3
+REPEATS = 5
 _TIMERS = {
     "step": mujoco.mjtTimer.mjTIMER_STEP,
     "collision": mujoco.mjtTimer.mjTIMER_POS_COLLISION,
@@ -53,8 +53,8 @@ def _demo(timestep: float) -> tuple[Plant, Any, Any, Any]:
     return plant, C.EE_SETTINGS[2].controller(model), traj, traj.sample(0.0).q_d
 
 
-def _alternate(fns: dict[str, Callable[[], None]]) -> tuple[dict[str, float], dict[str, float]]:
-    """Median wall and CPU (this process) time of REPEATS calls of each function, called in turn."""
+def _alternate(fns: dict[str, Callable[[], None]]) -> tuple[dict[str, list[float]], dict[str, list[float]]]:
+    """Wall and CPU (this process) times of REPEATS rounds, each calling every function once, in turn."""
     wall: dict[str, list[float]] = {k: [] for k in fns}
     cpu: dict[str, list[float]] = {k: [] for k in fns}
     for _ in range(REPEATS):
@@ -63,7 +63,13 @@ def _alternate(fns: dict[str, Callable[[], None]]) -> tuple[dict[str, float], di
             fn()
             wall[k].append(time.perf_counter() - t0)
             cpu[k].append(time.process_time() - c0)
-    return {k: statistics.median(v) for k, v in wall.items()}, {k: statistics.median(v) for k, v in cpu.items()}
+    return wall, cpu
+
+
+def _ratio(times: dict[str, list[float]], num: str, den: str) -> float:
+    """Median over rounds of num/den within each round: runs next to each other meet the same machine (its
+    speed drifts by tens of percent within a minute here, so a ratio of two medians is much noisier)."""
+    return statistics.median(a / b for a, b in zip(times[num], times[den], strict=True))
 
 
 def _replay(plant: Plant, q0: np.ndarray, tau: np.ndarray, *, quiet: bool = True) -> None:
@@ -112,7 +118,8 @@ def _measure(timestep: float, python_loop: bool) -> dict[str, float]:
             run_closed_loop(plant, ctrl, traj, sim_s)
 
         fns["python"] = python
-    wall, cpu = _alternate(fns)
+    walls, cpus = _alternate(fns)
+    wall = {k: statistics.median(v) for k, v in walls.items()}
     _replay(plant, q0, tau)
     if not np.array_equal(plant.q, q_end):
         raise AssertionError("the replay did not reproduce the compiled run's motion: the baseline is not comparable")
@@ -120,9 +127,9 @@ def _measure(timestep: float, python_loop: bool) -> dict[str, float]:
     res = {
         "compiled_x_realtime": sim_s / wall["compiled"],
         "mujoco_alone_x_realtime": sim_s / wall["alone"],
-        "compiled_vs_mujoco_alone": wall["alone"] / wall["compiled"],
+        "compiled_vs_mujoco_alone": _ratio(walls, "alone", "compiled"),
         # the same ratio in CPU time of this process: less sensitive to other processes on the machine
-        "compiled_vs_mujoco_alone_cpu": cpu["alone"] / cpu["compiled"],
+        "compiled_vs_mujoco_alone_cpu": _ratio(cpus, "alone", "compiled"),
         "compiled_tick_us": wall["compiled"] / n * 1e6,
         "mujoco_alone_tick_us": wall["alone"] / n * 1e6,
         "arm_alone_x_realtime": sim_s / wall["arm"],
@@ -134,8 +141,8 @@ def _measure(timestep: float, python_loop: bool) -> dict[str, float]:
     }
     if python_loop:
         res["python_x_realtime"] = sim_s / wall["python"]
-        res["compiled_vs_python"] = wall["python"] / wall["compiled"]
-        res["compiled_vs_python_cpu"] = cpu["python"] / cpu["compiled"]
+        res["compiled_vs_python"] = _ratio(walls, "python", "compiled")
+        res["compiled_vs_python_cpu"] = _ratio(cpus, "python", "compiled")
     return res
 
 
@@ -145,7 +152,7 @@ def main() -> dict[str, float]:
     one = _measure(1e-3, python_loop=False)
     res = {f"{k}_2x0.5ms": v for k, v in two.items()} | {f"{k}_1ms": v for k, v in one.items()}
     res["load_average_at_start"] = load0
-    print(f"demo contact run (8.5 s simulated, 1 kHz control), medians of {REPEATS}; load average {load0:.2f}")
+    print(f"demo contact run (8.5 s simulated, 1 kHz control), medians of {REPEATS} rounds; load average {load0:.2f}")
     print(f"{'':34s}{'2 x 0.5 ms':>12s}{'1 x 1 ms':>12s}")
     for label, key in (
         ("compiled loop [x real time]", "compiled_x_realtime"),
