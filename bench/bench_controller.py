@@ -122,14 +122,26 @@ def make_naive(robot, efc: bool, k=300.0, xi=0.7, k_o=5.0, dt=1e-3):
     return naive
 
 
+def damping_ticks(ctrl: Controller, seq) -> np.ndarray:
+    """Which calls of :func:`time_per_call`'s passes ran a part of the modal damping computation (the core
+    spreads one over several ticks of each ``damping_update_period``): one pass after a reset, repeated."""
+    ctrl.reset()
+    parts = np.empty(len(seq), dtype=bool)
+    for i, (m, r) in enumerate(seq):
+        ctrl.step(m, r)
+        parts[i] = ctrl._core.damping_parts_run != 0
+    return np.tile(parts, REPEATS)
+
+
 def main() -> dict[str, float]:
     robot = load_robot("atlas_v5_left_arm")
     seq = states(robot)
     results: dict[str, float] = {}
     print("Controller.step on atlas_v5_left_arm (7 joints), median per call over", N_STATES * REPEATS, "calls")
+    print("(plain: ticks without a part of the modal damping computation; damping: ticks with one, their share)")
     print(
-        f"{'configuration':34s} {'step [us]':>10s} {'mean':>8s} {'p99':>8s} {'floor':>8s} {'naive':>8s} "
-        f"{'step/floor':>10s} {'naive/step':>10s}"
+        f"{'configuration':34s} {'step [us]':>10s} {'plain':>7s} {'damping':>13s} {'mean':>7s} {'p99':>7s} "
+        f"{'floor':>7s} {'naive':>7s} {'step/floor':>10s} {'plain/floor':>11s} {'naive/step':>10s}"
     )
     for label, kw, efc in (
         ("detection (kappa_eps=0)", dict(kappa_eps=0, kappa_ext=0, reaction="none"), False),
@@ -138,6 +150,7 @@ def main() -> dict[str, float]:
         ctrl = Controller(robot, stiffness=300, observer_gain=5, threshold=11, **kw)
         floor = make_floor(robot, efc)
         naive = make_naive(robot, efc)
+        damping = np.tile(damping_ticks(ctrl, seq), 3)
         # warm up, then interleave the three so drifts in machine load hit all of them alike
         for fn in (ctrl.step, floor, naive):
             time_per_call(fn, seq[:200], ctrl.reset if fn == ctrl.step else None)
@@ -148,14 +161,16 @@ def main() -> dict[str, float]:
             t_naive.append(time_per_call(naive, seq))
         s, f, nv = (np.concatenate(x) * 1e6 for x in (t_step, t_floor, t_naive))
         ms, mf, mn = np.median(s), np.median(f), np.median(nv)
+        mp, md = np.median(s[~damping]), np.median(s[damping])
         print(
-            f"{label:34s} {ms:10.1f} {s.mean():8.1f} {np.percentile(s, 99):8.1f} {mf:8.1f} {mn:8.1f} "
-            f"{ms / mf:10.2f} {mn / ms:10.2f}"
+            f"{label:34s} {ms:10.1f} {mp:7.1f} {md:7.1f} ({damping.mean():3.0%}) {s.mean():7.1f} "
+            f"{np.percentile(s, 99):7.1f} {mf:7.1f} {mn:7.1f} {ms / mf:10.2f} {mp / mf:11.2f} {mn / ms:10.2f}"
         )
         key = "efc" if efc else "det"
         results.update(
-            {f"step_us_{key}": ms, f"floor_us_{key}": mf, f"naive_us_{key}": mn, f"step_mean_us_{key}": float(s.mean())}
-        )
+            {f"step_us_{key}": ms, f"floor_us_{key}": mf, f"naive_us_{key}": mn, f"step_mean_us_{key}": float(s.mean()),
+             f"step_plain_us_{key}": mp, f"step_damping_us_{key}": md}
+        )  # fmt: skip
     return results
 
 

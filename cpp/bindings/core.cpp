@@ -306,6 +306,9 @@ NB_MODULE(_core, m)
       return view<std::uint8_t>(h, j.data(), j.size());
     })
     .def_prop_ro("observer_invalid", [](const PyController & c) { return c.ctrl.observerInvalid(); })
+    .def_prop_ro(
+      "damping_parts_run", [](const PyController & c) { return c.ctrl.dampingPartsRun(); },
+      "Which parts of the modal damping computation the last tick ran, as bits (0: none); for benches.")
     .def_prop_ro("timing", [](const PyController & c) {
       const auto & s = c.ctrl.timing();
       return std::make_tuple(s.n_periods, s.sum_period, s.min_period, s.max_period, s.clipped, s.band_low, s.band_high);
