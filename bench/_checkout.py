@@ -71,15 +71,16 @@ def compiled_modules(checkout: Path) -> dict[str, Path]:
 
 
 def stale_sources(checkout: Path, modules: dict[str, Path]) -> list[Path]:
-    """Sources of the compiled modules of ``checkout`` (as the Makefile lists them: cpp/CMakeLists.txt, cpp/cmake,
-    cpp/include, cpp/src, cpp/bindings) newer than its oldest compiled module: a build that does not match them."""
-    if not modules:
+    """Sources of ``reflexarm._core`` in ``checkout`` (as the Makefile lists them: cpp/CMakeLists.txt, cpp/cmake,
+    cpp/include, cpp/src, cpp/bindings; the closed loop's files left out) newer than the built module."""
+    core = modules.get("reflexarm._core")
+    if core is None:
         return []
-    built = min(p.stat().st_mtime for p in modules.values())
+    built = core.stat().st_mtime
     cpp = checkout / "cpp"
     folders = ("cmake", "include", "src", "bindings")
     sources = [cpp / "CMakeLists.txt", *(p for d in folders for p in (cpp / d).rglob("*"))]
-    return sorted(p for p in sources if p.is_file() and p.stat().st_mtime > built)
+    return sorted(p for p in sources if p.is_file() and "closed_loop" not in p.name and p.stat().st_mtime > built)
 
 
 def use_checkout(checkout: Path) -> dict[str, Path]:

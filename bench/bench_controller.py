@@ -6,7 +6,9 @@ depend on how fast this machine is. Run with ``make bench`` (or ``python bench/b
 ``python bench/bench_controller.py --baseline DIR`` times Controller.step of this checkout against the
 one of another checkout ``DIR`` (e.g. ``git worktree add /tmp/base <commit>``): two subprocesses, one
 per checkout, time one pass of the same states in turn, ``--rounds`` times per configuration; it prints
-the medians and the median of the paired ratios (this checkout / DIR). Each subprocess imports reflexarm
+each side's median pass time and the median of the paired ratios (this checkout / DIR). A pass's time is the
+mean per call without the calls above the pass's 99th percentile (the median would jump between the ticks
+with and without a part of the modal damping computation, 50 % each). Each subprocess imports reflexarm
 from its checkout's ``src/`` and the C++ core built in its ``build/<wheel tag>/`` (bench/_checkout.py),
 not from the editable install; DIR therefore needs its own build, made once with
 ``python -m pip wheel --no-build-isolation --no-deps -w DIR/build/wheel DIR`` (this checkout has one after
@@ -180,9 +182,14 @@ CONFIGS = (
 )
 
 
+def trimmed_mean(ts: np.ndarray) -> float:
+    """Mean of the times up to their 99th percentile (a preempted call does not weigh in)."""
+    return float(np.mean(ts[ts <= np.percentile(ts, 99)]))
+
+
 def serve() -> None:
     """Subprocess mode of ``--baseline``: for each config index read on stdin, time one pass of the states
-    (after a reset) and print its median step time [us]."""
+    (after a reset) and print its trimmed mean step time [us]."""
     robot = load_robot("atlas_v5_left_arm")
     seq = states(robot)
     ctrls = [Controller(robot, stiffness=300, observer_gain=5, threshold=11, **kw) for _, kw in CONFIGS]
@@ -192,11 +199,11 @@ def serve() -> None:
     print(f"ready\t{package}\t{core}", flush=True)
     for line in sys.stdin:
         c = ctrls[int(line)]
-        print(float(np.median(time_per_call(c.step, seq, c.reset)) * 1e6), flush=True)
+        print(trimmed_mean(time_per_call(c.step, seq, c.reset)) * 1e6, flush=True)
 
 
 def compare(baseline: Path, rounds: int) -> dict[str, float]:
-    """This checkout's step medians against ``baseline``'s: two subprocesses time one pass each in turn
+    """This checkout's step times against ``baseline``'s: two subprocesses time one pass each in turn
     (order alternating), so drifts in machine load hit both alike; the ratio is the median of the paired
     per-pass ratios."""
     here = Path(__file__).resolve().parents[1]
@@ -204,7 +211,7 @@ def compare(baseline: Path, rounds: int) -> dict[str, float]:
     for name, checkout in checkouts.items():
         stale = stale_sources(checkout, compiled_modules(checkout))  # CheckoutError if it has no build
         if stale:
-            print(f"WARNING: the {name} build in {checkout}/build is older than {len(stale)} of its C++ sources "
+            print(f"WARNING: the {name} build of reflexarm._core is older than {len(stale)} of its C++ sources "
                   f"(e.g. {stale[-1]}): rebuild it for a meaningful comparison")  # fmt: skip
     launcher = Path(__file__).with_name("_checkout.py")
     procs = {}
@@ -237,7 +244,10 @@ def compare(baseline: Path, rounds: int) -> dict[str, float]:
         assert proc.stdin is not None
         proc.stdin.close()
         proc.wait()
-    print(f"Controller.step median [us] over {rounds} paired passes of {N_STATES * REPEATS} calls")
+    print(
+        f"Controller.step [us]: trimmed mean per call (calls above the pass's 99th percentile left out) of a pass "
+        f"of {N_STATES * REPEATS} calls, median over {rounds} paired passes"
+    )
     print(f"{'configuration':34s} {'baseline':>9s} {'this':>9s} {'this/baseline':>14s} {'(quartiles)':>14s}")
     ratios = {}
     for i, (label, _) in enumerate(CONFIGS):
