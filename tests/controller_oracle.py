@@ -40,7 +40,7 @@ N_TICKS = 300
 
 #: Accepted ticks over which the core spreads one computation of the modal damping (at most): the contract of
 #: ControllerParams.damping_update_period / Controller.kDampingParts (cpp/include/reflexarm/params.hpp).
-DAMPING_TICKS = 5
+DAMPING_TICKS = 4
 
 BOUNDS = {
     "margin": 0.2,

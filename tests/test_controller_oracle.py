@@ -1,7 +1,7 @@
 """reflexarm.control.Controller (the Python face of the C++ core) against the plain numpy/Pinocchio oracle.
 
 Every switch combination (kappa_f, kappa_eps, kappa_ext = DC/EFC, the modal damping updated every tick, every 3rd
-(its computation spread over 3 ticks) or every 10th (over 5)), a reset while a damping computation is under way,
+(its computation spread over 3 ticks) or every 10th (over 4)), a reset while a damping computation is under way,
 detection (12) with one or two observers, each reaction (13), the faults of the input contract, the
 invalid-observer latch and the joint springs: the commands are compared tick by tick over the seeded run of
 ``controller_oracle.ticks`` (with its NaN, implausible, repeated-stamp, gravity and late ticks).

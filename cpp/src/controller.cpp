@@ -128,11 +128,12 @@ namespace reflexarm
       M_ = pinocchio::crba(model_, data_m_, s.q); // upper triangle
   }
 
-  // The modal damping of a new M(q) is computed in five parts: 0 factorize (crba, M = L L^T, A = L^-1 K L^-T; it
+  // The modal damping of a new M(q) is computed in four parts: 0 factorize (crba, M = L L^T, A = L^-1 K L^-T; it
   // needs this tick's M(q)), 1 project A on the previous eigenvectors + one Jacobi sweep, 2 one more sweep, 3 the
-  // sweeps left + the new eigenvectors, 4 assemble D. They are spread over min(5, damping_update_period)
-  // consecutive accepted ticks (the last one runs all parts left) so that no tick carries the whole cost: part 0
-  // on the tick the countdown reaches 0, the new D used from the tick of the last part on. The first tick after configure()
+  // sweeps left (usually one or two), the new eigenvectors and D. They are spread over min(4,
+  // damping_update_period) consecutive accepted ticks (the last one runs all parts left) so that no tick carries
+  // the whole cost (~2x a plain tick) and most ticks carry none: part 0 on the tick the countdown reaches 0, the
+  // new D used from the tick of the last part on. The first tick after configure()
   // / reset() runs all three at once (there is no D for this posture yet). In gravity compensation (13) D is
   // not used and nothing is computed.
   Controller::DampingParts Controller::dampingParts() const noexcept
@@ -191,11 +192,10 @@ namespace reflexarm
       case 2:
         modalSweep(modal_, 1);
         break;
-      case 3: // not converged from the previous basis (never seen): once more, cold
+      default: // not converged from the previous basis (never seen): once more, cold
         ok = modalFinish(modal_) || (modalProject(modal_) && modalFinish(modal_));
-        break;
-      default:
-        modalAssemble(xi_, modal_, D_new_);
+        if (ok)
+          modalAssemble(xi_, modal_, D_new_);
       }
     if (!ok)
     {

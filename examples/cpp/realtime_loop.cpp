@@ -312,7 +312,7 @@ int main(int argc, char ** argv)
   std::printf("update(): median %.2f us, p99 %.2f us, max %.2f us (p99/median %.2f)\n", all.median, all.p99, all.max,
               all.p99 / all.median);
   // the modal damping is computed in parts on consecutive ticks (Controller::kDampingParts)
-  const char * part_names[5] = {"factorize M(q)", "project + 1 sweep", "1 sweep", "finish eigenvectors", "assemble D"};
+  const char * part_names[5] = {"factorize M(q)", "project + 1 sweep", "1 sweep", "finish eigenvectors + D", ""};
   for (int b = 0; b < 32; ++b)
     if (!by_parts[b].empty())
     {

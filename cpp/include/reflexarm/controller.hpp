@@ -99,11 +99,11 @@ namespace reflexarm
     /// computed from M(q) of the tick min(kDampingParts, damping_update_period) - 1 accepted ticks earlier).
     bool dampingUpdated() const noexcept { return damping_updated_; }
     /// Which parts of the modal damping the last update() ran, as bits (bit k: part k): 0 factorize (crba,
-    /// Cholesky), 1 project on the previous eigenvectors + a Jacobi sweep, 2 a sweep, 3 the sweeps left and the
-    /// eigenvectors, 4 assemble D; 0 if none.
+    /// Cholesky), 1 project on the previous eigenvectors + a Jacobi sweep, 2 a sweep, 3 the sweeps left, the
+    /// eigenvectors and D; 0 if none.
     int dampingPartsRun() const noexcept { return damping_parts_run_; }
     /// Parts of one computation of the modal damping, run on as many consecutive accepted ticks (at most).
-    static constexpr int kDampingParts = 5;
+    static constexpr int kDampingParts = 4;
     /// The residual the detector looks at (the detection observer's if there is one).
     const Eigen::VectorXd & detectionResidual() const noexcept
     {

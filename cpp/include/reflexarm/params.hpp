@@ -67,7 +67,7 @@ namespace reflexarm
     double switch_time = 0.1;     ///< kappa_eps ramp time [s]; 0 switches at once
     double dt = 1e-3;             ///< nominal control period [s]
     /// Recompute the modal damping from M(q) every this many accepted ticks. The computation is spread over
-    /// min(5, damping_update_period) ticks (Controller::kDampingParts), so the new D is used from that many
+    /// min(4, damping_update_period) ticks (Controller::kDampingParts), so the new D is used from that many
     /// ticks - 1 after the M(q) it comes from (1: every tick, whole, no delay; the first tick after
     /// configure()/reset() always computes whole).
     int damping_update_period = 10;

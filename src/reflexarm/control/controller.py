@@ -115,9 +115,9 @@ class Controller:
             no torque jump (bumpless); 0 switches at once.
         dt: nominal control period [s] (default 1 kHz).
         damping_update_period: recompute D from M(q) every this many accepted ticks (1 = every tick). The
-            core spreads one computation over min(5, damping_update_period) ticks (factorization,
+            core spreads one computation over min(4, damping_update_period) ticks (factorization,
             eigenvectors in steps, assembly) so that no tick carries it whole: the new D is used from that
-            many ticks - 1 after the M(q) it comes from (4 ms at the default 10 and 1 kHz); the first tick
+            many ticks - 1 after the M(q) it comes from (3 ms at the default 10 and 1 kHz); the first tick
             after construction or :meth:`reset` computes it whole.
         torque_limit: saturation of the command [Nm]: ``"model"`` (default) the model's effort limits
             (joints without a finite positive one are not saturated, with a warning naming them); a
