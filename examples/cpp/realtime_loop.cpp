@@ -13,6 +13,7 @@
 //     --mlock       lock the process's memory (mlockall), no page faults in the loop
 //     --fifo PRIO   real-time scheduling (SCHED_FIFO, needs the privilege)
 //     --warmup N    N untimed ticks on the initial state before the loop (then reset(), as on_activate)
+//     --dump FILE   write every tick's update() time (CSV: tick, us, damping parts) for a closer look
 #include <algorithm>
 #include <atomic>
 #include <cmath>
@@ -74,6 +75,7 @@ struct Options
   bool busy = false, spin = false, mlock = false;
   int pin = -1, fifo = 0;
   long warmup = 0;
+  std::string dump;
 };
 
 static Options parseOptions(int argc, char ** argv)
@@ -94,6 +96,8 @@ static Options parseOptions(int argc, char ** argv)
       o.pin = std::atoi(argv[++i]);
     else if (a == "--fifo" && has_value)
       o.fifo = std::atoi(argv[++i]);
+    else if (a == "--dump" && has_value)
+      o.dump = argv[++i];
     else if (a == "--warmup" && has_value)
       o.warmup = std::atol(argv[++i]);
     else if (positional == 0 && a.rfind("--", 0) != 0)
@@ -218,6 +222,7 @@ int main(int argc, char ** argv)
   Eigen::Vector3d gravity(m->opt.gravity[0], m->opt.gravity[1], m->opt.gravity[2]);
   const long ticks = static_cast<long>(seconds / dt);
   std::vector<double> durations(static_cast<std::size_t>(ticks)), floor_durations;
+  std::vector<unsigned char> parts_of(static_cast<std::size_t>(ticks));
   std::vector<double> by_parts[32]; // tick durations by the parts of the modal damping the tick ran (bits)
   for (auto & v : by_parts)
     v.reserve(static_cast<std::size_t>(ticks));
@@ -273,6 +278,7 @@ int main(int argc, char ** argv)
     allocations += g_allocations.load(std::memory_order_relaxed);
     durations[static_cast<std::size_t>(k)] = t1 - t0;
     by_parts[controller.dampingPartsRun()].push_back(t1 - t0);
+    parts_of[static_cast<std::size_t>(k)] = static_cast<unsigned char>(controller.dampingPartsRun());
     faults += code != reflexarm::FaultCode::None;
     if (busy && k % 2 == 1)
       floor_calls();
@@ -306,6 +312,19 @@ int main(int argc, char ** argv)
       clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &next, nullptr);
   }
 
+  if (!opt.dump.empty())
+  {
+    if (std::FILE * f = std::fopen(opt.dump.c_str(), "w"))
+    {
+      std::fprintf(f, "tick,update_us,damping_parts\n");
+      for (long k = 0; k < ticks; ++k)
+        std::fprintf(f, "%ld,%.3f,%d\n", k, 1e6 * durations[static_cast<std::size_t>(k)],
+                     static_cast<int>(parts_of[static_cast<std::size_t>(k)]));
+      std::fclose(f);
+    }
+    else
+      std::fprintf(stderr, "cannot write %s: %s\n", opt.dump.c_str(), std::strerror(errno));
+  }
   const Stats all = stats(durations);
   std::printf("robot: %s (%d joints), %ld ticks at 1 kHz, %d MuJoCo step(s) of %.4g s per tick, wait: %s\n",
               path.c_str(), n, ticks, substeps, m->opt.timestep, busy ? "none (--busy)" : opt.spin ? "spin" : "sleep");
