@@ -13,6 +13,7 @@ __all__ = [
     "ImplausibleDataError",
     "ModelError",
     "NonFiniteEstimateError",
+    "PoorlyDeterminedInertiaWarning",
     "ReflexArmError",
     "SignalError",
     "SimulationError",
@@ -80,6 +81,19 @@ class NonFiniteEstimateError(IdentificationError):
     def __init__(self, message: str, samples: tuple[object, ...] = ()) -> None:
         super().__init__(message)
         self.samples = samples
+
+
+class PoorlyDeterminedInertiaWarning(UserWarning):
+    """The identification data determine M(q) poorly (:mod:`reflexarm.ident.inertia_determinacy`): disturbance
+    compensation with the model is risky. Attributes: ``median`` and ``max`` of the 1-sigma relative
+    uncertainty u(q) over the postures, ``worst_posture`` (0-based joint order), ``threshold``."""
+
+    def __init__(self, message: str, *, median: float, max: float, worst_posture: object, threshold: float) -> None:
+        super().__init__(message)
+        self.median = median
+        self.max = max
+        self.worst_posture = worst_posture
+        self.threshold = threshold
 
 
 class SimulationError(ReflexArmError):

@@ -60,6 +60,7 @@ from reflexarm.ident.identification_result import (
     mass_matrix_margin,
     save_identification,
 )
+from reflexarm.ident.inertia_determinacy import assess_inertia_determinacy, warn_if_poorly_determined
 from reflexarm.ident.known_terms import KnownJointTerms
 from reflexarm.ident.plausibility import check_log_against_robot, likely_bad_rows
 from reflexarm.ident.regressor import BatchRegressor
@@ -326,6 +327,11 @@ def _identify_dynamics(
             + " of each joint's samples"
         )
     beta_b = x[:nb]
+    # how well M(q) is determined, from the covariance s^2 (F^T W F)^+ of beta_b (inertia_determinacy)
+    determinacy = assess_inertia_determinacy(
+        robot, base, beta_b, s2 * sol.covariance[:nb, :nb], armature=known.armature
+    )
+    warn_if_poorly_determined(determinacy, f"{method} identification", stacklevel=4)
     k = nb
     viscous = np.zeros(n) if fixed is None else fixed.viscous.copy()  # combined: every entry estimated below
     coulomb = np.zeros(n) if fixed is None else fixed.coulomb.copy()
@@ -368,6 +374,7 @@ def _identify_dynamics(
         information=sol.information,
         known_terms=known,
         friction_estimated=fric_est,
+        inertia_determinacy=determinacy,
     )
 
 

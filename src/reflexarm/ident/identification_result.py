@@ -16,6 +16,7 @@ import numpy.typing as npt
 from reflexarm.errors import IdentificationError
 from reflexarm.ident.base_parameters import BaseParameters
 from reflexarm.ident.friction_parameters import FrictionParameters
+from reflexarm.ident.inertia_determinacy import InertiaDeterminacy
 from reflexarm.ident.known_terms import KnownJointTerms
 from reflexarm.ident.regressor import BatchRegressor
 from reflexarm.robots.robot_model import RobotModel
@@ -55,6 +56,9 @@ class DynamicsIdentification:
             ``beta_std`` and ``information``: d_v of these joints, then their mu_C); every joint for the
             combined method, those the given friction did not know for the sequential one. None in
             results saved before it was recorded: see :attr:`estimated_friction_joints`.
+        inertia_determinacy: how well the data determine M(q) of the least-squares beta_b (1-sigma relative
+            uncertainty over postures, :mod:`reflexarm.ident.inertia_determinacy`); None in older results.
+            A projection onto consistent links keeps it (it describes the data, not the projection).
     """
 
     method: str
@@ -74,6 +78,7 @@ class DynamicsIdentification:
     physical_parameters: np.ndarray | None = field(default=None, compare=False)
     known_terms: KnownJointTerms | None = field(default=None, compare=False)
     friction_estimated: tuple[int, ...] | None = field(default=None, compare=False)
+    inertia_determinacy: InertiaDeterminacy | None = field(default=None, compare=False)
 
     @property
     def n(self) -> int:
@@ -172,6 +177,7 @@ class DynamicsIdentification:
             "physical_parameters": None if self.physical_parameters is None else self.physical_parameters.tolist(),
             "known_terms": None if self.known_terms is None else self.known_terms.to_dict(),
             "friction_estimated": None if self.friction_estimated is None else list(self.friction_estimated),
+            "inertia_determinacy": None if self.inertia_determinacy is None else self.inertia_determinacy.to_dict(),
         }
 
     @classmethod
@@ -200,6 +206,9 @@ class DynamicsIdentification:
                 friction_estimated=None
                 if d.get("friction_estimated") is None
                 else tuple(int(j) for j in d["friction_estimated"]),  # type: ignore[attr-defined]
+                inertia_determinacy=None
+                if d.get("inertia_determinacy") is None
+                else InertiaDeterminacy.from_dict(d["inertia_determinacy"]),  # type: ignore[arg-type]
             )
         except (KeyError, TypeError, ValueError) as e:
             raise IdentificationError(f"malformed identification result: {e}") from e

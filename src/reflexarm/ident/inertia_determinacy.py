@@ -1,0 +1,207 @@
+"""How well the data determine the identified mass matrix M(q), from the parameter covariance alone.
+
+A log dominated by gravity can give a model whose torque predictions pass validation while its M(q) is
+poor (the acceleration columns of the regressor were hardly excited). Disturbance compensation needs
+M(q) (the observer's generalized momentum p = M(q) dq), so a poorly determined M(q) makes it risky.
+No true model is needed to see this: M(q) is linear in the base parameters,
+
+    M(q) = sum_k beta_k M_k(q) + diag(I_a),
+
+where column j of M_k(q) is the base regressor at (q, dq = 0, ddq = e_j) minus the one at (q, 0, 0)
+(this removes gravity exactly, the regressor being linear in ddq), and I_a is the file's armature (given,
+not identified). The covariance Cov(beta) of the weighted least squares (s^2 (F^T W F)^-1, eq. (18))
+therefore gives the covariance of M(q).
+
+The measure (one definition, used everywhere here): at a posture q, with M_hat = L L^T the identified
+mass matrix and Z_k = L^-1 M_k(q) L^-T,
+
+    u(q) = sqrt( E || L^-1 dM(q) L^-T ||_F^2 ) = sqrt( sum_kl Cov_kl <Z_k, Z_l>_F ),
+
+dM = sum_k dbeta_k M_k(q), dbeta ~ N(0, Cov(beta)). To first order the eigenvalues lambda_i of
+M_hat^-1 M_true deviate from 1 by the eigenvalues of L^-1 dM L^-T, so u(q) is the expected root-sum-square
+of (lambda_i - 1): the 1-sigma relative error of M(q) in its own metric, the same for every joint unit and
+dominated by the light (distal) directions, which are the ones an observer amplifies. It is reported as
+median and max over a fixed, seeded set of postures uniform in the joint range
+(:func:`~reflexarm.ident.base_parameters.random_samples`, seed 0, 200 postures), with the posture of the max.
+A posture where M_hat is not positive definite gets u = inf.
+
+Threshold (:data:`DEFAULT_MAX_RELATIVE_STD`, on the max over the postures): 0.25. At u = 0.25 a 2-sigma
+error (the size an estimate reaches about 1 time in 20) moves some generalized eigenvalue of M(q) by up to
+50 %, a factor 2 between the model's and the arm's inertia in that direction: the momentum observer then
+reports half the joint's inertial torque as an external one, which disturbance compensation feeds back.
+Measured (tests/test_inertia_determinacy.py and the report of session 13): a short random-start excitation
+gives u_max well above it, an optimized or longer one well below.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from reflexarm.errors import IdentificationError, PoorlyDeterminedInertiaWarning
+from reflexarm.ident.base_parameters import BaseParameters, random_samples
+from reflexarm.ident.regressor import BatchRegressor
+from reflexarm.robots.robot_model import RobotModel
+
+__all__ = [
+    "DEFAULT_MAX_RELATIVE_STD",
+    "InertiaDeterminacy",
+    "assess_inertia_determinacy",
+    "mass_matrix_regressor",
+    "warn_if_poorly_determined",
+]
+
+#: u_max above which disturbance compensation with the model is risky (see the module docstring).
+DEFAULT_MAX_RELATIVE_STD = 0.25
+
+#: Postures (uniform in 90 % of the joint range, seeded) over which u(q) is evaluated.
+DEFAULT_POSTURES = 200
+
+
+@dataclass(frozen=True)
+class InertiaDeterminacy:
+    """u(q) of the module docstring over a fixed set of postures.
+
+    Attributes:
+        median: median of u(q) over the postures (dimensionless; 0.1 = 10 %).
+        max: its max (inf if M_hat is not positive definite at some posture).
+        worst_posture: the posture of the max [rad or m], 0-based joint order.
+        n_postures, seed: the posture set.
+        threshold: the limit :func:`warn_if_poorly_determined` uses.
+    """
+
+    median: float
+    max: float
+    worst_posture: np.ndarray
+    n_postures: int
+    seed: int
+    threshold: float = DEFAULT_MAX_RELATIVE_STD
+
+    @property
+    def poorly_determined(self) -> bool:
+        return not self.max <= self.threshold
+
+    def to_dict(self) -> dict[str, object]:
+        """JSON-ready (inf written as None)."""
+        return {
+            "definition": "u(q) = sqrt(E||L^-1 dM(q) L^-T||_F^2), M_hat = L L^T, dbeta ~ N(0, Cov(beta_b)): "
+            "expected root-sum-square deviation of the eigenvalues of M_hat^-1 M from 1",
+            "median": _finite_or_none(self.median),
+            "max": _finite_or_none(self.max),
+            "worst_posture": self.worst_posture.tolist(),
+            "n_postures": self.n_postures,
+            "seed": self.seed,
+            "threshold": self.threshold,
+            "poorly_determined": self.poorly_determined,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, object]) -> InertiaDeterminacy:
+        """Inverse of :meth:`to_dict` (None -> inf)."""
+
+        def num(key: str) -> float:
+            v = d[key]
+            return float("inf") if v is None else float(v)  # type: ignore[arg-type]
+
+        return cls(
+            num("median"),
+            num("max"),
+            np.asarray(d["worst_posture"], dtype=float),
+            int(d["n_postures"]),  # type: ignore[call-overload]
+            int(d["seed"]),  # type: ignore[call-overload]
+            num("threshold"),
+        )
+
+    def describe(self) -> str:
+        return (
+            f"1-sigma relative uncertainty of M(q) (eigenvalues of M_hat^-1 M, {self.n_postures} postures): "
+            f"median {100 * self.median:.1f} %, max {100 * self.max:.1f} % (limit {100 * self.threshold:.0f} %)"
+        )
+
+
+def _finite_or_none(x: float) -> float | None:
+    return float(x) if np.isfinite(x) else None
+
+
+def mass_matrix_regressor(robot: RobotModel, base: BaseParameters, q: npt.ArrayLike) -> np.ndarray:
+    """M_k(q) for postures q (N, n): (N, n, n, n_b) with M(q) = YM @ beta_b (+ the file's armature)."""
+    Q = np.atleast_2d(np.asarray(q, dtype=float))
+    N, n = Q.shape
+    reg = BatchRegressor(robot)
+    # row block 0: ddq = 0 (gravity only); block 1 + j: ddq = e_j
+    QQ = np.tile(Q, (n + 1, 1))
+    DDQ = np.zeros((n + 1, N, n))
+    DDQ[np.arange(1, n + 1), :, np.arange(n)] = 1.0
+    Y = base.select(reg.compute_regressor(QQ, np.zeros_like(QQ), DDQ.reshape(-1, n))).reshape(n + 1, N, n, -1)
+    cols = Y[1:] - Y[0][None]  # (j, N, i, k): entry (i, j) of M_k
+    return cols.transpose(1, 2, 0, 3)
+
+
+def assess_inertia_determinacy(
+    robot: RobotModel,
+    base: BaseParameters,
+    beta_b: npt.ArrayLike,
+    covariance: npt.ArrayLike,
+    *,
+    armature: npt.ArrayLike | None = None,
+    n_postures: int = DEFAULT_POSTURES,
+    seed: int = 0,
+    threshold: float = DEFAULT_MAX_RELATIVE_STD,
+) -> InertiaDeterminacy:
+    """u(q) (module docstring) of the identified beta_b with covariance ``covariance`` (n_b, n_b).
+
+    Args:
+        robot: the arm (kinematics).
+        base: the base-parameter map of beta_b.
+        beta_b: the identified base parameters.
+        covariance: their covariance (the top-left n_b block of the estimate's covariance).
+        armature: the file's rotor inertia per joint, part of M_hat (default 0).
+        n_postures, seed: the posture set (uniform in 90 % of the joint range).
+        threshold: the limit stored with the result.
+    """
+    beta = np.asarray(beta_b, dtype=float).reshape(-1)
+    C = np.asarray(covariance, dtype=float)
+    nb = base.n_base
+    if beta.size != nb or C.shape != (nb, nb):
+        raise IdentificationError(
+            f"expected {nb} base parameters and a ({nb}, {nb}) covariance; got {beta.size} and {C.shape}"
+        )
+    q, _, _ = random_samples(robot, n_postures, np.random.default_rng(seed))
+    YM = mass_matrix_regressor(robot, base, q)
+    Mhat = YM @ beta
+    if armature is not None:
+        Mhat = Mhat + np.diag(np.asarray(armature, dtype=float).reshape(-1))[None]
+    u = np.full(n_postures, np.inf)
+    C = 0.5 * (C + C.T)
+    for i in range(n_postures):
+        try:
+            L = np.linalg.cholesky(0.5 * (Mhat[i] + Mhat[i].T))
+        except np.linalg.LinAlgError:
+            continue  # not positive definite: u = inf
+        # Z_k = L^-1 M_k L^-T, flattened: (n*n, n_b)
+        A = np.linalg.solve(L, YM[i].transpose(2, 0, 1))  # (n_b, n, n): L^-1 M_k
+        Z = np.linalg.solve(L, A.transpose(0, 2, 1)).reshape(nb, -1)  # L^-1 (L^-1 M_k)^T = Z_k (symmetric)
+        u[i] = float(np.sqrt(max(np.einsum("ka,kl,la->", Z, C, Z), 0.0)))
+    worst = int(np.argmax(u))
+    return InertiaDeterminacy(float(np.median(u)), float(u[worst]), q[worst].copy(), n_postures, seed, threshold)
+
+
+def warn_if_poorly_determined(d: InertiaDeterminacy, what: str, *, stacklevel: int = 2) -> None:
+    """Warn (:class:`~reflexarm.errors.PoorlyDeterminedInertiaWarning`) when ``d.max`` exceeds its threshold."""
+    if not d.poorly_determined:
+        return
+    posture = ", ".join(f"{x:.2f}" for x in d.worst_posture)
+    message = (
+        f"{what}: the data determine M(q) poorly: {d.describe()}; worst posture q = [{posture}]. The torque "
+        "predictions (and validation) can still look good, since gravity dominates them, but disturbance "
+        "compensation needs M(q) (the observer's p = M(q) dq) and may diverge with this model. Identify again "
+        "from an optimized excitation ('reflexarm excite' without --maxiter 0) and/or a longer log (more periods)"
+    )
+    warnings.warn(
+        PoorlyDeterminedInertiaWarning(message, median=d.median, max=d.max, worst_posture=d.worst_posture,
+                                       threshold=d.threshold),
+        stacklevel=stacklevel + 1,
+    )  # fmt: skip
