@@ -124,6 +124,8 @@ def _identify_from_logs(args: argparse.Namespace) -> int:
             threads=None,  # set for the whole command by --threads
         )
         results[m] = for_controller(estimate, robot, robot, args)
+        if estimate.inertia_determinacy is not None:
+            print(f"{m}: {estimate.inertia_determinacy.describe()}")
     # what can still fail on the logs (validation times against the states) runs before anything is written
     vals = {} if val_raw is None else {m: validate_model(r, robot, val_raw, states=states) for m, r in results.items()}
     copies, copy_notes = [], {}
@@ -139,6 +141,7 @@ def _identify_from_logs(args: argparse.Namespace) -> int:
             "residual_rms": r.residual_rms,
             "friction": r.friction.to_dict(),
             "friction_estimated_joints": [j + 1 for j in r.estimated_friction_joints],
+            "inertia_determinacy": None if r.inertia_determinacy is None else r.inertia_determinacy.to_dict(),
             "notes": r.notes,
             "timings": r.timings,
         }
