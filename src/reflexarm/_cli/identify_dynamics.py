@@ -122,6 +122,7 @@ def _identify_from_logs(args: argparse.Namespace) -> int:
             min_speed=0.0 if args.min_speed is None else args.min_speed,
             progress=not args.quiet,
             threads=None,  # set for the whole command by --threads
+            filter_cutoff_hz=args.cutoff,
         )
         results[m] = for_controller(estimate, robot, robot, args)
         if estimate.inertia_determinacy is not None:
@@ -365,7 +366,9 @@ def validate_command(args: argparse.Namespace) -> int:
     if args.log is not None:
         raw = load_log_from_args(args, args.log, robot)
         states = preprocess_log(raw, cutoff_hz=args.cutoff)
-        v = validate_model(result, robot, raw, states=states, label=result.method)
+        # scored as the controller uses it (its friction: the model file's velocity band, issue 9 F6)
+        v = validate_model(result, robot, raw, states=states, label=result.method, friction=identified.friction)
+        print(f"friction {v.friction_model}")
         rows = v.table(robot.joint_names)
         write_csv(out / "validation.csv", rows)
         print(
@@ -382,7 +385,8 @@ def validate_command(args: argparse.Namespace) -> int:
         )
         print(f"pooled RMSE: {v.pooled_rmse:.4f} Nm over {v.t.size:,} samples; mean MSE over the joints: "
               f"{float(np.mean(v.mse)):.4f} Nm^2")  # fmt: skip
-        summary["validation"] = {"rows": rows, "pooled_rmse": v.pooled_rmse, "mean_mse": float(np.mean(v.mse))}
+        summary["validation"] = {"rows": rows, "pooled_rmse": v.pooled_rmse, "mean_mse": float(np.mean(v.mse)),
+                                 "friction_model": v.friction_model}  # fmt: skip
         plot_torque_validation({result.method: v}, out / "fig6_torques.png", joint_names=robot.joint_names)
     if args.closed_loop:
         from reflexarm.experiments.identification import NOMINAL_ERROR_LEVEL, compare_tracking

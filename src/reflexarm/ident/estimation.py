@@ -60,7 +60,11 @@ from reflexarm.ident.identification_result import (
     mass_matrix_margin,
     save_identification,
 )
-from reflexarm.ident.inertia_determinacy import assess_inertia_determinacy, warn_if_poorly_determined
+from reflexarm.ident.inertia_determinacy import (
+    assess_inertia_determinacy,
+    filtered_rows_factor,
+    warn_if_poorly_determined,
+)
 from reflexarm.ident.known_terms import KnownJointTerms
 from reflexarm.ident.plausibility import check_log_against_robot, likely_bad_rows
 from reflexarm.ident.regressor import BatchRegressor
@@ -107,6 +111,7 @@ def identify_dynamics(
     progress: bool = False,
     check_limits: bool = True,
     threads: int | None = DEFAULT_BLAS_THREADS,
+    filter_cutoff_hz: float | None = None,
 ) -> DynamicsIdentification:
     """Identify beta_b (and friction) from a log by weighted least squares, eq. (18).
 
@@ -133,10 +138,15 @@ def identify_dynamics(
         threads: BLAS threads for the Gram products and solves (default 1, see
             :mod:`reflexarm.ident._blas_threads`: many BLAS threads lose badly on a busy machine); None
             leaves BLAS as configured.
+        filter_cutoff_hz: the low-pass cutoff the logs were preprocessed with, if any: their rows' errors are
+            then correlated, and the M(q) uncertainty scales its covariance (see
+            :mod:`reflexarm.ident.inertia_determinacy`; the parameter std ``beta_std`` is not scaled).
 
     Warns:
         IllConditionedWarning: the regressor is rank deficient or its condition number (column-
             normalised, weighted) exceeds ``condition_limit``; the message gives the condition number.
+        PoorlyDeterminedInertiaWarning: the data determine M(q) poorly (1-sigma relative uncertainty above
+            15 % at some posture; ``result.inertia_determinacy`` holds the numbers).
 
     Raises:
         IdentificationError: unknown method, missing friction for ``sequential``, log without ddq,
@@ -150,7 +160,7 @@ def identify_dynamics(
     with blas_threads(threads):
         return _identify_dynamics(
             robot, log, method, friction, offset, noise_variance, base, condition_limit, min_speed, progress,
-            check_limits,
+            check_limits, filter_cutoff_hz,
         )  # fmt: skip
 
 
@@ -166,6 +176,7 @@ def _identify_dynamics(
     min_speed: float,
     progress: bool,
     check_limits: bool,
+    filter_cutoff_hz: float | None = None,
 ) -> DynamicsIdentification:
     """:func:`identify_dynamics` with BLAS threads set."""
     if method not in METHODS:
@@ -329,8 +340,9 @@ def _identify_dynamics(
     beta_b = x[:nb]
     # how well M(q) is determined, from the covariance s^2 (F^T W F)^+ of beta_b (inertia_determinacy)
     determinacy = assess_inertia_determinacy(
-        robot, base, beta_b, s2 * sol.covariance[:nb, :nb], armature=known.armature
-    )
+        robot, base, beta_b, s2 * sol.covariance[:nb, :nb], armature=known.armature,
+        row_correlation=filtered_rows_factor([float(np.median(np.diff(lg.t))) for lg in logs], filter_cutoff_hz),
+    )  # fmt: skip
     warn_if_poorly_determined(determinacy, f"{method} identification", stacklevel=4)
     k = nb
     viscous = np.zeros(n) if fixed is None else fixed.viscous.copy()  # combined: every entry estimated below

@@ -11,9 +11,21 @@ from reflexarm.errors import IdentificationError
 from reflexarm.ident._measured_torque import _rhs
 from reflexarm.ident.identification_result import DynamicsIdentification
 from reflexarm.ident.robot_log import RobotLog
+from reflexarm.robots.friction import CoulombViscousFriction
 from reflexarm.robots.robot_model import RobotModel
 
-__all__ = ["TorqueValidation", "validate_model"]
+__all__ = ["EXACT_SIGN", "TorqueValidation", "describe_friction_model", "validate_model"]
+
+#: :attr:`TorqueValidation.friction_model` of a prediction with the identification's own friction model.
+EXACT_SIGN = "as identified: d_v dq + mu_C sgn(dq) (exact sign) [+ offsets]"
+
+
+def describe_friction_model(friction: CoulombViscousFriction) -> str:
+    """How a :class:`CoulombViscousFriction` (the controller's model) computes the friction torque."""
+    return (
+        f"as the controller uses it: d_v dq + mu_C clip(dq / {friction.velocity_band:g} rad/s, -1, 1) "
+        "(Coulomb smoothed inside the velocity band; negative coefficients clipped to 0, no offsets)"
+    )
 
 
 @dataclass(frozen=True)
@@ -25,6 +37,8 @@ class TorqueValidation:
         mse: per joint [Nm^2]; rmse: per joint [Nm]; nrmse: rmse / std(measured) per joint [-].
         pooled_rmse: over all joints and samples [Nm].
         label: which model (e.g. ``"sequential"``).
+        friction_model: which friction model the prediction holds (:data:`EXACT_SIGN` or the one given to
+            :func:`validate_model`, e.g. the controller's with its velocity band).
     """
 
     t: np.ndarray
@@ -32,6 +46,7 @@ class TorqueValidation:
     predicted: np.ndarray
     label: str = ""
     dq: np.ndarray | None = None
+    friction_model: str = ""
 
     @property
     def error(self) -> np.ndarray:
@@ -84,6 +99,7 @@ def validate_model(
     *,
     states: RobotLog | None = None,
     label: str | None = None,
+    friction: CoulombViscousFriction | None = None,
 ) -> TorqueValidation:
     """Predict the torques of ``log`` with ``result`` and compare with its measured (unfiltered) torques.
 
@@ -94,6 +110,9 @@ def validate_model(
         states: where to take q, dq, ddq from if not from ``log`` itself (e.g. a filtered copy on a
             uniform grid); they are interpolated to ``log.t``.
         label: name of the model in plots and tables (default: the method).
+        friction: score this friction model instead of the result's own (exact-sign Coulomb, offsets): e.g.
+            the controller's, ``load_identified_model(...).friction`` or ``result.friction.to_model(band)``,
+            whose Coulomb torque is smoothed over a velocity band. The rigid-body part is the result's.
     """
     if states is None:
         if log.ddq is None:
@@ -112,10 +131,20 @@ def validate_model(
         dq = _interp_cols(states.t, states.dq, log.t)
         ddq = _interp_cols(states.t, states.ddq, log.t)
     pred = result.compute_torque(robot, q, dq, ddq)
+    how = EXACT_SIGN
+    if friction is not None:
+        if friction.coulomb.shape != (result.n,):
+            raise IdentificationError(
+                f"the friction model to score has {friction.coulomb.size} joints; the identification has {result.n}"
+            )
+        pred += friction.compute_torque(dq) - result.friction.compute_torque(dq)
+        how = describe_friction_model(friction)
     meas = log.measured_torque
     if log.wrench is not None:
         meas = _rhs(robot, replace(log, tau=meas, tau_raw=None))
-    return TorqueValidation(log.t.copy(), meas.copy(), pred, label if label is not None else result.method, dq.copy())
+    return TorqueValidation(
+        log.t.copy(), meas.copy(), pred, label if label is not None else result.method, dq.copy(), how
+    )
 
 
 def _refuse_times_in_gaps(log: RobotLog, states: RobotLog) -> None:
