@@ -95,7 +95,7 @@ def test_identify_dynamics_saves_the_models_whose_table_it_prints(tmp_path, caps
     table = json.loads((out / "study.json").read_text())["table"]
     for method in ("combined", "sequential"):
         code = main(["validate", "--model", str(out / f"model_{method}.json"), "--log", str(out / "validation_log.npz"),
-                     "--out", str(tmp_path / method), "--quiet"])  # fmt: skip
+                     "--friction-model", "identified", "--out", str(tmp_path / method), "--quiet"])  # fmt: skip
         assert code == 0
         rows = json.loads((tmp_path / method / "validate.json").read_text())["validation"]["rows"]
         np.testing.assert_allclose(

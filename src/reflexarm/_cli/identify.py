@@ -177,6 +177,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     v.add_argument("--model", required=True, help="model.json written by 'identify dynamics'")
     v.add_argument("--log", default=None, help="validation log (.csv/.parquet/.npz or a ROS 2 bag)")
     v.add_argument("--cutoff", type=float, default=10.0, help="low-pass cutoff for the states [Hz] (default 10)")
+    v.add_argument(
+        "--friction-model",
+        choices=("controller", "identified"),
+        default="controller",
+        help="friction to score: 'controller' (default: as the controller loads the model, Coulomb smoothed over "
+        "the model file's velocity band) or 'identified' (exact sign and offsets, the least-squares model)",
+    )
     v.add_argument("--closed-loop", action="store_true", help="compare tracking on the simulated plant")
     v.add_argument("--kappa-f", type=int, choices=(0, 1), default=1, help="friction compensation in (2) (closed loop)")
     v.add_argument("--duration", type=float, default=20.0, help="closed-loop run length [s] (default 20)")

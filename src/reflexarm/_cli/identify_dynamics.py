@@ -338,7 +338,8 @@ def dynamics_study_command(args: argparse.Namespace) -> int:
     print("\nrelative error of the base parameters: " + ", ".join(f"{m} {v:.3f}" for m, v in rel.items()))
     print(
         f"\nwrote {out}/ (model_combined.json, model_sequential.json: the models above; validation_log.npz: "
-        "'reflexarm validate --model model_<method>.json --log validation_log.npz' reproduces their columns; "
+        "'reflexarm validate --model model_<method>.json --log validation_log.npz --friction-model identified' "
+        "reproduces their columns; "
         "excitation.json, study.json, table1_mse.csv, fig4_friction.png, fig6_torques.png, excitation.png"
         + "".join(f", {c}" for c in copies if c)
         + ": the models above in a copy of the robot file)"
@@ -367,7 +368,8 @@ def validate_command(args: argparse.Namespace) -> int:
         raw = load_log_from_args(args, args.log, robot)
         states = preprocess_log(raw, cutoff_hz=args.cutoff)
         # scored as the controller uses it (its friction: the model file's velocity band, issue 9 F6)
-        v = validate_model(result, robot, raw, states=states, label=result.method, friction=identified.friction)
+        scored = identified.friction if args.friction_model == "controller" else None
+        v = validate_model(result, robot, raw, states=states, label=result.method, friction=scored)
         print(f"friction {v.friction_model}")
         rows = v.table(robot.joint_names)
         write_csv(out / "validation.csv", rows)
