@@ -25,19 +25,21 @@ Filtered logs: Cov(beta) = s^2 (F^T W F)^-1 assumes independent rows. A log low-
 identification's preprocessing, 10 Hz by default) sampled at f_s has errors correlated over about
 f_s / (2 f_c) rows, so that formula underestimates the variance by that factor (exact for white noise before
 the filter and regressors below f_c). Given the cutoff, the covariance is scaled by max(1, f_s / (2 f_c))
-(:func:`filtered_rows_factor`; ``row_correlation`` in the result). Measured on F8's iiwa14 logs (10 Hz,
-1 kHz: factor 50, std x 7.1) the corrected u still stays below the M(q) error of the least-squares estimate
-against the file by a factor 2-4 (unmodelled, non-white errors are not in it), so u is a lower bound.
+(:func:`filtered_rows_factor`; ``row_correlation`` in the result). On F8's iiwa14 logs (10 Hz, 1 kHz: factor
+50, std x 7.1) the corrected u is still 2.3-4.5 times below the M(q) error of the least-squares estimate
+against the file (random start: u median/max 10.4 %/24.9 %, error 46.8 %/88.7 %; optimized: 2.1 %/4.1 %,
+error 5.2 %/9.4 %): unmodelled, non-white errors are not in it, so u is a lower bound.
 
 Threshold (:data:`DEFAULT_MAX_RELATIVE_STD`, on the max over the postures): 0.15. In F8 (iiwa14) the model
 whose M(q) was off by 8.7 % at worst (median 4.0 %) worked with disturbance compensation, the one off by
 31.7 % at worst (median 13.9 %) diverged. At u_max = 0.15 a 2-sigma error (reached about 1 time in 20)
-is 30 % at the worst posture, the size that diverged.
+is 30 % at the worst posture, the size that diverged. Measured u_max on those two logs: 24.9 % (random
+start, warned) and 4.1 % (optimized).
 
 Not chosen: the spread of the generalized eigenvalues of (M, M_hat) (whitening by M_hat). Measured on the
 UR-like arm (no armature, smallest eigenvalue of M 4.7e-4 kg m^2 at q = 0, the wrist), every excitation
-tried (3-5 harmonics, 1-4 periods, torque noise 0.05-0.5 Nm) leaves that eigenvalue's relative error
-above 100 % (M_hat often indefinite there) while the absolute torque it makes is below the noise; such a
+tried (3-5 harmonics, one 10 s period, white torque noise 0.05-0.5 Nm) leaves that eigenvalue's relative
+error near or above 100 % (M_hat often indefinite there) while the absolute torque it makes is below the noise; such a
 measure would flag every model of such an arm. The Frobenius measure weights the directions by their
 inertia, so it reports the heavy (shoulder, elbow) part the torque predictions rest on.
 """
