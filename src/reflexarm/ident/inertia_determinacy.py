@@ -30,6 +30,12 @@ the filter and regressors below f_c). Given the cutoff, the covariance is scaled
 against the file (random start: u median/max 10.4 %/24.9 %, error 46.8 %/88.7 %; optimized: 2.1 %/4.1 %,
 error 5.2 %/9.4 %): unmodelled, non-white errors are not in it, so u is a lower bound.
 
+Overstated by Coulomb friction in low-passed torques: the filter smooths the friction step at a velocity
+reversal, sgn(dq) in the regressor does not, and the difference (a blip at each reversal, of the size of
+mu_C) counts as noise in s^2. On the Atlas arm with exact data (tests/test_ident_cli.py, sequential, 10 Hz)
+it gives u median/max 17.7 %/50.0 % while the estimate is exact (error < 0.05 %); leaving out the rows with
+|dq| < 0.1 rad/s (``min_speed``, ``--min-speed``) gives 1.3 %/3.5 % (error 0.3 %/1.2 %). The warning says so.
+
 Threshold (:data:`DEFAULT_MAX_RELATIVE_STD`, on the max over the postures): 0.15. In F8 (iiwa14) the model
 whose M(q) was off by 8.7 % at worst (median 4.0 %) worked with disturbance compensation, the one off by
 31.7 % at worst (median 13.9 %) diverged. At u_max = 0.15 a 2-sigma error (reached about 1 time in 20)
@@ -226,7 +232,9 @@ def warn_if_poorly_determined(d: InertiaDeterminacy, what: str, *, stacklevel: i
         f"{what}: the data determine M(q) poorly: {d.describe()}. The torque "
         "predictions (and validation) can still look good, since gravity dominates them, but disturbance "
         "compensation needs M(q) (the observer's p = M(q) dq) and may diverge with this model. Identify again "
-        "from an optimized excitation ('reflexarm excite' without --maxiter 0) and/or a longer log (more periods)"
+        "from an optimized excitation ('reflexarm excite' without --maxiter 0) and/or a longer log (more periods). "
+        "If the joints have Coulomb friction and the torques were low-passed, the smoothed friction step at velocity "
+        "reversals inflates this number: check it with min_speed (--min-speed 0.1) first"
     )
     warnings.warn(
         PoorlyDeterminedInertiaWarning(message, median=d.median, max=d.max, worst_posture=d.worst_posture,
