@@ -4,6 +4,7 @@ the same to the bit; the mujoco package's own clock is back after the run; a use
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Iterator
 
 import mujoco
@@ -105,3 +106,45 @@ def test_replay_with_quiet_timers_is_the_same_motion(
         assert plant.data.timer[STEP].number == len(tau) * plant.substeps
         finals.append(np.concatenate([plant.data.qpos, plant.data.qvel]))
     np.testing.assert_array_equal(finals[1], finals[0])
+
+
+def test_runs_in_threads_at_once_give_the_clock_back() -> None:
+    """Two compiled runs at once in threads (as Dask workers in one process run them): the time callback
+    is global, and before the count under a lock a check-then-write race left the clock of 0 installed
+    for good (seen after tests/test_sweeps_paper.py's in-process cluster)."""
+
+    def plant_timed() -> bool:
+        plant, _, _, q0 = _fresh_demo()
+        plant.reset(q0)
+        plant.data.timer[STEP].duration = 0.0
+        mujoco.mj_step(plant.model, plant.data)
+        return plant.data.timer[STEP].duration > 0.0
+
+    assert plant_timed(), "no clock to begin with: the test proves nothing"
+    errors: list[BaseException] = []
+
+    def work() -> None:
+        try:
+            plant, ctrl, traj, q0 = _fresh_demo()
+            for _ in range(2):
+                plant.reset(q0)
+                run_compiled(plant, ctrl, traj, 2.0)
+        except BaseException as e:  # noqa: BLE001 - reported below
+            errors.append(e)
+
+    threads = [threading.Thread(target=work) for _ in range(3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors, errors
+    assert plant_timed(), "the clock of 0 stayed installed after the threads' runs"
+
+
+def _fresh_demo() -> tuple[Plant, Controller, JointTrajectory, np.ndarray]:
+    """A plant and controller of the demo of their own (one per thread)."""
+    robot = load_robot(C.ROBOT)
+    model, _ = C.controller_model(robot, None, 0, None)
+    traj = C.ee_collision_trajectory()
+    plant = Plant(robot, scene=Cinderblock(**C.EE_BLOCK), noise=PAPER_NOISE, seed=0)  # type: ignore[arg-type]
+    return plant, C.EE_SETTINGS[2].controller(model), traj, traj.sample(0.0).q_d

@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <mutex>
 
 namespace reflexarm
 {
@@ -23,21 +24,33 @@ namespace reflexarm
     }
     // The clock of MuJoCo's profiling timers under QuietTimers.
     mjtNum noClock() noexcept { return 0.0; }
+    // mjcb_time is global: QuietTimers in several threads at once (e.g. Dask workers as threads) count
+    // themselves under a lock; the first saves the callback and installs noClock, the last restores it.
+    // (Without the lock a check-then-write race could leave noClock installed for good.)
+    std::mutex g_quiet_mutex;
+    int g_quiet_count = 0;
+    mjfTime g_quiet_prev = nullptr;
   } // namespace
 
   QuietTimers::QuietTimers(bool on) noexcept : on_(on)
   {
-    if (on_)
+    if (!on_)
+      return;
+    const std::lock_guard<std::mutex> lock(g_quiet_mutex);
+    if (g_quiet_count++ == 0)
     {
-      prev_ = mjcb_time;
+      g_quiet_prev = mjcb_time;
       mjcb_time = &noClock;
     }
   }
 
   QuietTimers::~QuietTimers()
   {
-    if (on_ && mjcb_time == &noClock) // a callback set meanwhile by someone else stays
-      mjcb_time = prev_;
+    if (!on_)
+      return;
+    const std::lock_guard<std::mutex> lock(g_quiet_mutex);
+    if (--g_quiet_count == 0 && mjcb_time == &noClock) // a callback set meanwhile by someone else stays
+      mjcb_time = g_quiet_prev;
   }
 
   void stepSensingLast(const mjModel * m, mjData * d, int steps) noexcept

@@ -139,8 +139,9 @@ namespace reflexarm
   /// (measured on the demo plant: 0.7-1.2 us of a 12-15 us step, 1.4-1.8 us per tick of the compiled loop);
   /// the timers feed nothing in the dynamics, so the state is the same to the bit and mjData.timer still
   /// counts the steps, with no duration. Callers turn it on only when nobody asked for the timings (Python:
-  /// mujoco.get_mjcb_time() is None). mjcb_time is global: not for concurrent plants whose timings someone
-  /// reads.
+  /// mujoco.get_mjcb_time() is None). mjcb_time is global: QuietTimers alive in several threads at once share
+  /// one count under a lock (the first installs the clock of 0, the last restores the callback); other threads'
+  /// plants stepped meanwhile read no durations either.
   class QuietTimers
   {
   public:
@@ -150,7 +151,6 @@ namespace reflexarm
     QuietTimers & operator=(const QuietTimers &) = delete;
 
   private:
-    mjfTime prev_ = nullptr;
     bool on_ = false;
   };
 
