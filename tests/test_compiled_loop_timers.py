@@ -29,16 +29,7 @@ FIELDS = ("t", "q", "dq", "q_meas", "tau", "tau_m", "residual", "wrench", "tau_e
 
 @pytest.fixture(scope="module")
 def demo() -> tuple[Plant, Controller, JointTrajectory, np.ndarray]:
-    robot = load_robot(C.ROBOT)
-    model, _ = C.controller_model(robot, None, 0, None)
-    traj = C.ee_collision_trajectory()
-    plant = Plant(
-        robot,
-        scene=Cinderblock(**C.EE_BLOCK),  # type: ignore[arg-type]
-        noise=PAPER_NOISE,
-        seed=0,
-    )
-    return plant, C.EE_SETTINGS[2].controller(model), traj, traj.sample(0.0).q_d
+    return _fresh_demo()
 
 
 @pytest.fixture
@@ -142,7 +133,7 @@ def test_runs_in_threads_at_once_give_the_clock_back() -> None:
 
 
 def _fresh_demo() -> tuple[Plant, Controller, JointTrajectory, np.ndarray]:
-    """A plant and controller of the demo of their own (one per thread)."""
+    """The demo's plant, controller, path and start (each call its own: one per thread)."""
     robot = load_robot(C.ROBOT)
     model, _ = C.controller_model(robot, None, 0, None)
     traj = C.ee_collision_trajectory()
