@@ -92,16 +92,21 @@ def test_demo_contact_run_is_the_python_loop(robot):
     assert "cinderblock_pos" in cc[0].extras
 
 
-def test_link_collision_is_the_python_loop(robot):
-    cm, _ = C.controller_model(robot, None, 0, None)
-    traj = C.link_collision_trajectory()
+def link_collision_plant(robot, traj):
+    """A maker of the link-collision plant (stick at the forearm from 5 s), at the path's start."""
 
     def plant():
         p = Plant(robot, scene=ElbowStick(body="l_larm", t_start=5.0), noise=PAPER_NOISE, seed=0)
         p.reset(traj.sample(0.0).q_d)
         return p
 
-    py, cc = both(plant, lambda: C.LINK_SETTING.controller(cm), traj, traj.duration)
+    return plant
+
+
+def test_link_collision_is_the_python_loop(robot):
+    cm, _ = C.controller_model(robot, None, 0, None)
+    traj = C.link_collision_trajectory()
+    py, cc = both(link_collision_plant(robot, traj), lambda: C.LINK_SETTING.controller(cm), traj, traj.duration)
     assert_same(py, cc, expect_detection=True)
     tip = cc[0].extras["elbow_stick_tip"]
     assert np.ptp(tip[cc[0].t > 5.0], axis=0).max() > 0.01  # the stick did move (played from its path)
@@ -325,13 +330,7 @@ def test_elbow_stick_still_keeps_the_mocap_state(robot):
     """The stick is a mocap body played by C++: its pose is part of the kept state and equals the Python loop's."""
     cm, _ = C.controller_model(robot, None, 0, None)
     traj = C.link_collision_trajectory()
-
-    def plant():
-        p = Plant(robot, scene=ElbowStick(body="l_larm", t_start=5.0), noise=PAPER_NOISE, seed=0)
-        p.reset(traj.sample(0.0).q_d)
-        return p
-
-    py, cc = _stills(plant, lambda: C.LINK_SETTING.controller(cm), traj, traj.duration)
+    py, cc = _stills(link_collision_plant(robot, traj), lambda: C.LINK_SETTING.controller(cm), traj, traj.duration)
     _assert_same_still(py, cc)
     assert cc[1].contact and cc[1].peak_time is not None and cc[1].peak_time > 5.0
 

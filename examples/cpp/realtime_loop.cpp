@@ -223,7 +223,8 @@ int main(int argc, char ** argv)
   const long ticks = static_cast<long>(seconds / dt);
   std::vector<double> durations(static_cast<std::size_t>(ticks)), floor_durations;
   std::vector<unsigned char> parts_of(static_cast<std::size_t>(ticks));
-  std::vector<double> by_parts[32]; // tick durations by the parts of the modal damping the tick ran (bits)
+  constexpr int kParts = reflexarm::Controller::kDampingParts;
+  std::vector<double> by_parts[1 << kParts]; // tick durations by the parts of the modal damping the tick ran (bits)
   for (auto & v : by_parts)
     v.reserve(static_cast<std::size_t>(ticks));
   // --busy also times the tick's bare Pinocchio calls (g, C, two RNEAs) on the same state, alternating
@@ -331,12 +332,12 @@ int main(int argc, char ** argv)
   std::printf("update(): median %.2f us, p99 %.2f us, max %.2f us (p99/median %.2f)\n", all.median, all.p99, all.max,
               all.p99 / all.median);
   // the modal damping is computed in parts on consecutive ticks (Controller::kDampingParts)
-  const char * part_names[5] = {"factorize M(q)", "project + 1 sweep", "1 sweep", "finish eigenvectors + D", ""};
-  for (int b = 0; b < 32; ++b)
+  const char * part_names[kParts] = {"factorize M(q)", "project + 1 sweep", "1 sweep", "finish eigenvectors + D"};
+  for (int b = 0; b < (1 << kParts); ++b)
     if (!by_parts[b].empty())
     {
       std::string what;
-      for (int k = 0; k < 5; ++k)
+      for (int k = 0; k < kParts; ++k)
         if (b & (1 << k))
           what += std::string(what.empty() ? "" : ", ") + part_names[k];
       const Stats st = stats(by_parts[b]);
