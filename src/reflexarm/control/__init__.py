@@ -1,7 +1,7 @@
 """The real-time part: impedance control (2), momentum observer (4)-(6), collision detection (12),
 reaction (13) and the composed :class:`Controller`. Never imports :mod:`reflexarm.sim`."""
 
-from reflexarm.control.collision import CollisionDetector
+from reflexarm.control.collision.detect import CollisionDetector
 from reflexarm.control.contract import FAULT_CODES, InputBounds, TimingStats
 from reflexarm.control.controller import MODES, REACTIONS, Controller
 from reflexarm.control.impedance import ImpedanceGains, JointImpedanceController, modal_damping

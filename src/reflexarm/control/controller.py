@@ -16,7 +16,7 @@ import numpy.typing as npt
 
 from reflexarm._validation import as_positive_scalar, as_switch, as_vector
 from reflexarm.control._setup import check_period_band, core_params, load_core, resolve_torque_limit
-from reflexarm.control.collision import CollisionDetector
+from reflexarm.control.collision.detect import CollisionDetector
 from reflexarm.control.contract import (
     BAD_SHAPE,
     InputBounds,
