@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -47,5 +48,15 @@ _BUILTINS: dict[str, BuiltinRobot] = {
         description="Franka Emika Panda (no hand), kinematics of the Franka description, "
         "inertial values of Gaz et al. 2019",
         velocity_limit=(2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61),
+    ),
+    "iiwa14": BuiltinRobot(
+        name="iiwa14",
+        file="iiwa14.xml",
+        ee_frame="ee",
+        sensor_frame="wrist_ft",
+        home=(0.0, 0.6, 0.0, -1.3, 0.0, 1.0, 0.0),
+        description="KUKA LBR iiwa 14 R820 (no gripper), KUKA's published kinematics and limits, inertial values "
+        "of Drake's iiwa14 description, assumed small joint friction (a low-friction arm)",
+        velocity_limit=tuple(math.radians(v) for v in (85, 85, 100, 75, 130, 135, 135)),  # KUKA's deg/s
     ),
 }
