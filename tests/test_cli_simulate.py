@@ -7,7 +7,14 @@ import json
 import numpy as np
 import pytest
 
-from reflexarm._cli.common import DEFAULT_MODEL_ERROR_PERCENT, ModelChoice, model_choice
+from reflexarm._cli.common import (
+    DEFAULT_MODEL_ERROR_PERCENT,
+    ModelChoice,
+    detection_choice,
+    model_choice,
+    read_threshold,
+    tuned_gain_note,
+)
 from reflexarm.cli import build_parser, main
 from reflexarm.errors import ConfigError
 from reflexarm.ident import BatchRegressor, FrictionParameters, RobotLog, identify_dynamics, save_identified_model
@@ -122,3 +129,118 @@ def test_an_identified_model_file_drives_the_link_collision(tmp_path, capsys, at
     assert row["detected_joint_names"] == ["l_arm_shz"]
     tr = Trace.load(next(out.glob("*.npz")))
     assert tr.meta["controller_model"] == {"source": "identified", "file": str(model_file)}
+
+
+# ------------------------------------------------------------------------------ detection settings on the CLI
+DETECTING = (["demo"], ["simulate", "ee-collision"], ["simulate", "link-collision"])
+
+
+@pytest.mark.parametrize("command", [*DETECTING, ["mode-table"]], ids=lambda c: " ".join(c))
+def test_detection_defaults_are_the_papers(command, atlas):
+    choice = detection_choice(build_parser().parse_args(command), atlas)
+    assert choice.threshold == 11.0 and choice.detection_observer_gain is None
+    if command == ["mode-table"]:  # the supervised push of Fig. 3: the setup's k_o, the compliant switch
+        assert (choice.observer_gain, choice.reaction) == (None, "compliant")
+    else:
+        assert (choice.observer_gain, choice.reaction) == (5.0, "gravity")
+
+
+def test_threshold_is_a_level_a_list_or_a_tuned_file(tmp_path, atlas):
+    assert read_threshold("8.5", atlas) == (8.5, "command line", None)
+    assert read_threshold("1,2,3,4,5,6,7", atlas) == ((1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0), "command line", None)
+    # what 'reflexarm tune-thresholds' writes: collision_Nm per joint, the joints' names, the observer
+    doc = {
+        "collision_Nm": [12.5, 13, 14, 15, 1.5, 1.25, 1.0],
+        "joints": [{"joint": j + 1, "name": name} for j, name in enumerate(atlas.joint_names)],
+        "observer": {"observer_gain": 5.0, "detection_observer_gain": 50.0},
+    }
+    path = tmp_path / "thresholds.json"
+    path.write_text(json.dumps(doc))
+    assert read_threshold(str(path), atlas) == ((12.5, 13.0, 14.0, 15.0, 1.5, 1.25, 1.0), str(path), 50.0)
+    args = build_parser().parse_args(["demo", "--threshold", str(path)])
+    note = tuned_gain_note(detection_choice(args, atlas), 5.0)
+    assert note is not None and "tuned for a detecting k_o = 50 1/s; this run detects with k_o = 5 1/s" in note
+
+
+def test_bad_thresholds_and_gains_name_the_value(tmp_path, atlas):
+    with pytest.raises(ConfigError, match=r"--threshold has 3 levels; robot 'atlas_v5_left_arm' has 7 joints \(l_arm"):
+        read_threshold("1,2,3", atlas)
+    with pytest.raises(ConfigError, match=r"--threshold levels must be positive torques \[Nm\]; got '-3'"):
+        read_threshold("-3", atlas)
+    with pytest.raises(ConfigError, match=r"--threshold expects a level \[Nm\], a comma list of 7 levels or a "):
+        read_threshold("eleven", atlas)
+    with pytest.raises(ConfigError, match=r"--threshold: no such file '.*nope\.json'"):
+        read_threshold(str(tmp_path / "nope.json"), atlas)
+    bad = tmp_path / "bad.json"
+    bad.write_text("{not json")
+    with pytest.raises(ConfigError, match=r"--threshold: '.*bad\.json' is not a JSON file"):
+        read_threshold(str(bad), atlas)
+    bad.write_text(json.dumps({"contact_Nm": [1] * 7}))
+    with pytest.raises(ConfigError, match=r"has no 'collision_Nm' list of numbers \(write it with 'reflexarm tune"):
+        read_threshold(str(bad), atlas)
+    bad.write_text(json.dumps({"collision_Nm": [1] * 6}))
+    with pytest.raises(ConfigError, match=r"has 6 levels; robot 'atlas_v5_left_arm' has 7 joints"):
+        read_threshold(str(bad), atlas)
+    bad.write_text(json.dumps({"collision_Nm": [1] * 7, "joints": [{"name": f"j{k}"} for k in range(7)]}))
+    with pytest.raises(ConfigError, match=r"is for joints \['j0', .*\]; robot 'atlas_v5_left_arm' has \['l_arm_shz'"):
+        read_threshold(str(bad), atlas)
+    parser = build_parser()
+    with pytest.raises(ConfigError, match=r"--observer-gain must be a positive gain \[1/s\]; got -5"):
+        detection_choice(parser.parse_args(["demo", "--observer-gain", "-5"]), atlas)
+    with pytest.raises(ConfigError, match=r"--detection-observer-gain must be a positive gain \[1/s\]; got 0"):
+        detection_choice(parser.parse_args(["demo", "--detection-observer-gain", "0"]), atlas)
+    with pytest.raises(SystemExit):  # argparse names the choices
+        parser.parse_args(["demo", "--reaction", "stop"])
+
+
+def test_link_collision_runs_with_the_given_detection_and_reports_the_event(tmp_path, capsys):
+    out = tmp_path / "link"
+    argv = ["simulate", "link-collision", "--out", str(out), "--quiet", "--model-error", "0"]
+    argv += ["--threshold", "9", "--observer-gain", "10", "--detection-observer-gain", "40", "--reaction", "compliant"]
+    assert main(argv) == 0
+    captured = capsys.readouterr()
+    assert "detection zeta = 9 Nm, k_o = 10 1/s, detection k_o = 40 1/s, reaction compliant" in captured.err
+    assert "KE +0.5 s / det" in captured.out and "re-contact" in captured.out
+    (row,) = json.loads((out / "link_collision_summary.json").read_text())
+    assert row["detection"] == {
+        "threshold_Nm": 9.0,
+        "threshold_source": "command line",
+        "observer_gain_per_s": 10.0,
+        "detection_observer_gain_per_s": 40.0,
+        "reaction": "compliant",
+    }
+    tr = Trace.load(next(out.glob("link_collision_*.npz")))
+    setting = tr.meta["setting"]
+    assert (setting["threshold"], setting["observer_gain"], setting["detection_observer_gain"]) == (9.0, 10.0, 40.0)
+    assert setting["reaction"] == "compliant"
+    assert set(tr.mode) >= {"compliant"} and "gravity_compensation" not in set(tr.mode)
+    event = row["event"]
+    assert event["contact_class"] == "link" and event["detected_s"] == row["detection_s"]
+    assert event["contact_point_source"] == "elbow_stick_tip"
+
+
+def test_a_tuned_file_of_high_levels_reaches_the_controller(tmp_path, atlas):
+    """Levels far above any contact torque of the push: no detection (the default 11 Nm detects it)."""
+    path = tmp_path / "thresholds.json"
+    path.write_text(json.dumps({"collision_Nm": [1000.0] * 7}))
+    out = tmp_path / "link"
+    assert main(["simulate", "link-collision", "--out", str(out), "--quiet", "--threshold", str(path)]) == 0
+    (row,) = json.loads((out / "link_collision_summary.json").read_text())
+    assert row["detection_s"] is None and row["contact_start_s"] is not None
+    assert row["detection"]["threshold_Nm"] == [1000.0] * 7 and row["detection"]["threshold_source"] == str(path)
+    assert row["event"]["kinetic_energy_at_detection_J"] is None
+
+
+def test_plant_friction_none_zeroes_the_true_friction_and_damping():
+    from reflexarm.experiments.collision import _true_friction
+    from reflexarm.robots import load_robot
+    from reflexarm.sim import Plant
+
+    iiwa = load_robot("iiwa14")
+    with_file = Plant(iiwa, true_friction=_true_friction(iiwa, "file"))
+    assert with_file.model.dof_frictionloss.max() > 0 and with_file.model.dof_damping.max() > 0
+    bare = Plant(iiwa, true_friction=_true_friction(iiwa, "none"))
+    np.testing.assert_array_equal(bare.model.dof_frictionloss, 0.0)
+    np.testing.assert_array_equal(bare.model.dof_damping, 0.0)
+    with pytest.raises(ConfigError, match="unknown plant_friction 'dry'; choose one of: file, none"):
+        _true_friction(iiwa, "dry")

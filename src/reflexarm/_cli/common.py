@@ -165,3 +165,187 @@ def model_error_line(robot: RobotModel, model: RobotModel) -> str:
         f"achieved model error over {size.n_states} random states: g(q) median {100 * size.gravity_median:.1f} % "
         f"(max {100 * size.gravity_max:.1f} %), M(q) median {100 * size.mass_matrix_median:.1f} %"
     )
+
+
+#: Reactions the collision commands offer (``--reaction``): passed to ``Controller(reaction=...)`` as given,
+#: so a name the installed controller does not know yet is refused there, naming its choices.
+REACTION_CHOICES = ("gravity", "brake", "retract", "compliant", "none")
+
+
+def add_detection_options(
+    p: argparse.ArgumentParser,
+    *,
+    observer_gain: float | None = 5.0,
+    threshold: str = "11",
+    reaction: str = "gravity",
+    note: str = "",
+) -> None:
+    """``--threshold ZETA|FILE``, ``--observer-gain K_O``, ``--detection-observer-gain K_O`` and
+    ``--reaction``: the collision detection (12) and reaction of the detecting run. ``observer_gain`` None:
+    the command's own default (named in ``note``)."""
+    g = p.add_argument_group("collision detection" + (f" ({note})" if note else ""))
+    g.add_argument(
+        "--threshold",
+        default=threshold,
+        metavar="ZETA|FILE",
+        help="zeta: one level [Nm] for every joint, a comma list per joint (model order), or the thresholds.json "
+        f"written by 'reflexarm tune-thresholds' (its collision level per joint) (default {threshold}, the paper's)",
+    )
+    g.add_argument(
+        "--observer-gain",
+        type=float,
+        default=observer_gain,
+        metavar="K_O",
+        help="k_o of the observer (4)-(6) [1/s] "
+        + ("(default: the command's own)" if observer_gain is None else f"(default {observer_gain:g}, the paper's)"),
+    )
+    g.add_argument(
+        "--detection-observer-gain",
+        type=float,
+        default=None,
+        metavar="K_O",
+        help="k_o of a second observer used for detection only [1/s] (default: none, the first one detects)",
+    )
+    g.add_argument(
+        "--reaction",
+        choices=REACTION_CHOICES,
+        default=reaction,
+        help=f"what a detected collision does (default {reaction})",
+    )
+
+
+@dataclass(frozen=True)
+class DetectionChoice:
+    """The detection settings the command line chose: zeta [Nm] (scalar or per joint), observer gains
+    [1/s], reaction, and where zeta came from."""
+
+    threshold: float | tuple[float, ...]
+    observer_gain: float | None
+    detection_observer_gain: float | None
+    reaction: str
+    source: str
+    tuned_gain: float | None = None  # the detecting k_o a thresholds.json was tuned for
+
+    def label(self) -> str:
+        """One line for the console."""
+        if isinstance(self.threshold, tuple):
+            zeta = "(" + ", ".join(f"{v:.3g}" for v in self.threshold) + ") Nm"
+        else:
+            zeta = f"{self.threshold:g} Nm"
+        gains = "" if self.observer_gain is None else f", k_o = {self.observer_gain:g} 1/s"
+        if self.detection_observer_gain is not None:
+            gains += f", detection k_o = {self.detection_observer_gain:g} 1/s"
+        src = "" if self.source == "command line" else f" (from {self.source})"
+        return f"zeta = {zeta}{src}{gains}, reaction {self.reaction}"
+
+    def describe(self) -> dict[str, object]:
+        """JSON-able description for summaries."""
+        return {
+            "threshold_Nm": list(self.threshold) if isinstance(self.threshold, tuple) else self.threshold,
+            "threshold_source": self.source,
+            "observer_gain_per_s": self.observer_gain,
+            "detection_observer_gain_per_s": self.detection_observer_gain,
+            "reaction": self.reaction,
+        }
+
+
+def _gain(value: float | None, flag: str) -> float | None:
+    if value is not None and (not math.isfinite(value) or value <= 0.0):
+        raise ConfigError(f"{flag} must be a positive gain [1/s]; got {value:g}")
+    return value
+
+
+def read_threshold(value: str, robot: RobotModel) -> tuple[float | tuple[float, ...], str, float | None]:
+    """(zeta, its source, the detecting k_o it was tuned for) from ``--threshold``: a number [Nm], a comma
+    list with one positive level per joint of ``robot``, or a ``thresholds.json`` of ``tune-thresholds``
+    (its ``collision_Nm``, checked against the robot's joints by count and, when the file has them, names).
+
+    Raises:
+        ConfigError: a non-positive or non-finite level, a list of the wrong length, a missing or malformed
+            file, a file for other joints.
+    """
+    text = str(value).strip()
+    path = Path(text)
+    if path.suffix.lower() == ".json" or path.is_file():
+        return _read_threshold_file(path, robot)
+    parts = [s.strip() for s in text.split(",")]
+    try:
+        levels = [float(s) for s in parts]
+    except ValueError:
+        raise ConfigError(
+            f"--threshold expects a level [Nm], a comma list of {robot.n} levels or a thresholds.json file; "
+            f"got {text!r}"
+        ) from None
+    bad = [v for v in levels if not math.isfinite(v) or v <= 0.0]
+    if bad:
+        raise ConfigError(f"--threshold levels must be positive torques [Nm]; got {text!r}")
+    if len(levels) == 1:
+        return levels[0], "command line", None
+    if len(levels) != robot.n:
+        raise ConfigError(
+            f"--threshold has {len(levels)} levels; robot {robot.name!r} has {robot.n} joints "
+            f"({', '.join(robot.joint_names)})"
+        )
+    return tuple(levels), "command line", None
+
+
+def _read_threshold_file(path: Path, robot: RobotModel) -> tuple[tuple[float, ...], str, float | None]:
+    import json
+
+    if not path.is_file():
+        raise ConfigError(f"--threshold: no such file {str(path)!r}")
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise ConfigError(f"--threshold: {str(path)!r} is not a JSON file: {e}") from e
+    levels = doc.get("collision_Nm") if isinstance(doc, dict) else None
+    if not isinstance(levels, list) or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in levels):
+        raise ConfigError(
+            f"--threshold: {str(path)!r} has no 'collision_Nm' list of numbers (write it with 'reflexarm "
+            "tune-thresholds')"
+        )
+    if len(levels) != robot.n:
+        raise ConfigError(
+            f"--threshold: {str(path)!r} has {len(levels)} levels; robot {robot.name!r} has {robot.n} joints"
+        )
+    names = [j.get("name") for j in doc.get("joints", []) if isinstance(j, dict)]
+    if len(names) == robot.n and names != list(robot.joint_names):
+        raise ConfigError(
+            f"--threshold: {str(path)!r} is for joints {names}; robot {robot.name!r} has {list(robot.joint_names)}"
+        )
+    if not all(math.isfinite(v) and v > 0.0 for v in levels):
+        raise ConfigError(f"--threshold: {str(path)!r} has non-positive levels {levels}")
+    observer = doc.get("observer") if isinstance(doc.get("observer"), dict) else {}
+    tuned = observer.get("detection_observer_gain") or observer.get("observer_gain")
+    return tuple(float(v) for v in levels), str(path), None if tuned is None else float(tuned)
+
+
+def detection_choice(args: argparse.Namespace, robot: RobotModel) -> DetectionChoice:
+    """The checked :class:`DetectionChoice` of :func:`add_detection_options` for ``robot``.
+
+    Raises:
+        ConfigError: a bad ``--threshold`` (see :func:`read_threshold`) or a non-positive gain.
+    """
+    zeta, source, tuned = read_threshold(args.threshold, robot)
+    return DetectionChoice(
+        threshold=zeta,
+        observer_gain=_gain(args.observer_gain, "--observer-gain"),
+        detection_observer_gain=_gain(args.detection_observer_gain, "--detection-observer-gain"),
+        reaction=args.reaction,
+        source=source,
+        tuned_gain=tuned,
+    )
+
+
+def tuned_gain_note(choice: DetectionChoice, default_gain: float) -> str | None:
+    """A warning line when a thresholds file was tuned for another detecting k_o than the run uses."""
+    if choice.tuned_gain is None:
+        return None
+    running = choice.detection_observer_gain or choice.observer_gain or default_gain
+    if math.isclose(running, choice.tuned_gain, rel_tol=1e-9):
+        return None
+    return (
+        f"warning: the thresholds in {choice.source} were tuned for a detecting k_o = {choice.tuned_gain:g} 1/s; "
+        f"this run detects with k_o = {running:g} 1/s (give --observer-gain or --detection-observer-gain "
+        f"{choice.tuned_gain:g})"
+    )

@@ -9,12 +9,16 @@ from pathlib import Path
 from typing import Any
 
 from reflexarm._cli.common import (
+    DetectionChoice,
     add_common,
+    add_detection_options,
     add_model_options,
+    detection_choice,
     format_table,
     model_choice,
     model_error_line,
     out_dir,
+    tuned_gain_note,
 )
 from reflexarm._cli.robot_options import add_robot_options, load_robot_from_args
 from reflexarm._cli.run_outputs import SceneCapture, add_output_options, number_joints, write_json, write_traces
@@ -25,6 +29,19 @@ _DEPTH_HELP = (
     "arms other than Atlas: the block stands across the end effector's path where the rest of the path would "
     "run this deep into it [m] (default 0.12; Atlas keeps the paper's block position)"
 )
+
+_FRICTION_HELP = (
+    "the true arm's joint friction: file (the robot file's Coulomb frictionloss and viscous damping; Atlas: "
+    "Table I) or none (no joint friction or damping: nothing but the controller stops the arm; the controller's "
+    "model is unchanged) (default file)"
+)
+
+#: The columns of the collision event (experiments.collision_events) added to the printed tables.
+_EVENT_COLUMNS = [
+    ("ke_ratio", "KE +0.5 s / det", "{:.3g}"),
+    ("moved_m", "moved after det [m]", "{:.3f}"),
+    ("recontact", "re-contact", "{}"),
+]
 
 _BLOCK_HELP = (
     "cinderblock variant: paper (0.39 x 0.19 x 0.19 m, 20 kg, table friction 0.6: the Stiff arm slides it) or "
@@ -45,6 +62,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_output_options(p)
     p.add_argument("--block", choices=("paper", "tipping"), default="paper", help=_BLOCK_HELP)
     p.add_argument("--depth", type=float, default=0.12, help=_DEPTH_HELP)
+    p.add_argument("--plant-friction", choices=("file", "none"), default="file", help=_FRICTION_HELP)
+    add_detection_options(p, note="the Coll.Det run; Stiff and Compliant run without detection")
     p.set_defaults(func=_demo)
 
     s = sub.add_parser("simulate", help="run one of the paper's simulated collision experiments")
@@ -57,6 +76,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_output_options(e)
     e.add_argument("--block", choices=("paper", "tipping"), default="paper", help=_BLOCK_HELP)
     e.add_argument("--depth", type=float, default=0.12, help=_DEPTH_HELP)
+    e.add_argument("--plant-friction", choices=("file", "none"), default="file", help=_FRICTION_HELP)
+    add_detection_options(e, note="the Coll.Det run; Stiff and Compliant run without detection")
     e.set_defaults(func=_demo)
     lc = ssub.add_parser("link-collision", help="a stick pushes the elbow during a joint motion (Figs. 9-10)")
     add_common(lc, default_out="results/link-collision")
@@ -69,6 +90,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="the link the stick pushes: a joint number, 1-based (its link), or a link name (default: Atlas' elbow "
         "l_larm; other arms the link of joint ceil(n/2))",
     )
+    lc.add_argument("--plant-friction", choices=("file", "none"), default="file", help=_FRICTION_HELP)
+    add_detection_options(lc)
     lc.set_defaults(func=_link)
     fm = ssub.add_parser("free-motion", help="false-alarm check: the demo trajectory without obstacle")
     add_common(fm, default_out="results/free-motion")
@@ -131,6 +154,58 @@ def register(sub: argparse._SubParsersAction) -> None:
     vt.set_defaults(func=_velocity)
 
 
+def _detecting(setting: Any, detection: DetectionChoice) -> Any:
+    """``setting`` with the command line's detection settings, if it detects at all."""
+    from dataclasses import replace
+
+    if setting.threshold is None:
+        return setting
+    return replace(
+        setting,
+        threshold=detection.threshold,
+        observer_gain=setting.observer_gain if detection.observer_gain is None else detection.observer_gain,
+        detection_observer_gain=detection.detection_observer_gain,
+        reaction=detection.reaction,
+    )
+
+
+def _setting_line(setting: Any) -> str:
+    if setting.threshold is None:
+        return f"[{setting.name}] k = {setting.stiffness:g} Nm/rad, detection off"
+    zeta = setting.threshold
+    zeta_text = ", ".join(f"{v:.3g}" for v in zeta) if isinstance(zeta, tuple) else f"{zeta:g}"
+    gains = f"k_o = {setting.observer_gain:g} 1/s"
+    if setting.detection_observer_gain is not None:
+        gains += f", detection k_o = {setting.detection_observer_gain:g} 1/s"
+    return (
+        f"[{setting.name}] k = {setting.stiffness:g} Nm/rad, detection zeta = {zeta_text} Nm, {gains}, "
+        f"reaction {setting.reaction}"
+    )
+
+
+def _event_row(row: dict[str, Any], trace: Any, robot: Any) -> dict[str, Any]:
+    """``row`` with the run's collision event (:func:`~reflexarm.experiments.collision_events.collision_outcome`)
+    under "event" and the printed event columns."""
+    from reflexarm.experiments.collision_events import collision_outcome
+
+    event = collision_outcome(trace, robot, name=str(row.get("run", "run"))).as_dict()
+    return {
+        **row,
+        "event": event,
+        "ke_ratio": event["kinetic_energy_ratio"],
+        "moved_m": event["moved_after_detection_m"],
+        "recontact": None if event["detected_s"] is None else ("yes" if event["recontact"] else "no"),
+    }
+
+
+def _print_detection(detection: DetectionChoice, plant_friction: str) -> None:
+    note = tuned_gain_note(detection, 5.0)
+    if note:
+        print(note, file=sys.stderr)
+    if plant_friction == "none":
+        print("true arm: no joint friction or damping (--plant-friction none)", file=sys.stderr)
+
+
 def _demo(args: argparse.Namespace) -> int:
     from reflexarm.experiments.collision import (
         EE_SETTINGS,
@@ -142,22 +217,17 @@ def _demo(args: argparse.Namespace) -> int:
 
     choice = model_choice(args)
     robot = load_robot_from_args(args)
+    detection = detection_choice(args, robot)
     model = choice.build(robot)
     out = out_dir(args)
     print(f"controller model: {choice.label()}; sensor noise: the paper's; cinderblock: {args.block}", file=sys.stderr)
     print(model_error_line(robot, model), file=sys.stderr)
+    _print_detection(detection, args.plant_friction)
     traces, rows = [], []
     scene = SceneCapture(args, out, "ee_collision")
-    for setting in EE_SETTINGS:
-        detection = (
-            "off"
-            if setting.threshold is None
-            else f"zeta = {setting.threshold:g} Nm, k_o = {setting.observer_gain:g} 1/s"
-        )
-        print(
-            f"[{setting.name}] k = {setting.stiffness:g} Nm/rad, detection {detection}",
-            file=sys.stderr,
-        )
+    settings = [_detecting(s, detection) for s in EE_SETTINGS]
+    for setting in settings:
+        print(_setting_line(setting), file=sys.stderr)
         with scene:
             tr = run_ee_collision(
                 setting,
@@ -168,11 +238,14 @@ def _demo(args: argparse.Namespace) -> int:
                 progress=not args.quiet,
                 robot=robot,
                 depth=args.depth,
+                plant_friction=args.plant_friction,
             )
         tr.meta["controller_model"] = choice.describe()
         traces.append(tr)
-        rows.append(number_joints(summarize_ee_collision(tr), robot.joint_names))
-    runs = [s.name for s in EE_SETTINGS]  # one name per run for the traces and the videos (run_outputs.slug)
+        rows.append(_event_row(number_joints(summarize_ee_collision(tr), robot.joint_names), tr, robot))
+        if setting.threshold is not None:
+            rows[-1]["detection"] = tr.meta["detection"] = detection.describe()
+    runs = [s.name for s in settings]  # one name per run for the traces and the videos (run_outputs.slug)
     write_traces(out, "ee_collision", dict(zip(runs, traces, strict=True)))
     write_json(out / "ee_collision_summary.json", rows)
     _print_placement(traces[0].meta.get("placement"))
@@ -192,6 +265,7 @@ def _demo(args: argparse.Namespace) -> int:
                 ("block_displacement_m", "block moved [m]", "{:.3f}"),
                 ("block_tipped", "tipped", "{}"),
                 ("final_swing_error_rad", f"|q{rows[0].get('swing_joint', 1)} err| end [rad]", "{:.3f}"),
+                *_EVENT_COLUMNS,
             ],
         )
     )
@@ -234,6 +308,7 @@ def _print_placement(placement: dict[str, Any] | None) -> None:
 
 def _link(args: argparse.Namespace) -> int:
     from reflexarm.experiments.collision import (
+        LINK_SETTING,
         compare_with_paper,
         model_torque,
         run_link_collision,
@@ -243,16 +318,29 @@ def _link(args: argparse.Namespace) -> int:
 
     choice = model_choice(args)
     robot = load_robot_from_args(args)
+    detection = detection_choice(args, robot)
     model = choice.build(robot)
     print(f"controller model: {choice.label()}; sensor noise: the paper's", file=sys.stderr)
     print(model_error_line(robot, model), file=sys.stderr)
+    _print_detection(detection, args.plant_friction)
+    setting = _detecting(LINK_SETTING, detection)
+    print(_setting_line(setting), file=sys.stderr)
     out = out_dir(args)
     with SceneCapture(args, out, "link_collision") as scene:
         tr = run_link_collision(
-            model=model, model_error=0.0, seed=args.seed, progress=not args.quiet, robot=robot, link=args.link
+            model=model,
+            model_error=0.0,
+            setting=setting,
+            seed=args.seed,
+            progress=not args.quiet,
+            robot=robot,
+            link=args.link,
+            plant_friction=args.plant_friction,
         )
     tr.meta["controller_model"] = choice.describe()
-    row = number_joints(summarize_link_collision(tr), robot.joint_names)
+    tr.meta["detection"] = detection.describe()
+    row = _event_row(number_joints(summarize_link_collision(tr), robot.joint_names), tr, robot)
+    row["detection"] = detection.describe()
     write_traces(out, "link_collision", {"link collision": tr})
     write_json(out / "link_collision_summary.json", [row])
     _print_placement(tr.meta.get("placement"))
@@ -268,6 +356,7 @@ def _link(args: argparse.Namespace) -> int:
                 ("detection_delay_s", "delay [s]", "{:.3f}"),
                 ("detected_joints", "joints", "{}"),
                 ("peak_external_torque_Nm", "peak |tau_ext| [Nm]", "{:.1f}"),
+                *_EVENT_COLUMNS,
             ],
         )
     )

@@ -33,7 +33,7 @@ from reflexarm.experiments.collision_summary import (
     write_outputs,
 )
 from reflexarm.experiments.link_push import link_push_plan
-from reflexarm.robots import RobotModel, load_robot, perturb_model
+from reflexarm.robots import CoulombViscousFriction, RobotModel, load_robot, perturb_model
 from reflexarm.sim import (
     PAPER_NOISE,
     Cinderblock,
@@ -52,6 +52,7 @@ __all__ = [
     "CollisionSetting",
     "EE_SETTINGS",
     "LINK_SETTING",
+    "PLANT_FRICTIONS",
     "ee_collision_trajectory",
     "compare_with_paper",
     "controller_model",
@@ -105,15 +106,18 @@ def controller_model(
 
 @dataclass(frozen=True)
 class CollisionSetting:
-    """One run of Fig. 8: joint stiffness k_i [Nm/rad], observer gain k_o [1/s], threshold zeta [Nm]
-    (None: detection off), and the reaction ("gravity" = (13), "none")."""
+    """One run of Fig. 8: joint stiffness k_i [Nm/rad], observer gain k_o [1/s], threshold zeta [Nm], one
+    level or one per joint (None: detection off), the reaction (a name of ``Controller(reaction=...)``:
+    "gravity" = (13), "compliant", "none", ...) and, optionally, the gain of a second observer that detects
+    (``detection_observer_gain`` [1/s], None: the first observer detects)."""
 
     name: str
     stiffness: float
     observer_gain: float = 5.0
-    threshold: float | None = 11.0
+    threshold: float | tuple[float, ...] | None = 11.0
     reaction: str = "gravity"
     damping_ratio: float = 0.7
+    detection_observer_gain: float | None = None
 
     def controller(self, robot: RobotModel) -> Controller:
         """This setting's controller on the model ``robot`` (the controller's model, not the plant's)."""
@@ -122,6 +126,7 @@ class CollisionSetting:
             stiffness=self.stiffness,
             damping_ratio=self.damping_ratio,
             observer_gain=self.observer_gain,
+            detection_observer_gain=self.detection_observer_gain,
             threshold=self.threshold,
             reaction=self.reaction,
         )
@@ -215,6 +220,17 @@ def link_collision_trajectory() -> JointTrajectory:
     return JointTrajectory(np.array([a, a, b, b]), np.array([1.0, 10.0, 2.0]))
 
 
+#: The true arm's joint friction in the collision experiments (``plant_friction=``): the robot file's
+#: (``frictionloss`` = Coulomb, ``damping`` = viscous), or none at all (both zero on every joint).
+PLANT_FRICTIONS = ("file", "none")
+
+
+def _true_friction(robot: RobotModel, plant_friction: str) -> CoulombViscousFriction | None:
+    if plant_friction not in PLANT_FRICTIONS:
+        raise ConfigError(f"unknown plant_friction {plant_friction!r}; choose one of: {', '.join(PLANT_FRICTIONS)}")
+    return None if plant_friction == "file" else CoulombViscousFriction.zeros(robot.n)
+
+
 def _block(block: str) -> dict[str, object]:
     if block not in EE_BLOCKS:
         raise ConfigError(f"unknown cinderblock variant {block!r}; choose one of: {', '.join(EE_BLOCKS)}")
@@ -233,6 +249,7 @@ def run_ee_collision(
     progress: bool = False,
     robot: RobotModel | None = None,
     depth: float = 0.12,
+    plant_friction: str = "file",
 ) -> Trace:
     """One run of the cinderblock experiment (Figs. 7-8).
 
@@ -252,6 +269,9 @@ def run_ee_collision(
         progress: show a progress bar.
         robot: the arm (plant's true model; default the built-in Atlas arm).
         depth: how deep the unobstructed end effector would run into the block [m] (not on Atlas).
+        plant_friction: the true arm's joint friction: "file" (the robot file's frictionloss and damping)
+            or "none" (no joint friction or damping at all: an arm that nothing but its controller stops;
+            the controller's model is unchanged), see :data:`PLANT_FRICTIONS`.
     """
     robot = load_robot(ROBOT) if robot is None else robot
     ctrl_model, model_info = controller_model(robot, model_error, model_seed, model)
@@ -271,13 +291,14 @@ def run_ee_collision(
         scene = Cinderblock(**kwargs, **variant)  # type: ignore[arg-type]
         placement = {**placement, **plan.describe()}
         swing_joint = plan.joint
-    plant = Plant(robot, scene=scene, noise=noise, seed=seed)
+    plant = Plant(robot, scene=scene, noise=noise, seed=seed, true_friction=_true_friction(robot, plant_friction))
     plant.reset(traj.sample(0.0).q_d)
     ctrl = setting.controller(ctrl_model)
     trace = run_fast(plant, ctrl, traj, traj.duration, progress=progress)  # compiled when it can
     trace.meta.update(
         {
             "experiment": "ee_collision",
+            "plant_friction": plant_friction,
             "robot": robot.name,
             "swing_joint": swing_joint + 1,
             "placement": placement,
@@ -303,8 +324,10 @@ def run_link_collision(
     progress: bool = False,
     robot: RobotModel | None = None,
     link: int | str | None = None,
+    plant_friction: str = "file",
 ) -> Trace:
-    """The elbow push of Figs. 9-10 with detection and reaction (13); arguments as :func:`run_ee_collision`.
+    """The elbow push of Figs. 9-10 with detection and reaction (13); arguments as :func:`run_ee_collision`
+    (``plant_friction`` too).
 
     On another ``robot`` than Atlas (or with ``link`` on Atlas) the stick pushes ``link`` (1-based joint
     number whose link is pushed, or a link name; default mid-chain) while the arm swings it
@@ -321,13 +344,15 @@ def run_link_collision(
         traj = plan.trajectory
         scene = ElbowStick(body=plan.body, t_start=plan.t_start, standoff=plan.standoff)
         placement = dict(plan.info)
-    plant = Plant(robot, scene=scene, noise=noise, seed=seed)
+    plant = Plant(robot, scene=scene, noise=noise, seed=seed, true_friction=_true_friction(robot, plant_friction))
     plant.reset(traj.sample(0.0).q_d)
     ctrl = setting.controller(ctrl_model)
     trace = run_fast(plant, ctrl, traj, traj.duration, progress=progress)  # compiled when it can
     trace.meta.update(
         {
             "experiment": "link_collision",
+            "pushed_body": scene.body,
+            "plant_friction": plant_friction,
             "robot": robot.name,
             "placement": placement,
             "setting": asdict(setting),

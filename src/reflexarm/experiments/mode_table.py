@@ -12,6 +12,7 @@ from reflexarm.experiments.compensation import (
     CompensationSetup,
     HoldReference,
     build_plant,
+    controller_model,
     ee_positions,
     held_posture,
     make_controller,
@@ -57,8 +58,41 @@ def _designed_displacement(robot: RobotModel, q: np.ndarray, jac: np.ndarray, f:
     return float(np.linalg.norm(jac @ (jac.T @ f) / k))
 
 
+def _supervised_controller(
+    setup: CompensationSetup,
+    kappa_eps: int,
+    kappa_ext: int,
+    model_seed: int,
+    threshold: float | tuple[float, ...],
+    detection_observer_gain: float | None,
+    reaction: str,
+) -> Controller:
+    """The controller of the supervised link push: :func:`make_controller`'s, with detection (threshold per
+    joint or one, a second detecting observer if ``detection_observer_gain``)."""
+    return Controller(
+        controller_model(setup, None, model_seed),
+        stiffness=setup.stiffness,
+        damping_ratio=setup.damping_ratio,
+        observer_gain=setup.observer_gain,
+        detection_observer_gain=detection_observer_gain,
+        threshold=threshold,
+        reaction=reaction,
+        kappa_f=setup.kappa_f,
+        kappa_eps=kappa_eps,
+        kappa_ext=kappa_ext,
+        residual_limit=setup.residual_limit,
+    )
+
+
 def mode_table(
-    setup: CompensationSetup | None = None, *, seed: int = 0, model_seed: int | None = None, progress: bool = False
+    setup: CompensationSetup | None = None,
+    *,
+    seed: int = 0,
+    model_seed: int | None = None,
+    progress: bool = False,
+    threshold: float | tuple[float, ...] = 11.0,
+    detection_observer_gain: float | None = None,
+    reaction: str = "compliant",
 ) -> tuple[list[dict[str, Any]], dict[str, Trace]]:
     """Fig. 3 measured: for each mode, accuracy under model errors, end-effector and link compliance.
 
@@ -69,8 +103,10 @@ def mode_table(
     * link compliance: 50 N on the forearm link at the elbow (:class:`LinkForce`; on another arm the
       mid-chain link, :func:`~reflexarm.experiments.any_arm.default_link`), not seen by the wrist
       sensor; ratio = measured displacement of the link / prescribed;
-    * link compliance with the supervisor: the same push with detection (zeta = 11 Nm, the paper's
-      threshold) and the supervisor's reaction "compliant" (Fig. 3's automatic switch).
+    * link compliance with the supervisor: the same push with detection (``threshold``, default zeta = 11 Nm,
+      the paper's; the observer of ``setup.observer_gain``, or a second detecting one of
+      ``detection_observer_gain``) and the reaction ``reaction`` (default "compliant": Fig. 3's automatic
+      switch).
 
     Returns:
         (rows, traces): one row per mode with the measured values, the derived marks and the paper's.
@@ -106,13 +142,12 @@ def mode_table(
         for supervised in (False, True):
             push = LinkForce(body=link, magnitude=setup.force, t_on=setup.t_on, t_off=setup.t_off)
             plant, _ = build_plant(setup, [push], noise_scale=setup.noise_scale, seed=noise_seed)
-            ctrl = make_controller(
-                setup,
-                mode.kappa_eps,
-                mode.kappa_ext,
-                model_seed=model_seed,
-                threshold=11.0 if supervised else None,
-                reaction="compliant" if supervised else "none",
+            ctrl = (
+                _supervised_controller(
+                    setup, mode.kappa_eps, mode.kappa_ext, model_seed, threshold, detection_observer_gain, reaction
+                )
+                if supervised
+                else make_controller(setup, mode.kappa_eps, mode.kappa_ext, model_seed=model_seed)
             )
             runner_ctrl: Controller | ModeSupervisor = ModeSupervisor(ctrl, mode=name) if supervised else ctrl
             tr_l = run_closed_loop(plant, runner_ctrl, HoldReference(q0), setup.duration, progress=progress)
