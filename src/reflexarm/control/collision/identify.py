@@ -115,7 +115,7 @@ class LinkFit:
         points: (m, 3) candidate points, world [m].
         normals: (m, 3) outward normals, world.
         forces: (m, 3) best force at each point (in its friction cone), world [N].
-        errors: (m,) fit error ``|J_p^T f - r|`` at each point [Nm].
+        errors: (m,) fit error ``|W (J_p^T f - r)|`` at each point (weighted; [Nm] without weights).
         best: index of the best point (-1 when the link has no geometry).
         link_rank: rank of the link's 6 x (link+1) Jacobian (independent residual components).
         wrench_error: error of the best unconstrained wrench at the link origin [Nm] (a lower bound of
@@ -201,13 +201,21 @@ class ContactIdentifier:
         """Joint frames and Jacobians at ``q`` (checked by the caller)."""
         return compute_link_kinematics(self.robot, q, self._data)
 
-    def fit_link(self, kin: LinkKinematics, link: int, residual: np.ndarray) -> LinkFit:
-        """Score every candidate point of ``link`` against ``residual`` (vectorised over the points)."""
+    def fit_link(
+        self, kin: LinkKinematics, link: int, residual: np.ndarray, weights: np.ndarray | None = None
+    ) -> LinkFit:
+        """Score every candidate point of ``link`` against ``residual`` (vectorised over the points).
+
+        ``weights`` (n,), positive: the fit minimises ``|W (J_p^T f - r)|`` with ``W = diag(weights)`` (the
+        inverse noise level per joint, as the Contact Particle Filter weights by the noise covariance);
+        ``errors`` and ``wrench_error`` are in that norm. Default: unweighted.
+        """
+        w = np.ones(residual.shape[0]) if weights is None else weights
         surface = self.geometry.links[link]
         R, o, J = kin.rotations[link], kin.origins[link], kin.jacobians[link]
-        r = residual
+        r = w * residual
         link_rank = _rank(J[:, : link + 1])
-        wrench_error = _wrench_error(J, r)
+        wrench_error = _wrench_error(J * w[None, :], r)
         if not surface.has_geometry:
             empty = np.zeros((0, 3))
             return LinkFit(link, empty, empty, empty, np.zeros(0), -1, link_rank, wrench_error, J, o)
@@ -215,6 +223,7 @@ class ContactIdentifier:
         points = d + o
         normals = surface.normals @ R.T
         JpT = J[:3].T[None, :, :] + np.cross(J[3:].T[None, :, :], d[:, None, :])  # (m, n, 3): J_p^T
+        JpT *= w[None, :, None]
         forces = self._constrained_forces(JpT, r, self._generators[link] @ R.T, self._facet_normals[link] @ R.T)
         errors = np.linalg.norm(np.einsum("mci,mi->mc", JpT, forces) - r, axis=1)
         best = int(np.argmin(errors))
@@ -275,7 +284,8 @@ class ContactIdentifier:
     ) -> ContactEstimate:
         """The contact estimate on ``fit``'s link and what the residual determines (see the module docstring).
 
-        ``tolerance`` [Nm]: points whose fit error is within it of the best form the consistent set.
+        ``tolerance``: points whose fit error (as in ``fit.errors``) is within it of the best form the consistent
+        set. The record's ``fit_error`` is the unweighted ``|J_c^T f - r|`` [Nm].
         """
         surface = self.geometry.links[fit.link]
         if fit.best < 0:
@@ -291,6 +301,10 @@ class ContactIdentifier:
                 candidate_links,
             )
         best = fit.best
+        d = fit.points[best] - fit.origin
+        error = float(
+            np.linalg.norm((fit.jacobian[:3] + np.cross(fit.jacobian[3:].T, d).T).T @ fit.forces[best] - residual)
+        )
         consistent = fit.errors <= fit.errors[best] + tolerance
         count = int(consistent.sum())
         spread = float(np.linalg.norm(fit.points[consistent] - fit.points[best], axis=1).max())
@@ -301,7 +315,7 @@ class ContactIdentifier:
                 surface.link_name,
                 fit.points[best].copy() if point else None,
                 fit.forces[best].copy() if force else None,
-                float(fit.errors[best]),
+                error,
                 determined,
                 reason,
                 candidate_links,

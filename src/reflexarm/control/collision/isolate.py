@@ -9,11 +9,13 @@ A point force on link i (0-based) produces no torque on the joints after i. So:
    the links after k are examined too.
 3. **Confirmation by the transposed Jacobian**: on each candidate link every surface point is scored by the
    friction-cone fit of :mod:`reflexarm.control.collision.identify` (the exhaustive Contact Particle
-   Filter score ``|J_p^T f - r|``); a link without collision geometry is scored by its best wrench at the
-   link origin (a lower bound: it may have been hit, but where cannot be said).
+   Filter score ``|W (J_p^T f - r)|``, weighted per joint by ``W = min(significance) / significance``, the
+   inverse noise level, as the Contact Particle Filter weights by the noise covariance; equal levels give
+   the plain norm); a link without collision geometry is scored by its best wrench at the link origin (a
+   lower bound: it may have been hit, but where cannot be said).
 4. **Choice**: the most proximal candidate link whose best fit is within ``tolerance`` of the best fit of
-   all candidates, ``tolerance = fit_tolerance + relative_tolerance * |r|`` [Nm] (the noise level plus
-   the discretisation of the candidate points: about 1 cm spacing moves the fit by a few per cent of |r|).
+   all candidates, ``tolerance = fit_tolerance + relative_tolerance * |W r|`` (the noise level plus the
+   discretisation of the candidate points: about 1 cm spacing moves the fit by a few per cent of |r|).
    When several links explain the residual equally, the joints cannot tell them apart; the most proximal
    one is the one the residual *requires* (a contact there needs no particular line of action).
 5. If no candidate explains the residual within ``tolerance`` (several contacts, an external moment, a
@@ -53,8 +55,9 @@ class ContactIsolator:
             positive): the detection threshold zeta, or the residual's noise level.
         geometry: the links' collision surfaces; default ``link_collision_geometry(robot, spacing=spacing)``.
         spacing: candidate point spacing [m] when ``geometry`` is not given.
-        fit_tolerance: absolute part of the fit tolerance [Nm], >= 0 (the residual's noise norm).
-        relative_tolerance: relative part, a fraction of |r|, >= 0.
+        fit_tolerance: absolute part of the fit tolerance, >= 0, in the weighted norm (the norm of the residual's
+            noise weighted by W; [Nm] of the least noisy joint).
+        relative_tolerance: relative part, a fraction of |W r|, >= 0.
         friction_coefficient: mu of the friction cone at the contact (0.5 as in the Contact Particle Filter).
         cone_edges: generators of the linearised friction cone, >= 3.
 
@@ -77,6 +80,8 @@ class ContactIsolator:
         self.robot = robot
         self.n = robot.n
         self.significance = as_vector(significance, self.n, "significance", positive=True)
+        #: W of the weighted fit: the inverse significance, scaled so that the least noisy joint has weight 1
+        self.weights = float(self.significance.min()) / self.significance
         for name, value in (("fit_tolerance", fit_tolerance), ("relative_tolerance", relative_tolerance)):
             if not (isinstance(value, (int, float)) and np.isfinite(value) and value >= 0.0):
                 raise ConfigError(f"{name} must be a finite number >= 0; got {value!r}")
@@ -99,8 +104,8 @@ class ContactIsolator:
         return arr
 
     def tolerance(self, residual: np.ndarray) -> float:
-        """The fit tolerance for this residual [Nm]: ``fit_tolerance + relative_tolerance * |r|``."""
-        return self.fit_tolerance + self.relative_tolerance * float(np.linalg.norm(residual))
+        """The fit tolerance for this residual (weighted norm): ``fit_tolerance + relative_tolerance * |W r|``."""
+        return self.fit_tolerance + self.relative_tolerance * float(np.linalg.norm(self.weights * residual))
 
     def candidate_links(self, residual: npt.ArrayLike) -> tuple[int, ...]:
         """The most distal joint with a significant residual and every link after it; ``()`` if none."""
@@ -112,7 +117,7 @@ class ContactIsolator:
         """The fits of every candidate link (for inspection; :meth:`isolate` uses them)."""
         qa, r = self._check(q, "q"), self._check(residual, "residual")
         kin = self.identifier.kinematics(qa)
-        return [self.identifier.fit_link(kin, link, r) for link in self.candidate_links(r)]
+        return [self.identifier.fit_link(kin, link, r, self.weights) for link in self.candidate_links(r)]
 
     def isolate(self, q: npt.ArrayLike, residual: npt.ArrayLike) -> ContactEstimate:
         """Contact link, point and force from the residual at configuration ``q``.
@@ -132,7 +137,7 @@ class ContactIsolator:
                 f"(max |r_j| / level_j = {float(np.max(np.abs(r) / self.significance)):.3g})"
             )
         kin = self.identifier.kinematics(qa)
-        fits = [self.identifier.fit_link(kin, link, r) for link in candidates]
+        fits = [self.identifier.fit_link(kin, link, r, self.weights) for link in candidates]
         tol = self.tolerance(r)
         best = min(f.best_error for f in fits)
         chosen = next(f for f in fits if f.best_error <= best + tol)
@@ -146,8 +151,8 @@ class ContactIsolator:
             None,
             estimate.fit_error,
             Determined.LINK_ONLY,
-            f"no single contact force on links {candidates[0]}..{candidates[-1]} explains the residual (best fit "
-            f"error {best:.3g} Nm > tolerance {tol:.3g} Nm): several contacts, an external moment or a model "
+            f"no single contact force on links {candidates[0]}..{candidates[-1]} explains the residual (weighted "
+            f"best fit error {best:.3g} > tolerance {tol:.3g}): several contacts, an external moment or a model "
             "error beyond the tolerance; point undetermined, force undetermined",
             candidates,
             estimate.consistent_points,
