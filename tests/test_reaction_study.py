@@ -1,0 +1,77 @@
+"""The reaction study: its arms, its rows, a refused reaction, the files it writes, and the physics it must
+show (an arm without joint friction or damping moves on after a gravity-compensation reaction at least as
+much as the same arm with its friction)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from reflexarm.errors import ConfigError
+from reflexarm.experiments.reaction_study import (
+    SCENARIOS,
+    STUDY_ARMS,
+    StudyArm,
+    run_reaction_study,
+    study_arm,
+)
+
+
+def test_study_arms_load(tmp_path):
+    for name in STUDY_ARMS:
+        arm = study_arm(name, tmp_path)
+        assert isinstance(arm, StudyArm) and arm.name == name
+    assert study_arm("ur_like", tmp_path).robot.n == 6
+    assert study_arm("iiwa14_frictionless").plant_friction == "none"
+    assert study_arm("iiwa14").plant_friction == "file"
+    with pytest.raises(ConfigError, match="unknown study arm 'kuka'; choose one of: atlas_v5_left_arm, panda, iiwa14"):
+        study_arm("kuka")
+
+
+def test_bad_scenarios_and_reactions_are_named():
+    with pytest.raises(ConfigError, match="unknown scenario 'push'; choose from: demo, link"):
+        run_reaction_study(["iiwa14"], ["gravity"], ["push"])
+    with pytest.raises(ConfigError, match="no reaction to study"):
+        run_reaction_study(["iiwa14"], [], SCENARIOS)
+
+
+@pytest.fixture(scope="module")
+def link_study():
+    return run_reaction_study(["iiwa14", "iiwa14_frictionless"], ["gravity", "hover"], ["link"])
+
+
+def test_rows_and_a_refused_reaction(link_study, tmp_path):
+    rows = link_study.rows
+    assert [(r["arm"], r["reaction"]) for r in rows] == [
+        ("iiwa14", "gravity"),
+        ("iiwa14", "hover"),
+        ("iiwa14_frictionless", "gravity"),
+        ("iiwa14_frictionless", "hover"),
+    ]
+    for r in rows:
+        if r["reaction"] == "hover":  # the controller refuses it, naming its choices; the study goes on
+            assert r["error"] is not None and "unknown reaction 'hover'" in r["error"]
+            assert link_study.outcome(r["arm"], "link", "hover") is None
+        else:
+            assert r["error"] is None and r["contact_class"] == "link" and r["detected_s"] is not None
+            assert r["detected_s"] >= r["contact_s"]
+            assert r["run"] == f"{r['arm']}/link/gravity"
+    files = link_study.write(tmp_path)
+    doc = json.loads(files["json"].read_text())
+    assert doc["conditions"]["model_error"] == 0.1 and doc["conditions"]["threshold_Nm"] == 11.0
+    assert len(doc["rows"]) == 4
+    lines = files["csv"].read_text().splitlines()
+    assert lines[0].startswith("arm,scenario,reaction,plant_friction,error,run,") and len(lines) == 5
+
+
+def test_without_friction_the_arm_moves_on_at_least_as_far(link_study):
+    """Same arm, controller, noise and contact; the plant without friction and damping dissipates less, so
+    after the gravity-compensation reaction it keeps more kinetic energy and moves at least as far."""
+    a = link_study.outcome("iiwa14", "link", "gravity")
+    b = link_study.outcome("iiwa14_frictionless", "link", "gravity")
+    assert a is not None and b is not None
+    assert b.moved_after_detection_m >= a.moved_after_detection_m
+    assert b.kinetic_energy_after_J >= a.kinetic_energy_after_J
+    assert np.isfinite(b.peak_speed_ratio)
