@@ -22,6 +22,7 @@ from reflexarm.experiments.collision_events import (
     KE_RESIDUAL_SHARE,
     KE_WINDOW_S,
     RELEASE_MIN_S,
+    RELEASE_SHARE,
     CollisionOutcome,
     collision_outcome,
     write_outcomes,
@@ -184,14 +185,15 @@ def test_contact_point_is_the_scenes_recorded_tip(ee_run):
 
 
 # ------------------------------------------------------------------------------------------ a link collision
-def link_run(arm, gap_ticks: int, meta=None):
+def link_run(arm, gap_ticks: int, meta=None, gap_level: float = 0.0):
     """Joint 2 turns at 0.5 rad/s (link 1 still); a torque on joint 2 only (a push on link 2): 4 Nm from
-    t = 0.5 s, detection at 0.7 s, then it falls to 0 for ``gap_ticks`` ticks at 1.0 s and comes back."""
+    t = 0.5 s, detection at 0.7 s, then it falls to ``gap_level`` for ``gap_ticks`` ticks at 1.0 s and
+    comes back."""
     t = np.arange(1500) * DT
     q = np.column_stack([np.zeros_like(t), 0.5 * t])
     dq = np.column_stack([np.zeros_like(t), np.full_like(t, 0.5)])
     tau2 = np.where(t >= 0.5, 4.0, 0.0)
-    tau2[1000 : 1000 + gap_ticks] = 0.0
+    tau2[1000 : 1000 + gap_ticks] = gap_level
     tau = np.column_stack([np.zeros_like(t), tau2])
     return collision_outcome(make_trace(q, dq, np.zeros_like(t), tau, 700, crossed=(1,), meta=meta), arm)
 
@@ -233,6 +235,13 @@ def test_recontact_needs_a_release_of_RELEASE_MIN_S(arm, gap_ticks, expected):
     if expected:
         assert o.recontact_s == pytest.approx(1.0 + gap_ticks * DT, abs=TOL)
         assert o.peak_after_recontact == pytest.approx(4.0)
+
+
+@pytest.mark.parametrize("share", [0.9, 1.0, RELEASE_SHARE + 0.01])
+def test_a_resting_contact_at_its_level_is_no_recontact(arm, share):
+    """The torque sits at (or just under) the 1 Nm contact level for 300 ms: not a release, so the rise
+    back to 4 Nm is the same contact (the Atlas demo's Coll.Det rests on the block at 4.6-5.2 N)."""
+    assert not link_run(arm, 300, gap_level=share * 1.0).recontact
 
 
 def test_undetected_and_contact_free_runs(arm):

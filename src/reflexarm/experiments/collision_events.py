@@ -18,8 +18,9 @@ the plant's :class:`~reflexarm.robots.RobotModel` into the record the collision 
 * moved after detection: the largest distance of the end effector (end-effector class) or of the contact
   link's origin (link class) from where it was at detection [m], and the largest |q_j - q_j(t_det)| [rad];
 * re-contact: after detection the contact signal of the class (force for the end effector, external torque
-  for a link; either for the class "none") falls below its level for at least :data:`RELEASE_MIN_S` and
-  rises above it again (a settling contact that dips below the level for a few ticks is not a new strike).
+  for a link; either for the class "none") falls below :data:`RELEASE_SHARE` of its level for at least
+  :data:`RELEASE_MIN_S` (a release) and then rises above the level again (a settling contact that dips for a
+  few ticks, or a resting one that sits at the level, is not a new strike).
 """
 
 from __future__ import annotations
@@ -44,6 +45,7 @@ __all__ = [
     "KE_RESIDUAL_SHARE",
     "KE_WINDOW_S",
     "RELEASE_MIN_S",
+    "RELEASE_SHARE",
     "CollisionOutcome",
     "collision_outcome",
     "write_outcomes",
@@ -58,10 +60,15 @@ KE_WINDOW_S = 0.5
 #: The arm counts as stopped when its kinetic energy falls below this share of its value at detection.
 KE_RESIDUAL_SHARE = 0.01
 
-#: A contact signal must stay below its level this long [s] before a rise counts as a re-contact: longer
-#: than the few ticks a settling padded contact dips below 5 N (measured on the demo's decaying force), far
-#: shorter than the time an arm needs to leave a block and come back (hundreds of ms at < 1 m/s).
+#: A contact signal must stay below :data:`RELEASE_SHARE` of its level this long [s] before a rise above the
+#: level counts as a re-contact: longer than the few ticks a settling contact dips, far shorter than the time
+#: an arm needs to leave a block and come back (hundreds of ms at < 1 m/s).
 RELEASE_MIN_S = 0.02
+
+#: The contact counts as released below this share of its level: a separation takes the true force to 0,
+#: while a resting contact can sit at the level itself (the Atlas demo's Coll.Det run rests on the block with
+#: 4.6-5.2 N after its reaction, crossing the 5 N level back and forth without leaving the block).
+RELEASE_SHARE = 0.5
 
 
 @dataclass(frozen=True)
@@ -151,17 +158,16 @@ def _kinetic_energy(robot: RobotModel, q: np.ndarray, dq: np.ndarray) -> np.ndar
 
 
 def _recontact(signal: np.ndarray, level: float, start: int, min_release: int) -> int | None:
-    """Index of the first rise above ``level`` after the signal stayed below it for ``min_release`` ticks,
-    searching from ``start``; None if there is none."""
-    below = signal[start:] <= level
+    """Index of the first rise above ``level`` after the signal stayed below ``RELEASE_SHARE * level`` for
+    ``min_release`` ticks, searching from ``start``; None if there is none."""
+    released = False
     run = 0
-    for k, b in enumerate(below):
-        if b:
-            run += 1
-        elif run >= min_release:
-            return start + k
-        else:
-            run = 0
+    for k in range(start, signal.size):
+        x = signal[k]
+        if released and x > level:
+            return k
+        run = run + 1 if x < RELEASE_SHARE * level else 0
+        released = released or run >= min_release
     return None
 
 
