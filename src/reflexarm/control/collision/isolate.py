@@ -41,8 +41,9 @@ from reflexarm.robots.robot_model import RobotModel
 
 __all__ = ["RELATIVE_TOLERANCE", "ContactIsolator"]
 
-#: Default relative part of the fit tolerance (fraction of |r|): the candidate points' ~1 cm spacing moves
-#: the best fit of an exact residual by up to a few per cent of |r| (measured in the isolation study).
+#: Default relative part of the fit tolerance (fraction of |W r|): allowance for the candidate points' ~1 cm
+#: spacing, which moves the best fit of an exact residual by a few per cent of |r| (an estimate: a 0.5 cm
+#: offset on a ~20 cm lever; set before the isolation study was run, not tuned on it).
 RELATIVE_TOLERANCE = 0.05
 
 
