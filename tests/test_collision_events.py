@@ -167,7 +167,7 @@ def test_motion_after_detection(ee_run):
     assert o.joint_travel_joint == 1
     assert o.moved_after_detection_m == pytest.approx(4 * math.sin(travel / 2), abs=TOL)
     assert o.peak_speed_ratio == pytest.approx(W / V_LIMIT[0], abs=TOL)
-    assert o.peak_speed_joint == 1
+    assert o.peak_speed_joint == 1 and o.peak_speed_rad_s == pytest.approx(W, abs=TOL)
 
 
 def test_recontact_after_a_release(ee_run):

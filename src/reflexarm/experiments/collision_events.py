@@ -102,6 +102,7 @@ class CollisionOutcome:
         joint_travel_joint: the joint of that largest travel.
         peak_speed_ratio: largest |dq_j| / velocity limit_j after detection.
         peak_speed_joint: the joint of that largest ratio.
+        peak_speed_rad_s: largest |dq_j| after detection (also for arms whose file gives no velocity limit).
         recontact: the contact came back after a release (module docstring).
         recontact_s: when it came back.
         peak_after_recontact: the largest contact signal after the re-contact (N for end-effector, Nm else).
@@ -133,6 +134,7 @@ class CollisionOutcome:
     joint_travel_joint: int | None
     peak_speed_ratio: float | None
     peak_speed_joint: int | None
+    peak_speed_rad_s: float | None
     recontact: bool
     recontact_s: float | None
     peak_after_recontact: float | None
@@ -223,6 +225,7 @@ def _after_detection(
     travel = np.abs(trace.q[i_d:] - trace.q[i_d]).max(axis=0)
     values["joint_travel_after_detection_rad"] = float(travel.max())
     values["joint_travel_joint"] = int(np.argmax(travel)) + 1
+    values["peak_speed_rad_s"] = float(np.abs(trace.dq[i_d:]).max())
     vmax = robot.velocity_limit
     if np.all(np.isfinite(vmax)) and np.all(vmax > 0):
         ratio = (np.abs(trace.dq[i_d:]) / vmax).max(axis=0)
