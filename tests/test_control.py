@@ -250,7 +250,7 @@ def test_nan_before_any_valid_state_gives_zero_torque(atlas):
         (dict(threshold=[11.0, 11.0]), "threshold must have shape (7,)"),
         (dict(kappa_eps=2), "kappa_eps must be 0 or 1"),
         (dict(kappa_ext=0.5), "kappa_ext must be 0 or 1"),
-        (dict(reaction="retract"), "unknown reaction 'retract'"),
+        (dict(reaction="explode"), "unknown reaction 'explode'; choose one of: gravity, brake, retract, compliant"),
         (dict(dt=0.0), "dt must be a positive number"),
         (dict(stiffness=np.ones((7, 7)) * 300), "stiffness must be diagonal"),
     ],

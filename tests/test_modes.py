@@ -99,7 +99,8 @@ def test_closed_loop_of_each_mode_under_ee_force(atlas, mode):
 
 def test_link_collision_switches_to_compliant_and_is_logged(atlas):
     # precise_ee_compliant is stiff against link contacts; a push on the structure is detected and the
-    # supervisor's controller (reaction "compliant") ramps kappa_eps to 0: the arm yields as in (3).
+    # supervisor's controller (reaction "compliant") ramps kappa_eps to 0 and holds the posture at detection at
+    # 0.1 K: the arm yields as in (3) with that stiffness.
     robot = frictionless(atlas)
     push = np.zeros(robot.n)
     push[1] = 20.0
@@ -120,8 +121,11 @@ def test_link_collision_switches_to_compliant_and_is_logged(atlas):
     # first-order residual reaching zeta = 11 of 20 Nm with k_o = 10: t = -ln(1 - 11/20)/10 = 0.080 s
     # (tolerance 5 ms: the 1 ms tick plus the arm's own small motion feeding back into the residual)
     assert abs(tr[1].t - t0 - (-np.log(1 - 11 / 20) / 10)) < 0.005
-    # after the switch the arm is compliant: K dq = tau_ext (3), to 1 % of the push (exact model)
-    np.testing.assert_allclose(K * (qs[-1] - robot.home), push, atol=0.2)
+    # after the switch the arm is compliant around the posture at detection: 0.1 K (q - q_detect) = tau_ext (3),
+    # to 1 % of the push (exact model)
+    event = ctrl.event
+    assert event is not None and event.reaction == "compliant" and event.phase == "holding"
+    np.testing.assert_allclose(0.1 * K * (qs[-1] - event.q_detect), push, atol=0.2)
     # the task cannot re-select a precise mode while the reaction is latched
     with pytest.raises(ConfigError) as e:
         sup.select("precise_stiff")

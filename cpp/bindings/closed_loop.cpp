@@ -22,6 +22,7 @@
 
 #include "reflexarm/closed_loop.hpp"
 #include "reflexarm/model_io.hpp"
+#include "event_dict.hpp"
 
 namespace nb = nanobind;
 using namespace nb::literals;
@@ -315,6 +316,7 @@ NB_MODULE(_closed_loop, m)
     .def_prop_ro("first_time", [](PyLoop & self) { return self.loop.controller().firstDetectionTime(); })
     .def_prop_ro("detected", [](PyLoop & self) { return self.loop.controller().detected(); })
     .def_prop_ro("reacted", [](PyLoop & self) { return self.loop.controller().reacted(); })
+    .def_prop_ro("event", [](PyLoop & self) { return reflexarm_bindings::eventDict(self.loop.controller()); })
     .def_prop_ro("mode", [](PyLoop & self) {
       return std::string(reflexarm::modeName(self.loop.controller().mode()));
     });

@@ -20,6 +20,7 @@
 
 #include "reflexarm/model_io.hpp"
 #include "reflexarm/reflexarm.hpp"
+#include "event_dict.hpp"
 #include "tick_io.hpp"
 
 namespace nb = nanobind;
@@ -45,7 +46,7 @@ namespace
     reflexarm::Command cmd;
     // step(): the Python Command type and the constant parts of a plain command, made once
     nb::object command_type, empty_tuple, empty_str, zero;
-    nb::object mode_names[5];
+    nb::object mode_names[reflexarm::kModeCount];
   };
 
   reflexarm::Reaction reactionFromName(const std::string & name)
@@ -56,8 +57,24 @@ namespace
       return reflexarm::Reaction::Compliant;
     if (name == "none")
       return reflexarm::Reaction::None;
-    throw reflexarm::ConfigError("unknown reaction '" + name + "'; choose one of: gravity, compliant, none");
+    if (name == "brake")
+      return reflexarm::Reaction::Brake;
+    if (name == "retract")
+      return reflexarm::Reaction::Retract;
+    throw reflexarm::ConfigError(
+      "unknown reaction '" + name + "'; choose one of: gravity, brake, retract, compliant, none");
   }
+
+  reflexarm::ObserverDiscretization discretizationFromName(const std::string & name)
+  {
+    if (name == "euler")
+      return reflexarm::ObserverDiscretization::Euler;
+    if (name == "exact")
+      return reflexarm::ObserverDiscretization::Exact;
+    throw reflexarm::ConfigError("unknown observer_discretization '" + name + "'; choose one of: euler, exact");
+  }
+
+
 
   /// One tick on inputs already read; returns a negative fault code, else n_collided + (n_saturated << kSatShift).
   int tick(PyController & c, double t, double period, const TickInputs & in)
@@ -151,6 +168,23 @@ NB_MODULE(_core, m)
   registerTiming(m);
   m.attr("SAT_SHIFT") = kSatShift;
 
+  using RP = reflexarm::ReactionParams;
+  nb::class_<RP>(m, "ReactionParams")
+    .def(nb::init<>())
+    .def_rw("brake_time", &RP::brake_time)
+    .def_rw("brake_duration", &RP::brake_duration)
+    .def_rw("retract_distance", &RP::retract_distance)
+    .def_rw("max_retract_angle", &RP::max_retract_angle)
+    .def_rw("retract_speed", &RP::retract_speed)
+    .def_rw("energy_filter_time", &RP::energy_filter_time)
+    .def_rw("velocity_fraction", &RP::velocity_fraction)
+    .def_rw("compliant_stiffness_factor", &RP::compliant_stiffness_factor)
+    .def_rw("rest_time", &RP::rest_time)
+    .def_rw("rest_energy_fraction", &RP::rest_energy_fraction)
+    .def_rw("rest_energy_floor", &RP::rest_energy_floor)
+    .def_rw("contact_level", &RP::contact_level)
+    .def_rw("position_margin", &RP::position_margin);
+
   nb::class_<reflexarm::InputBounds>(m, "InputBounds")
     .def(nb::init<>())
     .def_rw("position_margin", &reflexarm::InputBounds::position_margin)
@@ -174,6 +208,16 @@ NB_MODULE(_core, m)
     .def_prop_rw(
       "reaction", [](const P & p) { return std::string(reflexarm::reactionName(p.reaction)); },
       [](P & p, const std::string & name) { p.reaction = reactionFromName(name); })
+    .def_prop_rw(
+      "contact_reaction", [](const P & p) { return std::string(reflexarm::reactionName(p.contact_reaction)); },
+      [](P & p, const std::string & name) { p.contact_reaction = reactionFromName(name); })
+    .def_prop_rw(
+      "observer_discretization",
+      [](const P & p) {
+        return std::string(p.observer_discretization == reflexarm::ObserverDiscretization::Exact ? "exact" : "euler");
+      },
+      [](P & p, const std::string & name) { p.observer_discretization = discretizationFromName(name); })
+    .def_rw("reaction_params", &P::reaction_params)
     .def_rw("kappa_f", &P::kappa_f)
     .def_rw("kappa_eps", &P::kappa_eps)
     .def_rw("kappa_ext", &P::kappa_ext)
@@ -228,7 +272,7 @@ NB_MODULE(_core, m)
         c.empty_tuple = nb::steal(PyTuple_New(0));
         c.empty_str = nb::str("");
         c.zero = nb::int_(0);
-        for (int m = 0; m < 5; ++m)
+        for (int m = 0; m < reflexarm::kModeCount; ++m)
           c.mode_names[m] = nb::str(reflexarm::modeName(static_cast<reflexarm::Mode>(m)));
       },
       "command_type"_a, "The tuple subclass step() returns (reflexarm.signals.Command).")
@@ -298,6 +342,8 @@ NB_MODULE(_core, m)
     .def_prop_ro("kappa_ext", [](const PyController & c) { return c.ctrl.kappaExt(); })
     .def_prop_ro("eps_weight", [](const PyController & c) { return c.ctrl.epsWeight(); })
     .def_prop_ro("reacted", [](const PyController & c) { return c.ctrl.reacted(); })
+    .def_prop_ro("event", [](const PyController & c) { return reflexarm_bindings::eventDict(c.ctrl); },
+                 "The collision event record since the last reset (a dict of copies).")
     .def_prop_ro("detected", [](const PyController & c) { return c.ctrl.detected(); })
     .def_prop_ro("first_time", [](const PyController & c) { return c.ctrl.firstDetectionTime(); })
     .def_prop_ro("first_joints", [](nb::handle_t<PyController> h) {

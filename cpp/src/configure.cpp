@@ -133,7 +133,30 @@ namespace reflexarm
                                   "max_acceleration", "max_velocity",    "max_torque"};
     for (int k = 0; k < 9; ++k)
       checkPositive(bounds[k], (std::string("InputBounds.") + bound_names[k]).c_str());
-    // observer stability at the longest integrated period
+    for (const Reaction r : {p.reaction, p.contact_reaction})
+      if (static_cast<int>(r) < 0 || static_cast<int>(r) >= kReactionCount)
+        throw ConfigError(
+          "reaction " + std::to_string(static_cast<int>(r))
+          + " is not a Reaction (gravity 0, compliant 1, none 2, brake 3, retract 4)");
+    const int disc = static_cast<int>(p.observer_discretization);
+    if (disc != 0 && disc != 1)
+      throw ConfigError(
+        "observer_discretization " + std::to_string(disc) + " is not an ObserverDiscretization (euler 0, exact 1)");
+    const bool exact = p.observer_discretization == ObserverDiscretization::Exact;
+    const ReactionParams & rp = p.reaction_params;
+    const double rvals[] = {rp.brake_time,        rp.brake_duration,     rp.retract_distance,
+                            rp.max_retract_angle, rp.retract_speed,      rp.velocity_fraction,
+                            rp.compliant_stiffness_factor, rp.rest_time, rp.rest_energy_fraction,
+                            rp.rest_energy_floor, rp.energy_filter_time, rp.contact_level};
+    const char * rnames[] = {"brake_time",        "brake_duration",       "retract_distance",
+                             "max_retract_angle", "retract_speed",        "velocity_fraction",
+                             "compliant_stiffness_factor", "rest_time",   "rest_energy_fraction",
+                             "rest_energy_floor", "energy_filter_time",   "contact_level"};
+    for (int k = 0; k < 12; ++k)
+      checkPositive(rvals[k], (std::string("ReactionParams.") + rnames[k]).c_str());
+    if (!std::isfinite(rp.position_margin) || rp.position_margin < 0.0)
+      throw ConfigError("ReactionParams.position_margin must be a non-negative number of radians");
+    // observer stability at the longest integrated period (the exact form is stable at any gain)
     const double lo = p.period_band_low, hi = p.period_band_high;
     if (!(0.0 < lo && lo <= 1.0 && 1.0 <= hi && hi < kInf))
       throw ConfigError(
@@ -142,9 +165,9 @@ namespace reflexarm
     double k_o = q.observer_gain.maxCoeff();
     if (use_det)
       k_o = std::max(k_o, q.detection_observer_gain.maxCoeff());
-    if (q.observer_gain.maxCoeff() * p.dt >= 1.0 || (use_det && q.detection_observer_gain.maxCoeff() * p.dt >= 1.0))
+    if (!exact && (q.observer_gain.maxCoeff() * p.dt >= 1.0 || (use_det && q.detection_observer_gain.maxCoeff() * p.dt >= 1.0)))
       throw ConfigError("observer_gain * dt must be < 1 for the discrete observer to be stable");
-    if (k_o * p.dt * hi >= 1.0)
+    if (!exact && k_o * p.dt * hi >= 1.0)
       throw ConfigError(
         "observer_gain * dt * period_band[1] must be < 1 for the observer to stay stable at the longest "
         "integrated period");
@@ -174,6 +197,7 @@ namespace reflexarm
     data_m_ = Data(model_);
     data_p_ = Data(model0_);
     data_ff_ = Data(model0_);
+    data_r_ = Data(model_);
     K_ = q.stiffness;
     xi_ = q.damping_ratio;
     ko_ = q.observer_gain;
@@ -213,6 +237,33 @@ namespace reflexarm
       tau_m_max_[i] = (std::isfinite(ref) && ref > 0.0) ? b.torque_factor * ref : b.max_torque;
     }
     ddq_max_ = Eigen::VectorXd::Constant(n, b.max_acceleration);
+    decay_.resize(n);
+    decay_det_.resize(n);
+    v_lim_.resize(n);
+    q_safe_lo_.resize(n);
+    q_safe_hi_.resize(n);
+    for (int i = 0; i < n; ++i)
+    {
+      decay_[i] = std::exp(-ko_[i] * p.dt);
+      decay_det_[i] = std::exp(-ko_det_[i] * p.dt);
+      const double vel = model.upperVelocityLimit[i];
+      v_lim_[i] = (std::isfinite(vel) && vel > 0.0) ? vel : kInf;
+      const double lower = model.lowerPositionLimit[i], upper = model.upperPositionLimit[i];
+      const double margin = std::isfinite(lower) && std::isfinite(upper)
+                              ? std::min(rp.position_margin, 0.25 * (upper - lower))
+                              : rp.position_margin;
+      q_safe_lo_[i] = std::isfinite(lower) ? lower + margin : -kInf;
+      q_safe_hi_[i] = std::isfinite(upper) ? upper - margin : kInf;
+    }
+    event_.resize(n);
+    K_hold_ = K_;
+    q_from_.setZero(n);
+    dq_plan_.setZero(n);
+    dq_f_.setZero(n);
+    p_f_.setZero(n);
+    J_r_.setZero(6, n);
+    t_phase_ = 0.0;
+    retract_time_ = 0.1;
     tau_max_ = q.torque_limit;
     tau_step_ = q.torque_rate_limit.size() > 0 ? Eigen::VectorXd(q.torque_rate_limit * p.dt)
                                                 : Eigen::VectorXd::Constant(n, kInf);
@@ -252,9 +303,13 @@ namespace reflexarm
   {
     if (!configured_)
       return;
-    if (reacted_ && params_.reaction == Reaction::Compliant)
+    if (reacted_ && event_.reaction == Reaction::Compliant)
       kappa_eps_ = kappa_eps_before_reaction_;
     reacted_ = false;
+    event_.clear();
+    dq_f_.setZero();
+    p_f_.setZero();
+    has_filter_ = false;
     obs_.integral.setZero();
     obs_.p0.setZero();
     obs_.residual.setZero();
@@ -283,9 +338,15 @@ namespace reflexarm
 
   void Controller::updateMode() noexcept
   {
-    gravity_mode_ = reacted_ && params_.reaction == Reaction::Gravity;
+    gravity_mode_ = reacted_ && event_.reaction == Reaction::Gravity;
     if (gravity_mode_)
       mode_ = Mode::GravityCompensation;
+    else if (reacted_ && event_.phase == ReactionPhase::Braking)
+      mode_ = Mode::Braking;
+    else if (reacted_ && event_.phase == ReactionPhase::Retracting)
+      mode_ = Mode::Retracting;
+    else if (reacted_ && event_.phase == ReactionPhase::Holding && event_.reaction != Reaction::Compliant)
+      mode_ = Mode::Holding;
     else if (!kappa_eps_)
       mode_ = Mode::Compliant;
     else

@@ -61,7 +61,7 @@ namespace reflexarm
     }
     const int n_sat = boundTorque();
     commitTick(eps_w);
-    react(t, n_over, cmd);
+    react(t, s, n_over, n_sat, cmd);
     writeCommand(n_sat, cmd);
     return FaultCode::None;
   }
@@ -277,6 +277,8 @@ namespace reflexarm
     }
     const Eigen::MatrixXd & C = data_c_.C;
     const double kappa_f = static_cast<double>(kappa_f_);
+    const bool exact = params_.observer_discretization == ObserverDiscretization::Exact;
+    const bool nominal = h == params_.dt; // the decay at the nominal period is computed once in configure()
     for (int i = 0; i < n_; ++i)
     {
       double ct_dq = 0.0; // C^T dq of gamma (5)
@@ -291,6 +293,13 @@ namespace reflexarm
         alpha -= jt_f;
       }
       const double base = s.tau_m[i] - (g_[i] - ct_dq) - alpha;
+      if (exact)
+      {
+        stepExact(obs_, i, ko_[i], nominal ? decay_[i] : std::exp(-ko_[i] * h), base, h);
+        if (use_det_)
+          stepExact(obs_det_, i, ko_det_[i], nominal ? decay_det_[i] : std::exp(-ko_det_[i] * h), base, h);
+        continue;
+      }
       // momentum observer (4), explicit Euler over the integrated period
       obs_.integral[i] += h * (base + obs_.residual[i]);
       obs_.residual[i] = ko_[i] * (p_[i] - obs_.p0[i] - obs_.integral[i]);
@@ -300,6 +309,19 @@ namespace reflexarm
         obs_det_.residual[i] = ko_det_[i] * (p_[i] - obs_det_.p0[i] - obs_det_.integral[i]);
       }
     }
+  }
+
+  // The observer (4) is the first-order filter dr/dt = K_o (tau_ext - r) of the external torque; over a period h the
+  // momentum's increment gives the mean tau_ext = (p_k - p_{k-1}) / h - beta, beta = tau_m - g + C^T dq - alpha, and
+  // the filter's exact (zero-order-hold) form is r_k = e^{-K_o h} r_{k-1} + (1 - e^{-K_o h}) tau_ext: stable at any
+  // gain. p_{k-1} is not stored: by (4), p_{k-1} = p0 + integral + r_{k-1} / K_o; the integral is kept so that (4)
+  // holds after the step (integral = p_k - p0 - r_k / K_o), so both forms share one state.
+  void Controller::stepExact(ObserverState & o, int i, double k, double decay, double base, double h) noexcept
+  {
+    const double p_prev = o.p0[i] + o.integral[i] + o.residual[i] / k;
+    const double ext = (p_[i] - p_prev) / h - base;
+    o.residual[i] = decay * o.residual[i] + (1.0 - decay) * ext;
+    o.integral[i] = p_[i] - o.p0[i] - o.residual[i] / k;
   }
 
   bool Controller::observersFinite() const noexcept
@@ -339,6 +361,9 @@ namespace reflexarm
       double tau;
       if (gravity_mode_) // reaction (13)
         tau = g_[i];
+      else if (reactionLaw(s, i, tau)) // brake / retract / hold (reaction.cpp)
+      {
+      }
       else // control law (2)
       {
         double c_dq = 0.0, d_e = 0.0;
@@ -386,30 +411,28 @@ namespace reflexarm
       damping_countdown_ = (damping_countdown_ ? damping_countdown_ : params_.damping_update_period) - 1;
   }
 
-  void Controller::react(double t, int n_over, Command & cmd) noexcept
+  void Controller::react(double t, const State & s, int n_over, int n_sat, Command & cmd) noexcept
   {
     cmd.n_collided = 0;
     cmd.collided.setZero();
-    if (!has_detector_ || n_over == 0)
+    if (!has_detector_)
       return;
-    cmd.collided = over_;
-    cmd.n_collided = n_over;
-    if (!detected_)
+    filterVelocity(s);
+    if (n_over > 0)
     {
-      detected_ = true;
-      first_time_ = t;
-      first_joints_ = over_;
-    }
-    if (!reacted_ && params_.reaction != Reaction::None) // latched until reset()
-    {
-      reacted_ = true;
-      if (params_.reaction == Reaction::Compliant)
+      cmd.collided = over_;
+      cmd.n_collided = n_over;
+      if (!detected_)
       {
-        kappa_eps_before_reaction_ = kappa_eps_;
-        setSwitches(-1, 0, -1);
+        detected_ = true;
+        first_time_ = t;
+        first_joints_ = over_;
+        startReaction(t, s); // classify, record, choose and start the reaction (latched until reset())
+        return;
       }
-      updateMode();
     }
+    if (detected_)
+      followEvent(t, s, n_over, n_sat);
   }
 
   void Controller::writeCommand(int n_sat, Command & cmd) const noexcept

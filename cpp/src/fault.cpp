@@ -23,6 +23,10 @@ namespace reflexarm
       return "compliant";
     case Reaction::None:
       return "none";
+    case Reaction::Brake:
+      return "brake";
+    case Reaction::Retract:
+      return "retract";
     }
     return "?";
   }
@@ -41,6 +45,12 @@ namespace reflexarm
       return "gravity_compensation";
     case Mode::Fault:
       return "fault";
+    case Mode::Braking:
+      return "braking";
+    case Mode::Retracting:
+      return "retracting";
+    case Mode::Holding:
+      return "holding";
     }
     return "?";
   }

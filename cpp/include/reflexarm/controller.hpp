@@ -12,6 +12,7 @@
 
 #include "pinocchio/multibody.hpp"
 
+#include "reflexarm/collision_event.hpp"
 #include "reflexarm/fault.hpp"
 #include "reflexarm/modal_damping.hpp"
 #include "reflexarm/params.hpp"
@@ -85,6 +86,8 @@ namespace reflexarm
     int kappaExt() const noexcept { return kappa_ext_; }
     double epsWeight() const noexcept { return eps_weight_; } ///< ramped kappa_eps applied now
     bool reacted() const noexcept { return reacted_; }
+    /// The record of the collision detected since the last reset() (event().detected false before one).
+    const CollisionEvent & event() const noexcept { return event_; }
     bool detected() const noexcept { return detected_; }
     bool hasDetector() const noexcept { return has_detector_; }
     double firstDetectionTime() const noexcept { return first_time_; } ///< NaN before a detection
@@ -148,13 +151,22 @@ namespace reflexarm
     void commitInputs(const ConstVectorRef & q, const DampingParts & parts) noexcept;
     double advanceClock(double t, double period) noexcept;
     void updateObservers(const State & s, double h) noexcept;
+    void stepExact(ObserverState & o, int i, double k, double decay, double base, double h) noexcept;
     bool observersFinite() const noexcept;
     int detect() noexcept;
     double rampedEpsWeight() const noexcept;
     FaultCode controlLaw(const State & s, const Reference & r, double eps_w) noexcept;
     int boundTorque() noexcept;
     void commitTick(double eps_w) noexcept;
-    void react(double t, int n_over, Command & cmd) noexcept;
+    void react(double t, const State & s, int n_over, int n_sat, Command & cmd) noexcept;
+    // the collision pipeline after detection (reaction.cpp)
+    void startReaction(double t, const State & s) noexcept;
+    void planRetract(const State & s) noexcept;
+    void followEvent(double t, const State & s, int n_over, int n_sat) noexcept;
+    void advanceReaction(double t, const State & s) noexcept;
+    bool reactionLaw(const State & s, int i, double & tau) const noexcept;
+    double kineticEnergy() const noexcept;
+    void filterVelocity(const State & s) noexcept;
     void writeCommand(int n_sat, Command & cmd) const noexcept;
     /// tau_f of joint i: coulomb * clip(dq / velocity_band, -1, 1) + viscous * dq
     double frictionTorque(int i, double dq) const noexcept
@@ -171,11 +183,20 @@ namespace reflexarm
     int n_ = 0;
     ControllerParams params_;
     Model model_, model0_; // model0_: zero gravity, for M(q) x as RNEA(q, 0, x)
-    Data data_g_, data_c_, data_j_, data_m_, data_p_, data_ff_;
+    Data data_g_, data_c_, data_j_, data_m_, data_p_, data_ff_, data_r_;
     // parameters per joint
     Eigen::VectorXd K_, xi_, ko_, ko_det_, threshold_, coulomb_, viscous_, spring_k_, spring_q_;
     bool has_springs_ = false;
     Eigen::VectorXd q_lo_, q_hi_, dq_max_, ddq_max_, tau_m_max_, tau_max_, tau_step_;
+    Eigen::VectorXd decay_, decay_det_; // exact observer: e^{-K_o dt} per joint at the nominal period
+    Eigen::VectorXd v_lim_, q_safe_lo_, q_safe_hi_; // velocity limits (+inf: none), reaction posture bounds
+    // the reaction under way (reaction.cpp)
+    CollisionEvent event_;
+    Eigen::VectorXd K_hold_, q_from_, dq_plan_;
+    Eigen::VectorXd dq_f_, p_f_; // low-passed dq and M(q) dq for the guard's kinetic energy
+    bool has_filter_ = false;
+    Eigen::Matrix<double, 6, Eigen::Dynamic> J_r_;
+    double t_phase_ = 0.0, retract_time_ = 0.0, hold_damping_scale_ = 1.0;
     double inv_band_ = 0.0, limit_ = 0.0, period_lo_ = 0.0, period_hi_ = 0.0;
     double g_norm_ = 0.0, g_tol_ = 0.0, force_max_ = 0.0, moment_max_ = 0.0;
     bool use_det_ = false, has_detector_ = false;

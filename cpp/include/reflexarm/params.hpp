@@ -27,11 +27,46 @@ namespace reflexarm
   enum class Reaction
   {
     Gravity = 0,   ///< eq. (13): gravity compensation only
-    Compliant = 1, ///< kappa_eps -> 0 (compliant mode of Fig. 3)
-    None = 2       ///< detection is reported only
+    Compliant = 1, ///< hold the posture at detection at low stiffness, kappa_eps -> 0 (compliant mode of Fig. 3)
+    None = 2,      ///< detection is reported only
+    Brake = 3,     ///< inject damping M(q)/brake_time until the arm rests, then hold where it stopped
+    Retract = 4    ///< move the contact away along the residual by retract_distance, then hold there
   };
+  constexpr int kReactionCount = 5;
 
   const char * reactionName(Reaction r) noexcept;
+
+  /// How the momentum observer (4) is integrated over a period h.
+  enum class ObserverDiscretization
+  {
+    /// explicit Euler of the integral (the paper's form): stable only for observer_gain * h < 1
+    Euler = 0,
+    /// the first-order filter's exact form r_k = e^{-K h} r_{k-1} + (1 - e^{-K h}) (p_k - p_{k-1} - h beta) / h:
+    /// stable at any gain (the momentum's increment over the period is what the residual filters)
+    Exact = 1
+  };
+
+  /// Settings of the reactions after a detection (Reaction) and of the guard that checks they stop the arm.
+  struct ReactionParams
+  {
+    double brake_time = 0.05;       ///< [s] brake: closed loop ddq = -dq / brake_time (within the torque limit)
+    double brake_duration = 0.25;   ///< [s] brake: damping alone this long, then hold the posture reached
+    double retract_distance = 0.05; ///< [m] retract: how far the contact (link end) moves along the residual
+    double max_retract_angle = 0.5; ///< [rad] retract: largest joint motion of the retract
+    double retract_speed = 0.2;     ///< [m/s] retract: mean speed of the link end along its path
+    double velocity_fraction = 0.5; ///< reference motions of a reaction stay below this x velocity limit
+    double compliant_stiffness_factor = 0.1; ///< compliant: K of the hold = this x stiffness
+    double rest_time = 0.5;         ///< [s] guard: the arm must be at rest this long after detection
+    double rest_energy_fraction = 0.01; ///< guard: kinetic energy at rest_time <= this x the energy at detection
+    double rest_energy_floor = 1e-3;    ///< [J] guard: ... or below this (above the filtered velocity noise's energy)
+    /// [s] the guard's kinetic energy is 0.5 dq_f^T p_f of dq and M(q) dq low-passed with this time constant (the
+    /// paper's velocity noise, 5.5e-2 rad/s, alone gives a few mJ unfiltered on the Atlas arm, ~1e-5 J filtered)
+    double energy_filter_time = 0.02;
+    /// [N] a detection while the wrist sensor measures more than this force is a measured end-effector contact
+    /// (class Contact, reaction contact_reaction); otherwise an unmeasured collision (class Collision)
+    double contact_level = 10.0;
+    double position_margin = 0.05; ///< [rad] reaction references stay this far inside the joint limits
+  };
 
   /// Plausibility bounds of the inputs (same fields and defaults as reflexarm.control.InputBounds).
   struct InputBounds
@@ -59,7 +94,10 @@ namespace reflexarm
     Eigen::VectorXd detection_observer_gain;
     /// zeta [Nm] per joint for detection (12), > 0; empty: detection off.
     Eigen::VectorXd threshold = Eigen::VectorXd::Constant(1, 11.0);
-    Reaction reaction = Reaction::Gravity;
+    Reaction reaction = Reaction::Gravity;          ///< reaction to an unmeasured (link) collision
+    Reaction contact_reaction = Reaction::Gravity;  ///< reaction to a contact measured by the wrist sensor
+    ReactionParams reaction_params;
+    ObserverDiscretization observer_discretization = ObserverDiscretization::Euler;
     int kappa_f = 0;   ///< friction compensation in (2) and (6) (0/1)
     int kappa_eps = 0; ///< disturbance compensation in (2) (0/1)
     int kappa_ext = 0; ///< wrist-wrench term in (6), "EFC" (0/1)

@@ -41,8 +41,12 @@ namespace reflexarm
     PreciseStiff = 1,       ///< kappa_eps = 1, kappa_ext = 0: closed loop (10)
     PreciseEeCompliant = 2, ///< kappa_eps = kappa_ext = 1: closed loop (11)
     GravityCompensation = 3,///< reaction (13)
-    Fault = 4               ///< unusable input or invalid observer: safe command
+    Fault = 4,              ///< unusable input or invalid observer: safe command
+    Braking = 5,            ///< reaction "brake": damping injection until the arm rests
+    Retracting = 6,         ///< reaction "retract": moving the contact away
+    Holding = 7             ///< after brake / retract / compliant: holding a posture (impedance, no compensation)
   };
+  constexpr int kModeCount = 8;
 
   const char * modeName(Mode mode) noexcept;
 

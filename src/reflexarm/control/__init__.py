@@ -1,9 +1,9 @@
 """The real-time part: impedance control (2), momentum observer (4)-(6), collision detection (12),
 reaction (13) and the composed :class:`Controller`. Never imports :mod:`reflexarm.sim`."""
 
-from reflexarm.control.collision.detect import CollisionDetector
+from reflexarm.control.collision import CollisionDetector, CollisionEvent, ReactionSettings
 from reflexarm.control.contract import FAULT_CODES, InputBounds, TimingStats
-from reflexarm.control.controller import MODES, REACTIONS, Controller
+from reflexarm.control.controller import MODES, OBSERVER_DISCRETIZATIONS, REACTIONS, Controller
 from reflexarm.control.impedance import ImpedanceGains, JointImpedanceController, modal_damping
 from reflexarm.control.modes import CONTROL_MODES, ControlMode, ModeSchedule, ModeSupervisor, ModeTransition
 from reflexarm.control.momentum_observer import MomentumObserver
@@ -14,7 +14,9 @@ __all__ = [
     "FAULT_CODES",
     "MODES",
     "REACTIONS",
+    "OBSERVER_DISCRETIZATIONS",
     "CollisionDetector",
+    "CollisionEvent",
     "ControlMode",
     "Controller",
     "DisturbanceObserver",
@@ -24,6 +26,7 @@ __all__ = [
     "ModeSchedule",
     "ModeSupervisor",
     "ModeTransition",
+    "ReactionSettings",
     "MomentumObserver",
     "TimingStats",
     "modal_damping",

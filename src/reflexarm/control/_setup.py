@@ -22,8 +22,11 @@ if TYPE_CHECKING:
     from reflexarm.control.controller import Controller
 
 
-def check_period_band(band: object, dt: float, observer_gains: Sequence[np.ndarray]) -> tuple[float, float]:
-    """(low, high) multiples of dt with 0 < low <= 1 <= high, and k_o * dt * high < 1 for every observer."""
+def check_period_band(
+    band: object, dt: float, observer_gains: Sequence[np.ndarray], *, exact: bool = False
+) -> tuple[float, float]:
+    """(low, high) multiples of dt with 0 < low <= 1 <= high, and (Euler observer, ``exact=False``)
+    k_o * dt * high < 1 for every observer."""
     try:
         lo, hi = (float(x) for x in band)  # type: ignore[attr-defined]
     except (TypeError, ValueError) as e:
@@ -31,10 +34,11 @@ def check_period_band(band: object, dt: float, observer_gains: Sequence[np.ndarr
     if not (0.0 < lo <= 1.0 <= hi < math.inf):
         raise ConfigError(f"period_band must satisfy 0 < low <= 1 <= high < inf; got {band!r}")
     k_o = max(float(np.max(k)) for k in observer_gains)
-    if k_o * dt * hi >= 1.0:
+    if not exact and k_o * dt * hi >= 1.0:
         raise ConfigError(
             f"observer_gain * dt * period_band[1] must be < 1 for the observer to stay stable at the longest "
-            f"integrated period; got {k_o} 1/s * {dt} s * {hi}"
+            f"integrated period; got {k_o} 1/s * {dt} s * {hi} (observer_discretization='exact' is stable at "
+            "any gain)"
         )
     return lo, hi
 
@@ -84,6 +88,9 @@ def core_params(ctrl: Controller, core: ModuleType) -> Any:
     p.detection_observer_gain = np.zeros(0) if det is None else det.observer_gain.copy()
     p.threshold = np.zeros(0) if ctrl.detector is None else ctrl.detector.threshold.copy()
     p.reaction = ctrl.reaction
+    p.contact_reaction = ctrl.contact_reaction
+    p.reaction_params = ctrl.reaction_settings.to_core(core)
+    p.observer_discretization = ctrl.observer_discretization
     p.kappa_f, p.kappa_eps, p.kappa_ext = ctrl._kappa_init
     p.residual_limit, p.switch_time, p.dt = ctrl.residual_limit, ctrl.switch_time, ctrl.dt
     p.damping_update_period = imp.damping_update_period

@@ -17,6 +17,8 @@ import numpy.typing as npt
 from reflexarm._validation import as_positive_scalar, as_switch, as_vector
 from reflexarm.control._setup import check_period_band, core_params, load_core, resolve_torque_limit
 from reflexarm.control.collision.detect import CollisionDetector
+from reflexarm.control.collision.event import CollisionEvent
+from reflexarm.control.collision.react import REACTIONS, ReactionSettings, check_reaction
 from reflexarm.control.contract import (
     BAD_SHAPE,
     InputBounds,
@@ -33,11 +35,11 @@ from reflexarm.errors import ConfigError
 from reflexarm.robots.robot_model import RobotModel
 from reflexarm.signals import Command, Measurement, Reference
 
-__all__ = ["MODES", "REACTIONS", "Controller"]
+__all__ = ["MODES", "OBSERVER_DISCRETIZATIONS", "REACTIONS", "Controller"]
 
-#: Reactions to a detected collision: eq. (13) gravity compensation; switch to the compliant mode
-#: (kappa_eps = 0, Fig. 3); or none (detection is reported only).
-REACTIONS = ("gravity", "compliant", "none")
+#: Observer discretizations: the paper's explicit Euler (stable for observer_gain * dt < 1), or the first-order
+#: filter's exact form (stable at any gain).
+OBSERVER_DISCRETIZATIONS = ("euler", "exact")
 
 #: Mode names reported in :attr:`Command.mode`.
 MODES = (
@@ -46,6 +48,9 @@ MODES = (
     "precise_ee_compliant",  # kappa_eps = kappa_ext = 1: closed loop (11)
     "gravity_compensation",  # reaction (13)
     "fault",  # unusable input or invalid observer: safe command
+    "braking",  # reaction "brake": damping injection until the arm rests
+    "retracting",  # reaction "retract": moving the contact away
+    "holding",  # after brake / retract: holding a posture
 )
 
 
@@ -105,8 +110,18 @@ class Controller:
             parallel and is the one used for detection (the paper's proposal at the end of Sec. III-A);
             the first observer is then used for compensation only.
         threshold: zeta [Nm] per joint for collision detection (12); ``None`` disables detection.
-        reaction: what a detected collision does: ``"gravity"`` (13), ``"compliant"`` (kappa_eps -> 0)
-            or ``"none"``. Reactions latch until :meth:`reset`.
+        reaction: what a detected collision the wrist sensor does not measure does: ``"gravity"`` (13),
+            ``"brake"``, ``"retract"``, ``"compliant"`` or ``"none"`` (see
+            :mod:`reflexarm.control.collision.react`). Reactions latch until :meth:`reset`; detection goes on
+            while they run (:attr:`event` counts re-contacts).
+        contact_reaction: the same for a detection while the wrist sensor measures more than
+            ``reaction_settings.contact_level`` (an end-effector contact; only with kappa_ext = 0, since with
+            kappa_ext = 1 the residual excludes what the sensor measures); ``None``: as ``reaction``.
+        reaction_settings: :class:`~reflexarm.control.collision.ReactionSettings` (brake time, retract distance,
+            the guard's rest level, the contact level, ...); default: its defaults.
+        observer_discretization: ``"euler"`` (the paper's explicit Euler of (4); needs observer_gain * dt *
+            period_band[1] < 1) or ``"exact"`` (the first-order filter's exact form over the measured period:
+            stable at any gain, e.g. K_o = 500 1/s at 100 Hz).
         kappa_f: friction compensation in (2) and in the observer (6) (0/1).
         kappa_eps: disturbance compensation in (2) (0/1).
         kappa_ext: wrist-wrench term in the observer (6), "EFC" (0/1).
@@ -124,8 +139,8 @@ class Controller:
             scalar or (n,) positive array; or ``None`` for no saturation.
         torque_rate_limit: largest change of the command [Nm/s] (scalar or (n,)), or ``None`` (default).
         input_bounds: the plausibility bounds (:class:`InputBounds`; default: its defaults).
-        period_band: (low, high) multiples of ``dt`` the integrated period is clipped to;
-            ``observer_gain * dt * high`` must stay below 1.
+        period_band: (low, high) multiples of ``dt`` the integrated period is clipped to; with the Euler
+            observer ``observer_gain * dt * high`` must stay below 1.
     """
 
     def __init__(
@@ -138,6 +153,9 @@ class Controller:
         detection_observer_gain: npt.ArrayLike | None = None,
         threshold: npt.ArrayLike | None = 11.0,
         reaction: str = "gravity",
+        contact_reaction: str | None = None,
+        reaction_settings: ReactionSettings | None = None,
+        observer_discretization: str = "euler",
         kappa_f: int = 0,
         kappa_eps: int = 0,
         kappa_ext: int = 0,
@@ -167,9 +185,21 @@ class Controller:
             None if detection_observer_gain is None else MomentumObserver(n, detection_observer_gain, self.dt)
         )
         self.detector = None if threshold is None else CollisionDetector(n, threshold)
-        if reaction not in REACTIONS:
-            raise ConfigError(f"unknown reaction {reaction!r}; choose one of: {', '.join(REACTIONS)}")
-        self.reaction = reaction
+        self.reaction = check_reaction(reaction)
+        self.contact_reaction = self.reaction if contact_reaction is None else check_reaction(
+            contact_reaction, "contact_reaction"
+        )
+        self.reaction_settings = ReactionSettings() if reaction_settings is None else reaction_settings
+        if not isinstance(self.reaction_settings, ReactionSettings):
+            raise ConfigError(
+                f"reaction_settings must be a ReactionSettings; got {type(reaction_settings).__name__}"
+            )
+        if observer_discretization not in OBSERVER_DISCRETIZATIONS:
+            raise ConfigError(
+                f"unknown observer_discretization {observer_discretization!r}; choose one of: "
+                f"{', '.join(OBSERVER_DISCRETIZATIONS)}"
+            )
+        self.observer_discretization = observer_discretization
         self._kappa_init = (
             as_switch(kappa_f, "kappa_f"),
             as_switch(kappa_eps, "kappa_eps"),
@@ -182,7 +212,7 @@ class Controller:
         gains = [self.observer.observer_gain]
         if self.detection_observer is not None:
             gains.append(self.detection_observer.observer_gain)
-        self.period_band = check_period_band(period_band, self.dt, gains)
+        self.period_band = check_period_band(period_band, self.dt, gains, exact=observer_discretization == "exact")
         self.input_bounds = InputBounds() if input_bounds is None else input_bounds
         if not isinstance(self.input_bounds, InputBounds):
             raise ConfigError(f"input_bounds must be an InputBounds; got {type(input_bounds).__name__}")
@@ -244,6 +274,12 @@ class Controller:
     def reacted(self) -> bool:
         """True once a detected collision triggered the reaction (latched until :meth:`reset`)."""
         return bool(self._core.reacted)
+
+    @property
+    def event(self) -> CollisionEvent | None:
+        """The record of the collision detected since the last :meth:`reset` (None before a detection):
+        when, which joints, class, reaction and its phase, energies, the guard's report."""
+        return CollisionEvent.from_core(self._core.event)
 
     @property
     def mode(self) -> str:

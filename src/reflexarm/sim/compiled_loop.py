@@ -51,7 +51,10 @@ __all__ = ["compiled_reason", "run_compiled", "run_fast"]
 #: The MuJoCo state a still keeps (as StillCapture keeps it from the Python loop).
 _STILL_SPEC = int(mujoco.mjtState.mjSTATE_INTEGRATION)
 #: Mode names in the order of the C++ enum reflexarm::Mode (as reflexarm.control.controller.MODES).
-_MODES = np.array(["compliant", "precise_stiff", "precise_ee_compliant", "gravity_compensation", "fault"])
+_MODES = np.array([
+    "compliant", "precise_stiff", "precise_ee_compliant", "gravity_compensation", "fault", "braking", "retracting",
+    "holding",
+])  # fmt: skip
 
 
 def _modules() -> tuple[ModuleType, ModuleType] | str:
@@ -280,7 +283,15 @@ def _run(
         _hand_over_still(loop, rec, fault_code, still)
     if not np.array_equal(rec.t[: rec.done], times[: rec.done]):
         raise SimulationError("the compiled loop's clock differs from the sampled reference times; not returning it")
-    return rec.trace(meta | {"loop": "compiled"})
+    return rec.trace(meta | {"loop": "compiled", "collision_event": _event(loop.event)})
+
+
+def _event(record: dict[str, Any]) -> dict[str, Any] | None:
+    """The compiled controller's collision event record, JSON-ready (None: no detection)."""
+    from reflexarm.control.collision.event import CollisionEvent
+
+    event = CollisionEvent.from_core(record)
+    return None if event is None else event.to_dict()
 
 
 def _command(rec: _Recorder, fault_code: np.ndarray, k: int) -> Command:

@@ -91,7 +91,13 @@ def run_closed_loop(
         except Exception:  # pragma: no cover - never mask the original error
             pass
         raise
-    return rec.trace(meta)
+    return rec.trace(meta | {"collision_event": _event(controller)})
+
+
+def _event(controller: Any) -> dict[str, Any] | None:
+    """The controller's collision event record, JSON-ready (None: no detection, or a controller without one)."""
+    event = getattr(controller, "event", None)
+    return None if event is None or not hasattr(event, "to_dict") else event.to_dict()  # type: ignore[no-any-return]
 
 
 def stream_closed_loop(

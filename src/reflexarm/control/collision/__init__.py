@@ -8,5 +8,7 @@ the plain implementations the tests compare it with.
 """
 
 from reflexarm.control.collision.detect import CollisionDetector
+from reflexarm.control.collision.event import CollisionEvent
+from reflexarm.control.collision.react import REACTIONS, ReactionSettings, check_reaction
 
-__all__ = ["CollisionDetector"]
+__all__ = ["REACTIONS", "CollisionDetector", "CollisionEvent", "ReactionSettings", "check_reaction"]

@@ -1,0 +1,331 @@
+// reflexarm::Controller: the collision pipeline after the detection threshold (12): classify the contact, choose
+// and run the reaction (gravity (13), brake, retract, compliant), follow the event and guard that the reaction
+// brings the arm to rest. Called from update() on accepted ticks; never allocates, never throws.
+//
+// Reactions (the arm's own torque limits bound every one of them in boundTorque(), after this law):
+//   gravity   tau = g(q)                                                         (13), for good
+//   brake     tau = g(q) + C dq - M(q) dq / brake_time                          closed loop ddq = -dq / T_b,
+//             for brake_duration, then hold the posture reached                  (damping injection, no spring)
+//   retract   law (2) towards q_detect + dq_plan along a minimum-jerk path, then hold there; dq_plan moves the
+//             contacted link's far end by retract_distance along J J^T r (the residual's direction: a contact
+//             force f gives r = J_c^T f, and dq = J_c^T f moves the contact along f, away from the obstacle;
+//             De Luca et al., IROS 2006, "admittance reflex")
+//   compliant hold q_detect at c K (c = compliant_stiffness_factor) with the damping sqrt(c) D (the modal damping
+//             of c K: same modes, frequencies scaled by sqrt(c)), kappa_eps -> 0 (the compliant mode of Fig. 3)
+//   hold      law (2) with q_d = q_target, dq_d = ddq_d = 0, no disturbance compensation
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+#include "pinocchio/algorithm/frames.hpp"
+#include "pinocchio/algorithm/jacobian.hpp"
+
+#include "reflexarm/controller.hpp"
+
+namespace reflexarm
+{
+
+  const char * contactClassName(ContactClass c) noexcept
+  {
+    switch (c)
+    {
+    case ContactClass::None:
+      return "none";
+    case ContactClass::Contact:
+      return "contact";
+    case ContactClass::Collision:
+      return "collision";
+    }
+    return "?";
+  }
+
+  const char * reactionPhaseName(ReactionPhase p) noexcept
+  {
+    switch (p)
+    {
+    case ReactionPhase::None:
+      return "none";
+    case ReactionPhase::Gravity:
+      return "gravity";
+    case ReactionPhase::Braking:
+      return "braking";
+    case ReactionPhase::Retracting:
+      return "retracting";
+    case ReactionPhase::Holding:
+      return "holding";
+    }
+    return "?";
+  }
+
+  double Controller::kineticEnergy() const noexcept
+  {
+    return 0.5 * dq_f_.dot(p_f_);
+  }
+
+  // dq and p = M(q) dq low-passed (first order, energy_filter_time) on every accepted tick: the guard's energy
+  // 0.5 dq_f^T p_f follows the arm's motion, not the velocity noise
+  void Controller::filterVelocity(const State & s) noexcept
+  {
+    if (!has_filter_)
+    {
+      dq_f_ = s.dq;
+      p_f_ = p_;
+      has_filter_ = true;
+      return;
+    }
+    const double dt = params_.dt, a = dt / (params_.reaction_params.energy_filter_time + dt);
+    for (int i = 0; i < n_; ++i)
+    {
+      dq_f_[i] += a * (s.dq[i] - dq_f_[i]);
+      p_f_[i] += a * (p_[i] - p_f_[i]);
+    }
+  }
+
+  // ---------------------------------------------------------------------------------- detection -> reaction
+  void Controller::startReaction(double t, const State & s) noexcept
+  {
+    CollisionEvent & e = event_;
+    const ReactionParams & rp = params_.reaction_params;
+    e.detected = true;
+    e.t_detect = t;
+    e.joints = over_;
+    e.n_joints = 0;
+    e.distal_joint = -1;
+    for (int i = 0; i < n_; ++i)
+      if (over_[i])
+      {
+        ++e.n_joints;
+        e.distal_joint = i;
+      }
+    e.residual = detectionResidual();
+    e.q_detect = s.q;
+    e.q_target = s.q;
+    e.wrist_force = s.wrench.head<3>().norm();
+    // classify: with kappa_ext = 1 the residual already excludes what the wrist sensor measures, so a detection
+    // is something the sensor does not see; with kappa_ext = 0 a detection while the sensor measures a force
+    // above the contact level is taken as that end-effector contact
+    e.contact_class =
+      (!kappa_ext_ && e.wrist_force > rp.contact_level) ? ContactClass::Contact : ContactClass::Collision;
+    e.reaction = e.contact_class == ContactClass::Contact ? params_.contact_reaction : params_.reaction;
+    e.energy_detect = kineticEnergy();
+    e.energy_max = e.energy_detect;
+    double peak = 0.0;
+    for (int i = 0; i < n_; ++i)
+      peak = std::max(peak, std::abs(e.residual[i]) / threshold_[i]);
+    e.peak_residual = peak;
+    e.below_since = false;
+    t_phase_ = t;
+    q_from_ = s.q;
+    K_hold_ = K_;
+    hold_damping_scale_ = 1.0;
+    switch (e.reaction)
+    {
+    case Reaction::None:
+      e.phase = ReactionPhase::None;
+      break;
+    case Reaction::Gravity:
+      e.phase = ReactionPhase::Gravity;
+      break;
+    case Reaction::Brake:
+      e.phase = ReactionPhase::Braking;
+      break;
+    case Reaction::Retract:
+      planRetract(s);
+      e.phase = ReactionPhase::Retracting;
+      break;
+    case Reaction::Compliant:
+      for (int i = 0; i < n_; ++i)
+        e.q_target[i] = std::min(std::max(s.q[i], q_safe_lo_[i]), q_safe_hi_[i]);
+      K_hold_ = K_ * rp.compliant_stiffness_factor;
+      hold_damping_scale_ = std::sqrt(rp.compliant_stiffness_factor); // D of c K is sqrt(c) D
+      e.phase = ReactionPhase::Holding;
+      e.t_hold = t;
+      kappa_eps_before_reaction_ = kappa_eps_;
+      setSwitches(-1, 0, -1);
+      break;
+    }
+    if (e.reaction != Reaction::None)
+      reacted_ = true; // latched until reset()
+    updateMode();
+  }
+
+  // The retract's joint motion dq_plan and its duration. The point that moves and the direction:
+  //  * a contact the wrist sensor measures (class Contact): the sensor frame, along the measured force f (the
+  //    environment's force on the arm): d = J_s^T f / |f|, so J_s d = J_s J_s^T f / |f| has a positive component
+  //    along f;
+  //  * otherwise: the far end of the most distal link whose joint crossed its threshold (the next joint's
+  //    origin; the sensor frame for the last link), along the residual r = J_c^T f: d = r on the joints up to that
+  //    one (the joints after it carry no torque of a force on its link), J_c d = J_c J_c^T f.
+  // Scaled so that the point moves retract_distance; bounded by max_retract_angle per joint and by the joint
+  // limits (minus the reaction's margin); the duration keeps the mean speed of the point at retract_speed and the
+  // minimum-jerk path's peak joint speed (1.875 x its mean) below velocity_fraction x the velocity limits.
+  void Controller::planRetract(const State & s) noexcept
+  {
+    const ReactionParams & rp = params_.reaction_params;
+    CollisionEvent & e = event_;
+    const bool measured = e.contact_class == ContactClass::Contact;
+    const int last = (measured || e.distal_joint < 0) ? n_ - 1 : e.distal_joint;
+    q_buf_ = s.q;
+    J_r_.setZero();
+    if (measured || last + 1 >= n_)
+      pinocchio::computeFrameJacobian(
+        model_, data_r_, q_buf_, static_cast<pinocchio::FrameIndex>(params_.sensor_frame_id),
+        pinocchio::LOCAL_WORLD_ALIGNED, J_r_);
+    else
+    {
+      pinocchio::computeJointJacobians(model_, data_r_, q_buf_);
+      pinocchio::getJointJacobian(
+        model_, data_r_, static_cast<pinocchio::JointIndex>(last + 2), pinocchio::LOCAL_WORLD_ALIGNED, J_r_);
+    }
+    dq_plan_.setZero();
+    if (measured)
+    {
+      // the sensor measures the wrench on the arm beyond it in its own frame: rotate the force to the world
+      const auto & R = data_r_.oMf[params_.sensor_frame_id].rotation();
+      const Eigen::Vector3d f = R * s.wrench.head<3>();
+      for (int i = 0; i < n_; ++i)
+        dq_plan_[i] = J_r_.col(i).head<3>().dot(f);
+    }
+    else
+      for (int i = 0; i <= last; ++i)
+        dq_plan_[i] = e.residual[i];
+    const double norm = dq_plan_.norm();
+    if (norm > 0.0)
+      dq_plan_ /= norm;
+    double moved = 0.0; // |J_lin d| [m/rad]
+    for (int k = 0; k < 3; ++k)
+    {
+      double v = 0.0;
+      for (int i = 0; i <= last; ++i)
+        v += J_r_(k, i) * dq_plan_[i];
+      moved += v * v;
+    }
+    moved = std::sqrt(moved);
+    double scale = moved > 1e-9 ? rp.retract_distance / moved : rp.max_retract_angle;
+    const double largest = dq_plan_.cwiseAbs().maxCoeff();
+    if (largest * scale > rp.max_retract_angle)
+      scale = rp.max_retract_angle / largest;
+    dq_plan_ *= scale;
+    double duration = std::max(0.1, rp.retract_distance / rp.retract_speed); // [s] (0.1 s the shortest)
+    for (int i = 0; i < n_; ++i)
+    {
+      const double goal = std::min(std::max(s.q[i] + dq_plan_[i], q_safe_lo_[i]), q_safe_hi_[i]);
+      dq_plan_[i] = goal - s.q[i];
+      e.q_target[i] = goal;
+      if (std::isfinite(v_lim_[i]))
+        duration = std::max(duration, 1.875 * std::abs(dq_plan_[i]) / (rp.velocity_fraction * v_lim_[i]));
+    }
+    retract_time_ = duration; // the minimum-jerk path's peak speed is 1.875 x its mean
+  }
+
+  // ---------------------------------------------------------------------------------- the reaction's law
+  bool Controller::reactionLaw(const State & s, int i, double & tau) const noexcept
+  {
+    if (!reacted_)
+      return false;
+    const ReactionPhase phase = event_.phase;
+    if (phase != ReactionPhase::Braking && phase != ReactionPhase::Retracting && phase != ReactionPhase::Holding)
+      return false;
+    const Eigen::MatrixXd & C = data_c_.C;
+    double c_dq = 0.0;
+    for (int j = 0; j < n_; ++j)
+      c_dq += C(i, j) * s.dq[j];
+    if (phase == ReactionPhase::Braking)
+    {
+      tau = g_[i] + c_dq - p_[i] / params_.reaction_params.brake_time;
+      return true;
+    }
+    double d_e = 0.0, q_d = event_.q_target[i];
+    if (phase == ReactionPhase::Retracting)
+    {
+      const double tau_s = std::min(std::max((last_t_ - t_phase_) / retract_time_, 0.0), 1.0);
+      const double t2 = tau_s * tau_s, t3 = t2 * tau_s;
+      const double pos = t3 * (10.0 - 15.0 * tau_s + 6.0 * t2);        // minimum jerk
+      const double vel = 30.0 * t2 * (1.0 - 2.0 * tau_s + t2) / retract_time_; // its derivative [1/s]
+      q_d = q_from_[i] + dq_plan_[i] * pos;
+      for (int j = 0; j < n_; ++j)
+        d_e += D_(i, j) * (dq_plan_[j] * vel - s.dq[j]);
+    }
+    else
+    {
+      for (int j = 0; j < n_; ++j)
+        d_e += D_(i, j) * (-s.dq[j]);
+      d_e *= hold_damping_scale_;
+    }
+    tau = K_hold_[i] * (q_d - s.q[i]) + d_e + g_[i] + c_dq + static_cast<double>(kappa_f_) * frictionTorque(i, s.dq[i]);
+    return true;
+  }
+
+  // ---------------------------------------------------------------------------------- after detection
+  void Controller::advanceReaction(double t, const State & s) noexcept
+  {
+    CollisionEvent & e = event_;
+    const ReactionParams & rp = params_.reaction_params;
+    bool hold = false;
+    if (e.phase == ReactionPhase::Braking && t - t_phase_ >= rp.brake_duration)
+    {
+      for (int i = 0; i < n_; ++i) // hold where the brake stopped the arm
+        e.q_target[i] = std::min(std::max(s.q[i], q_safe_lo_[i]), q_safe_hi_[i]);
+      hold = true;
+    }
+    else if (e.phase == ReactionPhase::Retracting && t - t_phase_ >= retract_time_)
+      hold = true; // q_target is the retract's goal
+    if (hold)
+    {
+      e.phase = ReactionPhase::Holding;
+      e.t_hold = t;
+      t_phase_ = t;
+      updateMode();
+    }
+  }
+
+  void Controller::followEvent(double t, const State & s, int n_over, int n_sat) noexcept
+  {
+    CollisionEvent & e = event_;
+    const ReactionParams & rp = params_.reaction_params;
+    if (reacted_)
+      advanceReaction(t, s);
+    const Eigen::VectorXd & r = detectionResidual();
+    double peak = e.peak_residual, moved = e.moved;
+    for (int i = 0; i < n_; ++i)
+    {
+      peak = std::max(peak, std::abs(r[i]) / threshold_[i]);
+      moved = std::max(moved, std::abs(s.q[i] - e.q_detect[i]));
+      if (reacted_ && std::abs(s.dq[i]) > v_lim_[i])
+        e.overspeed = true;
+    }
+    e.peak_residual = peak;
+    e.moved = moved;
+    bool quiet = true; // hysteresis: a new contact needs the residual below half of every threshold first
+    for (int i = 0; i < n_ && quiet; ++i)
+      quiet = std::abs(r[i]) < 0.5 * threshold_[i];
+    if (quiet)
+      e.below_since = true;
+    else if (e.below_since)
+    {
+      ++e.recrossings; // the residual crossed again after falling below half of every threshold: a new contact
+      e.below_since = false;
+    }
+    if (reacted_ && n_sat > 0 && e.phase != ReactionPhase::Gravity)
+      e.torque_limited = true;
+    const double energy = kineticEnergy();
+    e.energy_max = std::max(e.energy_max, energy);
+    if (!e.guard_checked && t - e.t_detect >= rp.rest_time)
+    {
+      e.guard_checked = true;
+      e.energy_rest = energy;
+      const double rest_level = std::max(rp.rest_energy_fraction * e.energy_detect, rp.rest_energy_floor);
+      if (e.reaction != Reaction::None && energy > rest_level)
+      {
+        e.still_moving = true;
+        std::snprintf(
+          e.text.data(), e.text.size(),
+          "reaction %s left the arm moving: kinetic energy %.3g J %.3g s after detection (%.3g J at detection; "
+          "rest level %.3g J)%s",
+          reactionName(e.reaction), energy, t - e.t_detect, e.energy_detect, rest_level,
+          e.torque_limited ? "; its torque was saturated" : "");
+      }
+    }
+  }
+
+} // namespace reflexarm

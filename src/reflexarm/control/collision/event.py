@@ -1,0 +1,96 @@
+"""The record of one collision: what the stages detect -> isolate -> identify -> classify -> react found.
+
+:attr:`reflexarm.control.Controller.event` returns it (filled by the real-time tick, ``cpp/src/reaction.cpp``).
+The simulation's truth (time of contact, true force and point) is added beside it by
+:mod:`reflexarm.experiments.collision_events`; a real robot has only this.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+__all__ = ["CollisionEvent"]
+
+
+@dataclass(frozen=True)
+class CollisionEvent:
+    """One detected collision (the reaction latches until :meth:`Controller.reset`).
+
+    Attributes:
+        t_detect: stamp of the detecting tick [s].
+        joints: 0-based joints whose |residual| exceeded the threshold at detection.
+        distal_joint: the most distal of them: a force on link i gives no torque on the joints after i, so the
+            contact is on this joint's link or a later one (-1 if none).
+        contact_class: ``"contact"`` (the wrist sensor measures it: an end-effector contact) or ``"collision"``
+            (not measured: somewhere on the arm).
+        reaction: the reaction chosen for this class (see :mod:`reflexarm.control.collision.react`).
+        phase: where the reaction is now: ``"none"``, ``"gravity"``, ``"braking"``, ``"retracting"``,
+            ``"holding"``.
+        residual: the detection residual at detection (n,) [Nm].
+        q_detect: posture at detection (n,) [rad].
+        q_target: posture the reaction holds or retracts to (n,) [rad] (q_detect for gravity / none).
+        wrist_force: |wrist force| at detection [N].
+        peak_residual: largest max_i |residual_i| / threshold_i from detection on [-].
+        energy_detect: kinetic energy 0.5 dq^T M(q) dq at detection, from the measured dq [J].
+        energy_rest: the same ``rest_time`` after detection (NaN until then) [J].
+        energy_max: largest kinetic energy from detection on [J].
+        moved: largest joint displacement from q_detect since detection [rad].
+        t_hold: stamp the reaction started holding a posture (NaN: not (yet)) [s].
+        recrossings: detections again after the residual had fallen below every threshold (re-contacts).
+        torque_limited: the reaction's torque hit the torque limit on some tick.
+        overspeed: some joint exceeded its velocity limit during the reaction.
+        still_moving: the guard found the arm moving ``rest_time`` after detection (see ``text``).
+        text: the guard's report, "" if the reaction brought the arm to rest (or it has not run yet).
+    """
+
+    t_detect: float
+    joints: tuple[int, ...]
+    distal_joint: int
+    contact_class: str
+    reaction: str
+    phase: str
+    residual: np.ndarray
+    q_detect: np.ndarray
+    q_target: np.ndarray
+    wrist_force: float
+    peak_residual: float
+    energy_detect: float
+    energy_rest: float
+    energy_max: float
+    moved: float
+    t_hold: float
+    recrossings: int
+    torque_limited: bool
+    overspeed: bool
+    still_moving: bool
+    guard_checked: bool
+    text: str
+
+    @classmethod
+    def from_core(cls, record: dict[str, Any]) -> CollisionEvent | None:
+        """The event from the core's record (``reflexarm._core.Controller.event``); None before a detection."""
+        if not record["detected"]:
+            return None
+        values = {k: v for k, v in record.items() if k != "detected"}
+        values["joints"] = tuple(int(i) for i in np.flatnonzero(np.asarray(record["joints"])))
+        for key in ("residual", "q_detect", "q_target"):
+            values[key] = np.array(record[key], dtype=float)
+        return cls(**values)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: arrays as lists, NaN as None, joints 1-based under ``joints_1based`` beside the 0-based."""
+        out: dict[str, Any] = {}
+        for key, value in asdict(self).items():
+            if isinstance(value, np.ndarray):
+                value = value.tolist()
+            elif isinstance(value, float) and not math.isfinite(value):
+                value = None
+            elif isinstance(value, tuple):
+                value = list(value)
+            out[key] = value
+        out["joints_1based"] = [j + 1 for j in self.joints]
+        return out

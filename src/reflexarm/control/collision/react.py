@@ -1,0 +1,98 @@
+"""React: what the controller does once a collision is detected, and the guard that checks it stops the arm.
+
+The reactions run inside the real-time tick (C++ core, ``cpp/src/reaction.cpp``); this module names them and
+holds their settings. Every reaction's torque is bounded by the controller's torque limit; reference motions
+stay below ``velocity_fraction`` x the joints' velocity limits and ``position_margin`` inside their ranges.
+
+* ``"gravity"``: eq. (13), tau = g(q) for good (the paper's reaction). An arm with little joint friction keeps
+  the momentum it had and drifts; the guard reports it.
+* ``"brake"``: damping injection tau = g(q) + C(q, dq) dq - M(q) dq / brake_time, the closed loop
+  ddq = -dq / brake_time, for ``brake_duration``; then the posture reached is held (impedance (2) around it,
+  no disturbance compensation).
+* ``"retract"``: moves the contacted link away from the contact along the residual's direction (a contact force
+  f gives r = J_c^T f; the joint motion dq = J_c^T f moves the contact point along f, away from the obstacle: the
+  "admittance reflex" of De Luca, Albu-Schaeffer, Haddadin, Hirzinger, IROS 2006), the far end of the most
+  distal link whose joint crossed its threshold by ``retract_distance``, on a minimum-jerk path; then holds.
+* ``"compliant"``: holds the posture at detection at c K (c = ``compliant_stiffness_factor``) with the damping
+  sqrt(c) D (the modal damping of c K: the same modes at sqrt(c) times the frequencies), with the disturbance
+  compensation off (kappa_eps -> 0, the compliant mode of Fig. 3).
+* ``"none"``: detection is reported only.
+
+The reaction is chosen per class of contact (:mod:`reflexarm.control.collision.classify`): ``reaction`` for a
+collision the wrist sensor does not measure, ``contact_reaction`` for an end-effector contact it measures.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Any
+
+from reflexarm.errors import ConfigError
+
+__all__ = ["REACTIONS", "ReactionSettings", "check_reaction"]
+
+#: Reactions to a detected collision (see the module's docstring).
+REACTIONS = ("gravity", "brake", "retract", "compliant", "none")
+
+
+def check_reaction(name: object, what: str = "reaction") -> str:
+    """``name`` if it is one of :data:`REACTIONS`, else a ConfigError naming the choices."""
+    if not isinstance(name, str) or name not in REACTIONS:
+        raise ConfigError(f"unknown {what} {name!r}; choose one of: {', '.join(REACTIONS)}")
+    return name
+
+
+@dataclass(frozen=True)
+class ReactionSettings:
+    """Settings of the reactions and of the guard that checks they bring the arm to rest.
+
+    Attributes:
+        brake_time: brake: time constant of the stop, closed loop ddq = -dq / brake_time [s].
+        brake_duration: brake: damping alone this long, then the posture reached is held [s].
+        retract_distance: retract: how far the contacted link's far end moves away [m].
+        max_retract_angle: retract: largest motion of any joint [rad].
+        retract_speed: retract: mean speed of the link end along the retract [m/s].
+        velocity_fraction: reference motions of a reaction stay below this x each joint's velocity limit [-].
+        compliant_stiffness_factor: compliant: stiffness of the hold = this x the controller's [-].
+        rest_time: the guard checks the kinetic energy this long after detection [s].
+        rest_energy_fraction: ... and reports the arm as still moving above this x its energy at detection [-]
+        rest_energy_floor: ... and above this energy [J].
+        energy_filter_time: the guard's kinetic energy 0.5 dq_f^T p_f uses dq and M(q) dq low-passed with this
+            time constant [s] (the paper's velocity noise, 5.5e-2 rad/s, alone gives a few mJ unfiltered on the
+            Atlas arm; filtered ~1e-5 J).
+        contact_level: a detection while the wrist sensor measures more than this force is a measured
+            end-effector contact (with kappa_ext = 0) [N].
+        position_margin: postures a reaction holds or moves to stay this far inside the joint limits [rad].
+    """
+
+    brake_time: float = 0.05
+    brake_duration: float = 0.25
+    retract_distance: float = 0.05
+    max_retract_angle: float = 0.5
+    retract_speed: float = 0.2
+    velocity_fraction: float = 0.5
+    compliant_stiffness_factor: float = 0.1
+    rest_time: float = 0.5
+    rest_energy_fraction: float = 0.01
+    rest_energy_floor: float = 1e-3
+    energy_filter_time: float = 0.02
+    contact_level: float = 10.0
+    position_margin: float = 0.05
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+            if not ok or value < 0 or (value == 0 and f.name != "position_margin"):
+                raise ConfigError(
+                    f"ReactionSettings.{f.name} must be a positive number"
+                    f"{' (or 0)' if f.name == 'position_margin' else ''}; got {value!r}"
+                )
+
+    def to_core(self, core: Any) -> Any:
+        """The C++ core's ReactionParams with these values."""
+        p = core.ReactionParams()
+        for f in fields(self):
+            setattr(p, f.name, float(getattr(self, f.name)))
+        return p
