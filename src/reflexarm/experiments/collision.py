@@ -17,6 +17,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from reflexarm.control import Controller
+from reflexarm.control.collision import CollisionEvent, estimate_contact
 from reflexarm.errors import ConfigError
 from reflexarm.experiments.any_arm import (
     ee_swing_plan,
@@ -310,6 +311,7 @@ def run_ee_collision(
             "block_displacement": scene.displacement(plant).tolist(),
         }
     )
+    trace.meta["contact_estimate"] = _contact_estimate(ctrl_model, setting, trace)
     return trace
 
 
@@ -360,6 +362,7 @@ def run_link_collision(
             "seed": seed,
         }
     )
+    trace.meta["contact_estimate"] = _contact_estimate(ctrl_model, setting, trace)
     return trace
 
 
@@ -418,3 +421,14 @@ def free_motion_false_alarms(
         "robot": robot.name,
         "motion": motion,
     }
+
+
+def _contact_estimate(robot: RobotModel, setting: CollisionSetting, trace: Trace) -> dict[str, object] | None:
+    """Isolation and identification of the run's detected collision (JSON-ready), from the controller's event:
+    the residual and posture at detection, on the controller's model; None without a detection."""
+    record = trace.meta.get("collision_event")
+    if not record or setting.threshold is None:
+        return None
+    event = CollisionEvent.from_dict(record)  # type: ignore[arg-type]
+    i = int(np.searchsorted(trace.t, event.t_detect))
+    return estimate_contact(robot, event, setting.threshold, wrench=trace.wrench[min(i, trace.t.size - 1)]).as_dict()

@@ -8,7 +8,7 @@ The simulation's truth (time of contact, true force and point) is added beside i
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -79,6 +79,18 @@ class CollisionEvent:
         values["joints"] = tuple(int(i) for i in np.flatnonzero(np.asarray(record["joints"])))
         for key in ("residual", "q_detect", "q_target"):
             values[key] = np.array(record[key], dtype=float)
+        return cls(**values)
+
+    @classmethod
+    def from_dict(cls, record: dict[str, Any]) -> CollisionEvent:
+        """The event back from :meth:`to_dict` (e.g. a trace's ``meta["collision_event"]``)."""
+        values = {f.name: record[f.name] for f in fields(cls)}
+        values["joints"] = tuple(int(j) for j in record["joints"])
+        for key in ("residual", "q_detect", "q_target"):
+            values[key] = np.asarray(record[key], dtype=float)
+        for f in fields(cls):
+            if f.type == "float" and values[f.name] is None:
+                values[f.name] = math.nan
         return cls(**values)
 
     def to_dict(self) -> dict[str, Any]:
