@@ -8,12 +8,14 @@ modal damping and no code of the package's tick. ``ticks`` is the seeded run bot
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
+from reflexarm.control.collision.react import ReactionSettings
 from reflexarm.control.contract import (
     MASS_NOT_POSITIVE_DEFINITE,
     MODEL_NON_FINITE,
@@ -55,9 +57,34 @@ BOUNDS = {
 }  # fmt: skip  (InputBounds defaults)
 
 
+def min_jerk(s: float) -> tuple[float, float, float]:
+    """The minimum-jerk profile at s = t / T in [0, 1]: position s^3 (10 - 15 s + 6 s^2) (the quintic with
+    x(0) = x'(0) = x''(0) = 0, x(1) = 1, x'(1) = x''(1) = 0) and its first two derivatives with respect to s."""
+    return (s**3 * (10.0 - 15.0 * s + 6.0 * s * s), 30.0 * s * s * (1.0 - s) ** 2,
+            60.0 * s * (1.0 - 3.0 * s + 2.0 * s * s))  # fmt: skip
+
+
 @dataclass
 class Oracle:
-    """One control tick in plain numpy: eqs. (2), (4)-(6), (9)-(13) and the input contract."""
+    """One control tick in plain numpy: eqs. (2), (4)-(6), (9)-(13), the reactions and the input contract.
+
+    The reactions and the event record are written from the documented math (the docstrings of
+    ``reflexarm.control.collision.react`` / ``.event`` and of ``ReactionSettings``), not from the C++:
+
+    * brake: tau = g + C dq - M dq / T_b (closed loop ddq = -dq / T_b) until brake_duration has passed, then hold;
+    * retract: law (2) (K, D, g, C dq, M(q_d) ddq_d, kappa_f tau_f; no disturbance compensation) along the
+      minimum-jerk path q_detect -> q_target over T, then hold; the motion d moves a point along J J^T f: the
+      sensor frame along the measured force (class contact), else the far end of the most distal crossing link
+      (the next joint's origin, the sensor frame for the last link) along the residual on the joints up to it;
+      |J d| = retract_distance, |d_i| <= max_retract_angle, T >= retract_distance / retract_speed, >= 0.1 s, and
+      the path's peak speed 1.875 |d_i| / T <= velocity_fraction x v_lim_i; q_target inside the safe range;
+    * hold: law (2) with q_d = q_target, dq_d = ddq_d = 0, no disturbance compensation; compliant holds q_detect
+      from the detection on (kappa_eps -> 0) at c K with the modal damping of c K, c = compliant_stiffness_factor:
+      L^-1 (c K) L^-T = c U diag(lambda) U^T has the same U and c lambda, so that damping is sqrt(c) D;
+    * the reaction's law replaces (2) from the tick after detection; the torque limits bound it like any command;
+    * classification: with kappa_ext = 0, |wrist force| > contact_level at detection is a "contact"
+      (contact_reaction), else a "collision" (reaction).
+    """
 
     robot: RobotModel
     stiffness: float = 300.0
@@ -66,6 +93,9 @@ class Oracle:
     detection_observer_gain: float | None = None
     threshold: float | None = 11.0
     reaction: str = "gravity"
+    contact_reaction: str | None = None
+    settings: ReactionSettings = field(default_factory=ReactionSettings)
+    discretization: str = "euler"
     kappa_f: int = 0
     kappa_eps: int = 0
     kappa_ext: int = 0
@@ -78,6 +108,8 @@ class Oracle:
     def __post_init__(self) -> None:
         r, n = self.robot, self.robot.n
         self.n = n
+        if self.contact_reaction is None:
+            self.contact_reaction = self.reaction
         self.model = r.pin_model.copy()
         self.data = self.model.createData()
         self.model0 = r.pin_model.copy()
@@ -90,28 +122,40 @@ class Oracle:
         self.q_hi = np.where(np.isfinite(hi), hi + BOUNDS["margin"], np.inf)
         vel = r.velocity_limit
         self.dq_max = np.where(np.isfinite(vel) & (vel > 0), BOUNDS["velocity_factor"] * vel, BOUNDS["velocity"])
+        self.v_lim = np.where(np.isfinite(vel) & (vel > 0), vel, np.inf)
         eff = r.effort_limit
         ok = np.isfinite(eff) & (eff > 0)
         self.tau_max = np.where(ok, eff, np.inf)
         self.tau_m_max = np.where(ok, BOUNDS["torque_factor"] * np.where(ok, eff, 1.0), BOUNDS["torque"])
         self.step_max = np.full(n, np.inf if self.torque_rate_limit is None else self.torque_rate_limit * DT)
+        # postures a reaction holds or moves to: position_margin inside the limits (at most a quarter of the range)
+        both = np.isfinite(lo) & np.isfinite(hi)
+        pm = self.settings.position_margin
+        margin = np.where(both, np.minimum(pm, 0.25 * np.where(both, hi - lo, 0.0)), pm)
+        self.safe_lo = np.where(np.isfinite(lo), lo + margin, -np.inf)
+        self.safe_hi = np.where(np.isfinite(hi), hi - margin, np.inf)
         self.D = np.zeros((n, n))
         self.last_q = None
         self.prev_tau = None
         self.reacted = False
         self.detected = False
+        self.event: dict | None = None
         self.eps_before = self.kappa_eps
         self.reset()
 
     def reset(self) -> None:
-        if self.reacted and self.reaction == "compliant":
+        if self.reacted and self.event is not None and self.event["reaction"] == "compliant":
             self.kappa_eps = self.eps_before
         self.reacted = self.detected = False
-        self.obs = [np.zeros((3, self.n)), np.zeros((3, self.n))]  # integral, p0, residual per observer
+        self.event = None
+        self.obs = [np.zeros((3, self.n)), np.zeros((3, self.n))]  # integral, p0, residual per observer (Euler)
+        self.p_prev = np.zeros(self.n)  # exact form: the momentum of the last accepted tick
         self.started, self.last_t, self.invalid, self.countdown = False, None, False, 0
         self.pending: tuple[np.ndarray | None, int] | None = None  # (next D, accepted ticks until it is used)
         self.full = True
         self.eps_w = float(self.kappa_eps)
+        self.dq_f: np.ndarray | None = None  # the guard's low-passed dq and M(q) dq
+        self.p_f = np.zeros(self.n)
 
     def set_switches(self, kappa_eps: int) -> None:
         self.kappa_eps = kappa_eps
@@ -120,12 +164,18 @@ class Oracle:
 
     @property
     def gravity_mode(self) -> bool:
-        return self.reacted and self.reaction == "gravity"
+        return self.reacted and self.event is not None and self.event["reaction"] == "gravity"
 
     @property
     def mode(self) -> str:
         if self.gravity_mode:
             return "gravity_compensation"
+        if self.reacted and self.event is not None:
+            phase = self.event["phase"]
+            if phase in ("braking", "retracting"):
+                return phase
+            if phase == "holding" and self.event["reaction"] != "compliant":
+                return "holding"
         if not self.kappa_eps:
             return "compliant"
         return "precise_ee_compliant" if self.kappa_ext else "precise_stiff"
@@ -215,45 +265,53 @@ class Oracle:
         self.last_t = t
         if self.invalid:
             return self.reject((OBSERVER_INVALID, 0, -1, 0.0, 0.0, 0.0))
+        fr = self.robot.friction
+        tau_f = fr.coulomb * np.clip(dq / fr.velocity_band, -1, 1) + fr.viscous * dq
         if not self.started:
             for o in self.obs:
                 o[0], o[1], o[2] = 0.0, p, 0.0
+            self.p_prev = p.copy()
             self.started = True
         else:
-            fr = self.robot.friction
-            tau_f = fr.coulomb * np.clip(dq / fr.velocity_band, -1, 1) + fr.viscous * dq
-            alpha = self.kappa_f * tau_f - J.T @ wrench
-            base = tau_m - (g - C.T @ dq) - alpha  # tau_m - gamma - alpha, eqs. (4)-(6)
-            gains = (self.observer_gain, self.detection_observer_gain)
-            for o, k_o in zip(self.obs, gains, strict=True):
-                if k_o is not None:
-                    o[0] += h * (base + o[2])
-                    o[2] = k_o * (p - o[1] - o[0])
+            beta = tau_m - (g - C.T @ dq) - (self.kappa_f * tau_f - J.T @ wrench)  # tau_m - gamma - alpha, (4)-(6)
+            self.observe(p, beta, h)
         if not all(np.all(np.isfinite(o)) for o in self.obs):
             self.invalid = True
             return self.reject((OBSERVER_INVALID, 0, -1, 0.0, 0.0, 0.0))
-        fr = self.robot.friction
-        tau_f = fr.coulomb * np.clip(dq / fr.velocity_band, -1, 1) + fr.viscous * dq
         over = np.abs(self.r_det()) > (np.inf if self.threshold is None else self.threshold)
-        if self.gravity_mode:
-            tau = g
-        else:
+        tau = self.reaction_torque(t, q, dq, g, C, p, tau_f)
+        if tau is None:
             r = np.clip(self.obs[0][2], -self.residual_limit, self.residual_limit)
             tau = self.stiffness * (q_d - q) + D @ (dq_d - dq) + g + C @ dq + ff + self.kappa_f * tau_f - eps_w * r
         bounded = self.bound(tau)
+        saturated = bounded != tau
         self.model.gravity.linear, self.gravity = gravity, gravity.copy()
         self.eps_w = eps_w
         if not self.gravity_mode:
             self.countdown = (self.countdown or self.damping_update_period) - 1
-        if over.any():
-            self.detected = True
-            if not self.reacted and self.reaction != "none":
-                self.reacted = True
-                if self.reaction == "compliant":
-                    self.eps_before = self.kappa_eps
-                    self.set_switches(0)
+        if self.threshold is not None:
+            self.follow(t, q, dq, p, wrench, over, saturated)
         return {"code": 0, "tau": bounded, "residual": self.r_det().copy(), "collision": self.detected,
-                "collided": over, "saturated": bounded != tau, "mode": self.mode, "fault": None}  # fmt: skip
+                "collided": over, "saturated": saturated, "mode": self.mode, "fault": None}  # fmt: skip
+
+    def observe(self, p: np.ndarray, beta: np.ndarray, h: float) -> None:
+        """Both observers over the period h: Euler of (4), or the exact form of the first-order filter
+        dr/dt = K_o (tau_ext - r) whose input over the period is the mean tau_ext = (p_k - p_{k-1}) / h - beta."""
+        gains = (self.observer_gain, self.detection_observer_gain)
+        for o, k_o in zip(self.obs, gains, strict=True):
+            if k_o is None:
+                continue
+            if self.discretization == "exact":
+                o[2] = self.exact_step(o[2], k_o, h, p - self.p_prev, beta)
+            else:
+                o[0] += h * (beta + o[2])
+                o[2] = k_o * (p - o[1] - o[0])
+        self.p_prev = p.copy()
+
+    @staticmethod
+    def exact_step(r: np.ndarray, k_o: float, h: float, dp: np.ndarray, beta: np.ndarray) -> np.ndarray:
+        decay = math.exp(-k_o * h)
+        return decay * r + (1.0 - decay) * (dp / h - beta)
 
     def bound(self, tau: np.ndarray) -> np.ndarray:
         b = tau.copy()
@@ -276,16 +334,166 @@ class Oracle:
         return {"code": fault[0], "tau": bounded, "residual": self.r_det().copy(), "collision": collision,
                 "collided": zeros, "saturated": bounded != tau, "mode": "fault", "fault": fault}  # fmt: skip
 
+    # ------------------------------------------------------------------ reactions
+    def reaction_torque(self, t, q, dq, g, C, p, tau_f) -> np.ndarray | None:
+        """The reaction's law on this tick (None: law (2)); the event's phase is the one the last tick left."""
+        if self.gravity_mode:
+            return g  # (13)
+        ev = self.event
+        if not self.reacted or ev is None or ev["phase"] not in ("braking", "retracting", "holding"):
+            return None
+        if ev["phase"] == "braking":  # M ddq = -M dq / T_b after the model terms cancel
+            return g + C @ dq - p / self.settings.brake_time
+        q_d, dq_d, ff = ev["q_target"], np.zeros(self.n), np.zeros(self.n)
+        D = self.hold_damping * self.D
+        if ev["phase"] == "retracting":
+            D = self.D
+            T = self.retract_time
+            pos, vel, acc = min_jerk(min(max((t - self.t_phase) / T, 0.0), 1.0))
+            q_d = self.q_from + pos * self.dq_plan
+            dq_d = vel / T * self.dq_plan
+            ff = pin.rnea(self.model0, self.data0, q_d, np.zeros(self.n), acc / T**2 * self.dq_plan)  # M(q_d) ddq_d
+        return self.k_hold * (q_d - q) + D @ (dq_d - dq) + g + C @ dq + ff + self.kappa_f * tau_f
 
-def core_controller(core: Any, robot: RobotModel, o: Oracle) -> Any:
-    """The C++ controller with the oracle's settings (the model crosses as pin.Model.saveToString text)."""
+    def energy(self) -> float:
+        assert self.dq_f is not None
+        return 0.5 * float(self.dq_f @ self.p_f)
+
+    def follow(self, t, q, dq, p, wrench, over, saturated) -> None:
+        """After the law: low-pass dq and M dq; start the event on the first detection, else follow it."""
+        if self.dq_f is None:
+            self.dq_f, self.p_f = dq.copy(), p.copy()
+        else:
+            a = DT / (self.settings.energy_filter_time + DT)
+            self.dq_f = self.dq_f + a * (dq - self.dq_f)
+            self.p_f = self.p_f + a * (p - self.p_f)
+        if over.any() and not self.detected:
+            self.detected = True
+            self.start(t, q, wrench, over)
+        elif self.detected:
+            self.advance(t, q, dq, over, saturated)
+
+    def start(self, t, q, wrench, over) -> None:
+        rs, zeta = self.settings, self.threshold
+        r = self.r_det().copy()
+        force = float(np.linalg.norm(wrench[:3]))
+        measured = not self.kappa_ext and force > rs.contact_level
+        reaction = self.contact_reaction if measured else self.reaction
+        e = self.energy()
+        self.event = ev = {
+            "detected": True, "t_detect": t, "joints": over.copy(), "distal_joint": int(np.flatnonzero(over)[-1]),
+            "contact_class": "contact" if measured else "collision", "reaction": reaction, "phase": "none",
+            "residual": r, "q_detect": q.copy(), "q_target": q.copy(), "wrist_force": force,
+            "peak_residual": float(np.max(np.abs(r)) / zeta), "energy_detect": e, "energy_rest": math.nan,
+            "energy_max": e, "moved": 0.0, "t_hold": math.nan, "recrossings": 0, "torque_limited": False,
+            "overspeed": False, "still_moving": False, "guard_checked": False, "text": "",
+        }  # fmt: skip
+        self.armed = False  # a re-contact needs the residual below half of every threshold first
+        self.t_phase, self.q_from, self.k_hold = t, q.copy(), np.full(self.n, float(self.stiffness))
+        self.hold_damping = 1.0  # the hold's damping is this x D
+        if reaction == "gravity":
+            ev["phase"] = "gravity"
+        elif reaction == "brake":
+            ev["phase"] = "braking"
+        elif reaction == "retract":
+            self.plan_retract(q, wrench, measured)
+            ev["phase"] = "retracting"
+        elif reaction == "compliant":
+            ev["q_target"] = np.clip(q, self.safe_lo, self.safe_hi)
+            self.k_hold = rs.compliant_stiffness_factor * self.k_hold
+            self.hold_damping = math.sqrt(rs.compliant_stiffness_factor)  # the modal damping of c K
+            ev["phase"], ev["t_hold"] = "holding", t
+            self.eps_before = self.kappa_eps
+            self.set_switches(0)
+        self.reacted = reaction != "none"
+
+    def retract_direction(self, q, wrench, measured) -> tuple[np.ndarray, np.ndarray]:
+        """(d, J): the joint direction and the translational Jacobian (rows in any frame: only |J d| is used) of
+        the point it moves, both over the joints that move it."""
+        ev, n = self.event, self.n
+        assert ev is not None
+        last = n - 1 if measured else ev["distal_joint"]
+        if last == n - 1:  # the sensor frame (LOCAL: the wrench is measured in it)
+            J = pin.computeFrameJacobian(self.model, self.data, q, self.robot.sensor_frame_id, pin.LOCAL)[:3]
+        else:  # the origin of the next joint (Pinocchio joint ids are 1-based: joint i is id i + 1)
+            J = pin.computeJointJacobian(self.model, self.data, q, last + 2)[:3]
+        d = np.zeros(n)
+        if measured:
+            d = J.T @ wrench[:3]  # J d = J J^T f: a positive component along the force on the arm
+        else:
+            d[: last + 1] = ev["residual"][: last + 1]  # r = J_c^T f on the joints a force on that link reaches
+        J = J.copy()
+        J[:, last + 1 :] = 0.0
+        return d, J
+
+    def plan_retract(self, q, wrench, measured) -> None:
+        rs, ev = self.settings, self.event
+        assert ev is not None
+        d, J = self.retract_direction(q, wrench, measured)
+        if np.linalg.norm(d) > 0:
+            d = d / np.linalg.norm(d)
+        moved = float(np.linalg.norm(J @ d))  # [m/rad]
+        scale = rs.retract_distance / moved if moved > 1e-9 else rs.max_retract_angle
+        scale = min(scale, rs.max_retract_angle / float(np.max(np.abs(d)))) if np.any(d) else scale
+        goal = np.clip(q + scale * d, self.safe_lo, self.safe_hi)
+        self.dq_plan = goal - q
+        ev["q_target"] = goal
+        finite = np.isfinite(self.v_lim)
+        peak = 1.875 * np.abs(self.dq_plan[finite]) / (rs.velocity_fraction * self.v_lim[finite])
+        self.retract_time = max(0.1, rs.retract_distance / rs.retract_speed, *peak.tolist())
+
+    def advance(self, t, q, dq, over, saturated) -> None:
+        """A tick after the detecting one: phase changes, then the record (peak, motion, re-contacts, guard)."""
+        ev, rs, zeta = self.event, self.settings, self.threshold
+        assert ev is not None and zeta is not None
+        if self.reacted:
+            done_braking = ev["phase"] == "braking" and t - self.t_phase >= rs.brake_duration
+            done_retracting = ev["phase"] == "retracting" and t - self.t_phase >= self.retract_time
+            if done_braking:
+                ev["q_target"] = np.clip(q, self.safe_lo, self.safe_hi)  # hold where the brake stopped it
+            if done_braking or done_retracting:
+                ev["phase"], ev["t_hold"], self.t_phase = "holding", t, t
+        r = self.r_det()
+        ev["peak_residual"] = max(ev["peak_residual"], float(np.max(np.abs(r))) / zeta)
+        ev["moved"] = max(ev["moved"], float(np.max(np.abs(q - ev["q_detect"]))))
+        if self.reacted and np.any(np.abs(dq) > self.v_lim):
+            ev["overspeed"] = True
+        if np.all(np.abs(r) < 0.5 * zeta):
+            self.armed = True
+        elif self.armed and over.any():  # a detection again after the residual fell below half of every threshold
+            ev["recrossings"] += 1
+            self.armed = False
+        if self.reacted and saturated.any() and ev["phase"] != "gravity":
+            ev["torque_limited"] = True
+        e = self.energy()
+        ev["energy_max"] = max(ev["energy_max"], e)
+        if not ev["guard_checked"] and t - ev["t_detect"] >= rs.rest_time:
+            ev["guard_checked"], ev["energy_rest"] = True, e
+            level = max(rs.rest_energy_fraction * ev["energy_detect"], rs.rest_energy_floor)
+            if ev["reaction"] != "none" and e > level:
+                ev["still_moving"] = True
+                ev["text"] = (
+                    f"reaction {ev['reaction']} left the arm moving: kinetic energy {e:.3g} J "
+                    f"{t - ev['t_detect']:.3g} s after detection ({ev['energy_detect']:.3g} J at detection; "
+                    f"rest level {level:.3g} J)" + ("; its torque was saturated" if ev["torque_limited"] else "")
+                )
+
+
+def core_controller(core: Any, robot: RobotModel, o: Oracle, **changes: float) -> Any:
+    """The C++ controller with the oracle's settings (the model crosses as pin.Model.saveToString text).
+    ``changes``: ReactionParams fields to set differently from the oracle (a deliberately broken twin)."""
     p = core.ControllerParams()
     p.stiffness, p.damping_ratio = np.array([o.stiffness]), np.array([o.damping_ratio])
     p.observer_gain = np.array([o.observer_gain])
     det = o.detection_observer_gain
     p.detection_observer_gain = np.zeros(0) if det is None else np.array([det])
     p.threshold = np.zeros(0) if o.threshold is None else np.array([o.threshold])
-    p.reaction = o.reaction
+    p.reaction, p.contact_reaction = o.reaction, o.contact_reaction
+    p.observer_discretization = o.discretization
+    rp = core.ReactionParams()
+    for f in fields(o.settings):
+        setattr(rp, f.name, float(changes.get(f.name, getattr(o.settings, f.name))))
+    p.reaction_params = rp
     p.kappa_f, p.kappa_eps, p.kappa_ext = o.kappa_f, o.kappa_eps, o.kappa_ext
     p.residual_limit, p.switch_time, p.dt = o.residual_limit, o.switch_time, DT
     p.damping_update_period = o.damping_update_period
@@ -300,13 +508,24 @@ def core_controller(core: Any, robot: RobotModel, o: Oracle) -> Any:
     return core.Controller(robot.pin_model.saveToString(), p)
 
 
-def ticks(robot, *, seed: int = 0, push: float = 0.0, faults: bool = True):
-    """(t, q, dq, tau_m, wrench, gravity, q_d, dq_d, ddq_d) along a seeded random reference, with bad ticks."""
+def ticks(
+    robot,
+    *,
+    seed: int = 0,
+    push: float | Callable[[int], float] = 0.0,
+    wrist_force: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    faults: bool = True,
+    n_ticks: int = N_TICKS,
+):
+    """(t, q, dq, tau_m, wrench, gravity, q_d, dq_d, ddq_d) along a seeded random reference, with bad ticks.
+
+    ``push``: added to tau_m[1] from tick 100 on [Nm] (a function of the tick: any profile); ``wrist_force``: added
+    to the measured wrist force from tick 100 on [N] (in the sensor frame)."""
     rng = np.random.default_rng(seed)
     n = robot.n
     phase = rng.uniform(0, 2 * np.pi, n)
     t = 0.0
-    for k in range(N_TICKS):
+    for k in range(n_ticks):
         t += DT
         s = 2.0 * t + phase
         q_d = robot.home + 0.3 * np.sin(s) + rng.uniform(-0.01, 0.01, n)
@@ -314,9 +533,10 @@ def ticks(robot, *, seed: int = 0, push: float = 0.0, faults: bool = True):
         q = q_d + rng.uniform(-3.4e-4, 3.4e-4, n)
         dq = dq_d + rng.uniform(-5.5e-2, 5.5e-2, n)
         tau_m = robot.compute_gravity(q) + rng.uniform(-3.0, 3.0, n)
-        if k >= 100:
-            tau_m[1] += push
         wrench = rng.uniform(-2.3, 2.3, 6)
+        if k >= 100:
+            tau_m[1] += push(k) if callable(push) else push
+            wrench[:3] += wrist_force
         gravity = np.array([0.0, 0.0, -9.81])
         tk = t
         if faults:
@@ -406,3 +626,27 @@ def expected_text(fault: tuple) -> str:
     if code == OUTPUT_NON_FINITE:
         return f"non-finite control law on joint {index}: collision detection is off until reset()"
     return f"fault {code}"
+
+
+#: Event fields that are arrays, times or energies (compared with a tolerance); the others compare exactly.
+EVENT_ARRAYS = ("residual", "q_detect", "q_target")
+
+
+def event_mismatches(want: dict | None, got: dict, atol: float) -> list[str]:
+    """The fields of an event record (the core's dict, or the Python CollisionEvent as one with a 0/1 joint mask)
+    that differ from the oracle's: arrays and floats beyond ``atol`` (NaN equals NaN), the rest exactly."""
+    if want is None:
+        return [] if not got["detected"] else ["detected: core True, oracle False"]
+    bad = []
+    for key, w in want.items():
+        g = got[key]
+        if key == "joints":
+            same = np.array_equal(np.asarray(g).astype(bool), w)
+        elif key in EVENT_ARRAYS or isinstance(w, float):
+            a, b = np.asarray(g, dtype=float), np.asarray(w, dtype=float)
+            same = a.shape == b.shape and bool(np.all((np.abs(a - b) <= atol) | (np.isnan(a) & np.isnan(b))))
+        else:
+            same = g == w
+        if not same:
+            bad.append(f"{key}: core {g!r}, oracle {w!r}")
+    return bad
