@@ -1,10 +1,13 @@
 """reflexarm.control.Controller (the Python face of the C++ core) against the plain numpy/Pinocchio oracle.
 
 Every switch combination (kappa_f, kappa_eps, kappa_ext = DC/EFC, the modal damping updated every tick, every 3rd
-(its computation spread over 3 ticks) or every 10th (over 4)), a reset while a damping computation is under way,
-detection (12) with one or two observers, each reaction (13), the faults of the input contract, the
-invalid-observer latch and the joint springs: the commands are compared tick by tick over the seeded run of
-``controller_oracle.ticks`` (with its NaN, implausible, repeated-stamp, gravity and late ticks).
+(its computation spread over 3 ticks) or every 10th (over 4)), both observer discretizations, a reset while a
+damping computation is under way, detection (12) with one or two observers, each reaction (gravity (13), brake,
+retract, compliant, none) for a measured contact and an unmeasured collision, the event record
+(:attr:`Controller.event`), the faults of the input contract, the invalid-observer latch and the joint springs: the
+commands are compared tick by tick over the seeded run of ``controller_oracle.ticks`` (with its NaN, implausible,
+repeated-stamp, gravity and late ticks). A deliberately broken oracle (a sign flipped in the exact observer) must
+fail the same comparison.
 """
 
 from __future__ import annotations
@@ -12,15 +15,31 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controller_oracle import DT, N_TICKS, Oracle, expected_text, ticks, with_springs
+from controller_oracle import DT, N_TICKS, Oracle, event_mismatches, expected_text, ticks, with_springs
 from reflexarm.control import Controller
 from reflexarm.control import contract as _k
+from reflexarm.control.collision.event import CollisionEvent
+from reflexarm.control.collision.react import ReactionSettings
 from reflexarm.signals import Command, Measurement, Reference
 
-# Tolerance 1e-9 [Nm, Nms]: the same Pinocchio functions on both sides; summation order and the modal damping's
-# eigen-decomposition (Jacobi rotations in C++, LAPACK in the oracle) differ by ~1e-13 relative on ~1e2 Nm, which
-# the observer's integral carries over a few hundred ticks at most.
+# Tolerance 1e-9 [Nm, Nms; event record also rad, s, J]: the same Pinocchio functions on both sides; summation order
+# and the modal damping's eigen-decomposition (Jacobi rotations in C++, LAPACK in the oracle) differ by ~1e-13
+# relative on ~1e2 Nm, which the observer's integral carries over a few hundred ticks at most; the exact observer
+# divides a momentum increment by h = 1e-3 s (~1e-12 Nm per tick). A real difference is a sizeable fraction of a Nm.
 ATOL = 1e-9
+
+#: Reaction settings short enough that each reaction's phases all happen within RUN_TICKS ticks (as in
+#: test_cpp_core.py): braking 40 ms then holding, a retract of 0.1 s then holding, the guard at 0.1 s.
+SHORT = ReactionSettings(brake_duration=0.04, retract_speed=0.5, rest_time=0.1)
+RUN_TICKS = 400
+PHASES = {"gravity": ["gravity"], "brake": ["braking", "holding"], "retract": ["retracting", "holding"],
+          "compliant": ["holding"], "none": ["none"]}  # fmt: skip
+RETRACT_FEEDFORWARD = (
+    "cpp/src/reaction.cpp Controller::reactionLaw, Retracting branch: law (2) along the minimum-jerk path without "
+    "its feed-forward M(q_d) ddq_d; the oracle, written from law (2), has it (tens of Nm on the first retract ticks)"
+)
+REACTION_PARAMS = [pytest.param(r, marks=pytest.mark.xfail(strict=True, reason=RETRACT_FEEDFORWARD))
+                   if r == "retract" else r for r in PHASES]  # fmt: skip
 
 
 def controller_like(robot, o: Oracle) -> Controller:
@@ -33,6 +52,9 @@ def controller_like(robot, o: Oracle) -> Controller:
         detection_observer_gain=o.detection_observer_gain,
         threshold=o.threshold,
         reaction=o.reaction,
+        contact_reaction=o.contact_reaction,
+        reaction_settings=o.settings,
+        observer_discretization=o.discretization,
         kappa_f=o.kappa_f,
         kappa_eps=o.kappa_eps,
         kappa_ext=o.kappa_ext,
@@ -61,12 +83,24 @@ def compare(k: int, want: dict, cmd: Command, ctrl: Controller, o: Oracle) -> No
     if cmd.fault_code == 0:
         assert cmd.fault == "" and ctrl.last_fault == "", where
     assert np.all(np.isfinite(cmd.tau)), where
+    if o.threshold is not None:
+        bad = event_mismatches(o.event, event_record(ctrl.event, o.n), ATOL)
+        assert not bad, f"{where}: event " + "; ".join(bad)
+
+
+def event_record(event: CollisionEvent | None, n: int) -> dict:
+    """The Python CollisionEvent as the oracle's record (joints as a mask; before a detection: not detected)."""
+    if event is None:
+        return {"detected": False}
+    record = {f: getattr(event, f) for f in event.__dataclass_fields__}
+    record["joints"] = np.isin(np.arange(n), event.joints)
+    return {"detected": True, **record}
 
 
 def run_both(robot, o: Oracle, ctrl: Controller, **kw) -> list[int]:
     codes = []
     for k, (t, *rest) in ticks(robot, **kw):
-        if k == 200 and o.reaction == "none":  # a kappa_eps switch mid-run, ramped over switch_time
+        if k == 200 and o.reaction == "none" and o.contact_reaction == "none":  # a kappa_eps switch, ramped
             o.set_switches(1 - o.kappa_eps)
             ctrl.set_switches(kappa_eps=1 - ctrl.kappa_eps)
         want = o.step(t, *rest)
@@ -75,6 +109,19 @@ def run_both(robot, o: Oracle, ctrl: Controller, **kw) -> list[int]:
         assert ctrl.mode == o.mode, f"tick {k}"
         codes.append(want["code"])
     return codes
+
+
+def phases_seen(robot, o: Oracle, ctrl: Controller, **kw) -> list[str]:
+    """run_both, returning the reaction phases Controller.event went through."""
+    seen: list[str] = []
+    for k, (t, *rest) in ticks(robot, **kw):
+        want = o.step(t, *rest)
+        compare(k, want, ctrl.step(Measurement(t, *rest[:5]), Reference(*rest[5:])), ctrl, o)
+        assert ctrl.mode == o.mode, f"tick {k}"
+        event = ctrl.event
+        if event is not None and (not seen or seen[-1] != event.phase):
+            seen.append(event.phase)
+    return seen
 
 
 @pytest.mark.parametrize("damping_update_period", [1, 3, 10])
@@ -91,22 +138,90 @@ def test_controller_equals_oracle_for_every_switch_combination(atlas, kappa_f, k
     assert sorted(set(codes)) == [_k.TIME_NOT_INCREASING, _k.OUT_OF_BOUNDS, _k.NON_FINITE, 0]
 
 
-@pytest.mark.parametrize("reaction", ["gravity", "compliant", "none"])
+@pytest.mark.parametrize("kappa_f", [0, 1])
+@pytest.mark.parametrize("kappa_eps", [0, 1])
+@pytest.mark.parametrize("kappa_ext", [0, 1])
+def test_exact_observer_of_controller_equals_oracle(atlas, kappa_f, kappa_eps, kappa_ext):
+    """observer_discretization="exact" (a detection observer of 800 1/s beside the 5 1/s one: K dt = 0.8, refused
+    by the Euler form at the band's 2 dt, stable here) over the run with its clipped late tick."""
+    o = Oracle(atlas, kappa_f=kappa_f, kappa_eps=kappa_eps, kappa_ext=kappa_ext, threshold=None, reaction="none",
+               detection_observer_gain=800.0, discretization="exact")  # fmt: skip
+    codes = run_both(atlas, o, controller_like(atlas, o))
+    assert sorted(set(codes)) == [_k.TIME_NOT_INCREASING, _k.OUT_OF_BOUNDS, _k.NON_FINITE, 0]
+
+
+@pytest.mark.parametrize("reaction", REACTION_PARAMS)
 @pytest.mark.parametrize("detection_gain", [None, 30.0])
-def test_detection_and_reaction_of_controller_equal_oracle(atlas, reaction, detection_gain):
+@pytest.mark.parametrize("discretization", ["euler", "exact"])
+def test_detection_and_reaction_of_controller_equal_oracle(atlas, reaction, detection_gain, discretization):
+    """A 40 Nm push from tick 100 is detected; each reaction runs through its phases; Command and Controller.event
+    equal the oracle's on every tick."""
     o = Oracle(atlas, kappa_eps=1, kappa_ext=1, reaction=reaction, detection_observer_gain=detection_gain,
-               switch_time=0.0 if reaction == "compliant" else 0.1)  # fmt: skip
+               switch_time=0.0 if reaction == "compliant" else 0.1, settings=SHORT,
+               discretization=discretization)  # fmt: skip
     ctrl = controller_like(atlas, o)
-    run_both(atlas, o, ctrl, push=40.0)
+    seen = phases_seen(atlas, o, ctrl, push=40.0, n_ticks=RUN_TICKS)
     assert o.detected and ctrl.detector is not None and ctrl.detector.detected, "the 40 Nm push went undetected"
     assert ctrl.detector.first_time is not None and 0.1 < ctrl.detector.first_time < N_TICKS * DT
-    expected = {"gravity": "gravity_compensation", "compliant": "compliant"}
-    assert ctrl.mode == o.mode == expected.get(reaction, "precise_ee_compliant" if o.kappa_eps else "compliant")
+    assert seen == PHASES[reaction], "the reaction did not go through its phases: the test would prove little"
+    end_mode = {"gravity": "gravity_compensation", "brake": "holding", "retract": "holding", "compliant": "compliant"}
+    assert ctrl.mode == o.mode == end_mode.get(reaction, "precise_ee_compliant")
     assert ctrl.reacted == (reaction != "none")
     o.reset()
     ctrl.reset()
-    assert ctrl.mode == o.mode and not ctrl.reacted and ctrl.kappa_eps == o.kappa_eps
-    assert not ctrl.detector.detected and ctrl.detector.first_time is None
+    assert ctrl.mode == o.mode and not ctrl.reacted and ctrl.kappa_eps == o.kappa_eps == 1
+    assert not ctrl.detector.detected and ctrl.detector.first_time is None and ctrl.event is None
+
+
+@pytest.mark.parametrize("reaction", REACTION_PARAMS)
+@pytest.mark.parametrize("contact_class", ["contact", "collision"])
+def test_classified_reaction_of_controller_equals_oracle(atlas, reaction, contact_class):
+    """kappa_ext = 0: a detection while the wrist measures ~16 N (> contact_level) runs contact_reaction, else
+    reaction (the other one "none", so a wrong class shows); exact observer."""
+    measured = contact_class == "contact"
+    o = Oracle(atlas, kappa_eps=1, kappa_ext=0, reaction="none" if measured else reaction,
+               contact_reaction=reaction if measured else "none", detection_observer_gain=30.0, settings=SHORT,
+               discretization="exact")  # fmt: skip
+    ctrl = controller_like(atlas, o)
+    force = (12.0, -6.0, 9.0) if measured else (0.0, 0.0, 0.0)
+    assert phases_seen(atlas, o, ctrl, push=40.0, wrist_force=force, n_ticks=RUN_TICKS) == PHASES[reaction]
+    event = ctrl.event
+    assert event is not None and (event.contact_class, event.reaction) == (contact_class, reaction)
+
+
+class FlippedExactOracle(Oracle):
+    """A deliberately broken oracle: the exact observer's momentum increment with the wrong sign."""
+
+    @staticmethod
+    def exact_step(r, k_o, h, dp, beta):
+        return Oracle.exact_step(r, k_o, h, -dp, beta)
+
+
+class PushingBrakeOracle(Oracle):
+    """A deliberately broken oracle: the brake's damping injection with the wrong sign (+M dq / brake_time)."""
+
+    def reaction_torque(self, t, q, dq, g, C, p, tau_f):
+        tau = super().reaction_torque(t, q, dq, g, C, p, tau_f)
+        if self.event is not None and self.event["phase"] == "braking":
+            return tau + 2.0 * p / self.settings.brake_time
+        return tau
+
+
+@pytest.mark.parametrize(
+    ("broken", "message"),
+    [(FlippedExactOracle, "tick 1: tau"), (PushingBrakeOracle, r"tick 1\d\d: tau")],
+    ids=["exact-observer-sign", "brake-sign"],
+)
+def test_a_broken_oracle_fails_the_comparison(atlas, broken, message):
+    """The comparison has teeth: a sign flipped in the exact observer (caught on the first observer tick: with
+    kappa_eps = 1 the residual enters tau) or in the brake (caught on its first tick, after the detection ~ tick 110)
+    fails it, where the correct oracle passes."""
+    kw = {"kappa_eps": 1, "kappa_ext": 1, "reaction": "brake", "detection_observer_gain": 30.0, "settings": SHORT,
+          "discretization": "exact"}  # fmt: skip
+    run_both(atlas, Oracle(atlas, **kw), controller_like(atlas, Oracle(atlas, **kw)), push=40.0, n_ticks=RUN_TICKS)
+    o = broken(atlas, **kw)
+    with pytest.raises(AssertionError, match=message):
+        run_both(atlas, o, controller_like(atlas, o), push=40.0, n_ticks=RUN_TICKS)
 
 
 def test_invalid_observer_of_controller_latches_until_reset_like_oracle(atlas):
@@ -148,3 +263,24 @@ def test_reset_while_the_damping_is_being_computed_starts_over_like_oracle(atlas
         cmd = ctrl.step(Measurement(t, *rest[:5]), Reference(*rest[5:]))
         compare(k, want, cmd, ctrl, o)
     assert in_flight == [True, True], "the resets did not fall inside a damping computation: the test proves little"
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "src/reflexarm/control/controller.py: Controller.mode returns self._mode, refreshed only in set_switches, reset "
+    "and _finish when n_over > 0; a brake -> hold (or retract -> hold) change on a tick without a threshold "
+    "crossing leaves Controller.mode at 'braking' for good, and the Commands _finish builds (saturated ticks) say "
+    "'braking' too, while the core's mode (and its own Commands) say 'holding'"))  # fmt: skip
+def test_mode_follows_a_phase_change_without_a_threshold_crossing(atlas):
+    """A 15 ms push (detected), released: the residual is back under the threshold when the brake's 0.1 s end and
+    the arm is held; Controller.mode and every Command.mode must say so."""
+    settings = ReactionSettings(brake_duration=0.1)
+    o = Oracle(atlas, kappa_eps=1, kappa_ext=1, reaction="brake", detection_observer_gain=30.0, settings=settings)
+    ctrl = controller_like(atlas, o)
+    modes = []
+    for k, (t, *rest) in ticks(atlas, push=lambda k: 40.0 if k < 115 else 0.0, faults=False, n_ticks=RUN_TICKS):
+        want = o.step(t, *rest)
+        cmd = ctrl.step(Measurement(t, *rest[:5]), Reference(*rest[5:]))
+        modes.append((k, cmd.mode, ctrl.mode, want["mode"]))
+    assert o.event is not None and o.event["phase"] == "holding"
+    wrong = [m for m in modes if not m[1] == m[2] == m[3]]
+    assert not wrong, f"{len(wrong)} ticks with a wrong mode (tick, Command.mode, Controller.mode, oracle): {wrong[:3]}"
