@@ -479,9 +479,10 @@ class Oracle:
                 )
 
 
-def core_controller(core: Any, robot: RobotModel, o: Oracle, **changes: float) -> Any:
+def core_controller(core: Any, robot: RobotModel, o: Oracle, dt: float = DT, **changes: float) -> Any:
     """The C++ controller with the oracle's settings (the model crosses as pin.Model.saveToString text).
-    ``changes``: ReactionParams fields to set differently from the oracle (a deliberately broken twin)."""
+    ``dt``: its nominal period (the oracle's is DT); ``changes``: ReactionParams fields to set differently from the
+    oracle (a deliberately broken twin)."""
     p = core.ControllerParams()
     p.stiffness, p.damping_ratio = np.array([o.stiffness]), np.array([o.damping_ratio])
     p.observer_gain = np.array([o.observer_gain])
@@ -495,7 +496,7 @@ def core_controller(core: Any, robot: RobotModel, o: Oracle, **changes: float) -
         setattr(rp, f.name, float(changes.get(f.name, getattr(o.settings, f.name))))
     p.reaction_params = rp
     p.kappa_f, p.kappa_eps, p.kappa_ext = o.kappa_f, o.kappa_eps, o.kappa_ext
-    p.residual_limit, p.switch_time, p.dt = o.residual_limit, o.switch_time, DT
+    p.residual_limit, p.switch_time, p.dt = o.residual_limit, o.switch_time, dt
     p.damping_update_period = o.damping_update_period
     fr = robot.friction
     p.friction_coulomb, p.friction_viscous = fr.coulomb.copy(), fr.viscous.copy()
