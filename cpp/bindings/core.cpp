@@ -27,6 +27,7 @@ namespace nb = nanobind;
 using namespace nb::literals;
 
 void registerTiming(nb::module_ & m); // timing.cpp: time_tick_in_cpp, for bench/bench_cpp_core.py
+void bindIsolation(nb::module_ & m);  // isolation.cpp: ContactIsolator
 
 namespace
 {
@@ -166,6 +167,7 @@ NB_MODULE(_core, m)
   m.doc() = "reflexarm's real-time core (C++): the control tick of eqs. (2), (4)-(6), (9)-(13)";
   reflexarm_bindings::importNumpy();
   registerTiming(m);
+  bindIsolation(m);
   m.attr("SAT_SHIFT") = kSatShift;
 
   using RP = reflexarm::ReactionParams;

@@ -1,0 +1,130 @@
+// reflexarm._core.ContactIsolator: reflexarm::ContactIsolator from Python (nanobind).
+//
+// Configured from the model text (pin.Model.saveToString(), as reflexarm._core.Controller) and the collision
+// surfaces as float64 C-contiguous (m, 3) arrays per joint; isolate(q, residual) takes float64 C-contiguous
+// (n,) vectors (anything else raises TypeError instead of being copied silently: noconvert) and returns a dict.
+// The Python face is reflexarm.control.collision.isolate_core.CoreContactIsolator.
+#include <string>
+#include <vector>
+
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+#include <nanobind/stl/string.h>
+#include <nanobind/stl/vector.h>
+
+#include "reflexarm/isolation.hpp"
+#include "reflexarm/model_io.hpp"
+
+namespace nb = nanobind;
+using namespace nb::literals;
+
+namespace
+{
+  using Rows3 = nb::ndarray<const double, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu>;
+  using Vec = nb::ndarray<const double, nb::shape<-1>, nb::c_contig, nb::device::cpu>;
+  using Out3 = nb::ndarray<nb::numpy, double, nb::shape<3>>;
+  using Map = Eigen::Map<const Eigen::VectorXd>;
+
+  struct PyIsolator
+  {
+    reflexarm::ContactIsolator iso;
+    reflexarm::ContactEstimateData out;
+  };
+
+  nb::object vector3(const Eigen::Vector3d & v)
+  {
+    auto * data = new double[3]{v[0], v[1], v[2]};
+    nb::capsule owner(data, [](void * p) noexcept { delete[] static_cast<double *>(p); });
+    return nb::cast(Out3(data, {3}, owner));
+  }
+
+  Map view(const Vec & a)
+  {
+    return Map(a.data(), static_cast<Eigen::Index>(a.shape(0)));
+  }
+
+  reflexarm::LinkSurfaceData::Rows3 rows(const Rows3 & a)
+  {
+    return Eigen::Map<const reflexarm::LinkSurfaceData::Rows3>(a.data(), static_cast<Eigen::Index>(a.shape(0)), 3);
+  }
+
+  nb::dict toDict(const reflexarm::ContactEstimateData & e)
+  {
+    nb::dict d;
+    d["link"] = e.link;
+    d["point"] = e.has_point ? vector3(e.point) : nb::none();
+    d["force"] = e.has_force ? vector3(e.force) : nb::none();
+    d["best_point"] = vector3(e.point);
+    d["best_force"] = vector3(e.force);
+    d["fit_error"] = e.fit_error;
+    d["determined"] = static_cast<int>(e.determined);
+    d["cause"] = static_cast<int>(e.cause);
+    d["first_candidate"] = e.first_candidate;
+    d["candidate_count"] = e.candidate_count;
+    d["consistent_points"] = e.consistent_points;
+    d["point_spread"] = e.point_spread;
+    d["best_fit"] = e.best_fit;
+    d["tolerance"] = e.tolerance;
+    d["link_rank"] = e.link_rank;
+    d["force_rank"] = e.force_rank;
+    d["force_variation"] = e.force_variation;
+    d["direction_variation_deg"] = e.direction_variation_deg;
+    d["max_significance_ratio"] = e.max_significance_ratio;
+    return d;
+  }
+} // namespace
+
+void bindIsolation(nb::module_ & m)
+{
+  nb::class_<PyIsolator>(
+    m, "ContactIsolator",
+    "Collision isolation and identification from the joint residual (reflexarm::ContactIsolator); the Python "
+    "face is reflexarm.control.collision.isolate_core.CoreContactIsolator.")
+    .def(
+      "__init__",
+      [](PyIsolator * self, const std::string & model_text, const std::vector<Rows3> & points,
+         const std::vector<Rows3> & normals, const Vec & significance, double fit_tolerance,
+         double relative_tolerance, double friction_coefficient, int cone_edges) {
+        if (points.size() != normals.size())
+          throw reflexarm::ConfigError(
+            "points and normals: one array per joint each; got " + std::to_string(points.size()) + " and "
+            + std::to_string(normals.size()));
+        std::vector<reflexarm::LinkSurfaceData> surfaces(points.size());
+        for (size_t i = 0; i < points.size(); ++i)
+        {
+          surfaces[i].points = rows(points[i]);
+          surfaces[i].normals = rows(normals[i]);
+        }
+        reflexarm::IsolationParams params;
+        params.significance = view(significance);
+        params.fit_tolerance = fit_tolerance;
+        params.relative_tolerance = relative_tolerance;
+        params.friction_coefficient = friction_coefficient;
+        params.cone_edges = cone_edges;
+        new (self) PyIsolator();
+        self->iso.configure(reflexarm::modelFromString(model_text), surfaces, params);
+      },
+      "model_text"_a, "points"_a, "normals"_a, "significance"_a, "fit_tolerance"_a, "relative_tolerance"_a,
+      "friction_coefficient"_a, "cone_edges"_a,
+      "Configure from a Pinocchio model as text (pin.Model.saveToString()), per joint (m, 3) surface points and "
+      "outward normals in the joint frame, and the parameters of the Python ContactIsolator.")
+    .def_prop_ro("nv", [](const PyIsolator & s) { return s.iso.nv(); })
+    .def(
+      "isolate",
+      [](PyIsolator & s, const Vec & q, const Vec & residual) {
+        if (!s.iso.isolate(view(q), view(residual), s.out))
+          throw nb::value_error(
+            ("q and residual must be finite vectors of size " + std::to_string(s.iso.nv())).c_str());
+        return toDict(s.out);
+      },
+      "q"_a.noconvert(), "residual"_a.noconvert(),
+      "Contact from the residual at q (float64 C-contiguous (n,) vectors): a dict of link, point, force, "
+      "fit_error, determined (0 point_and_force, 1 force_only, 2 link_only, 3 none), cause and the numbers of "
+      "the reason.")
+    .def(
+      "isolate_only",
+      [](PyIsolator & s, const Vec & q, const Vec & residual) {
+        return s.iso.isolate(view(q), view(residual), s.out);
+      },
+      "q"_a.noconvert(), "residual"_a.noconvert(), "The C++ call alone, no result dict (for bench/): returns whether the input was valid.");
+}

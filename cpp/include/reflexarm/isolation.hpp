@@ -1,0 +1,152 @@
+// reflexarm: collision isolation and identification from the joint residual (the C++ port of
+// reflexarm.control.collision.isolate.ContactIsolator and identify.ContactIdentifier).
+//
+// Same algorithm, same results: the most distal significant joint gives the candidate links; every candidate
+// point of every candidate link is scored by the friction-pyramid constrained least squares
+// min |W (J_p^T f - r)| (interior 3x3, facets 2x2, edges, apex); the most proximal link within the tolerance of
+// the best fit is chosen; what the residual determines follows from the ranks and the consistent set.
+// configure() sizes every buffer once; isolate() allocates nothing and throws nothing.
+#pragma once
+
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/Eigenvalues>
+#include <Eigen/SVD>
+
+#include "pinocchio/multibody.hpp"
+
+#include "reflexarm/params.hpp"
+
+namespace reflexarm
+{
+
+  /// Sampled collision surface of the link moved by one joint, in the Pinocchio joint frame
+  /// (reflexarm.robots.collision_geometry.LinkSurface). Zero rows: a link without collision geometry.
+  struct LinkSurfaceData
+  {
+    using Rows3 = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
+    Rows3 points;  ///< (m, 3) surface points [m]
+    Rows3 normals; ///< (m, 3) outward unit normals
+  };
+
+  /// Parameters of ContactIsolator::configure (the Python ContactIsolator's keyword arguments).
+  struct IsolationParams
+  {
+    /// per-joint level [Nm] above which a residual component counts, > 0 (size n, or 1: broadcast)
+    Eigen::VectorXd significance = Eigen::VectorXd::Constant(1, 1.0);
+    double fit_tolerance = 0.0;        ///< absolute part of the fit tolerance (weighted norm), >= 0
+    double relative_tolerance = 0.05;  ///< relative part, a fraction of |W r|, >= 0
+    double friction_coefficient = 0.5; ///< mu of the friction pyramid, >= 0
+    int cone_edges = 8;                ///< generators of the pyramid, >= 3
+  };
+
+  /// What a joint residual determines (values as reflexarm.control.collision.contact.Determined's order).
+  enum class Determined
+  {
+    PointAndForce = 0,
+    ForceOnly = 1,
+    LinkOnly = 2,
+    None = 3
+  };
+
+  /// Why the estimate is what it is (the Python face writes the reason text from it and the numbers).
+  enum class IsolationCause
+  {
+    Determined = 0,         ///< POINT_AND_FORCE (link rank >= 5) or FORCE_ONLY (forces agree)
+    NoSignificantJoint = 1, ///< NONE
+    NoGeometry = 2,         ///< LINK_ONLY: the chosen link has no collision geometry
+    ForceRankDeficient = 3, ///< LINK_ONLY: J_c^T has rank < 3 at the best point
+    ForcesDisagree = 4,     ///< LINK_ONLY: link rank < 5 and the forces along the consistent set disagree
+    NoSingleContact = 5     ///< LINK_ONLY: no candidate explains the residual within the tolerance
+  };
+
+  /// The result of one isolate() call (ContactEstimate plus the numbers of its reason).
+  struct ContactEstimateData
+  {
+    int link = -1;                   ///< 0-based joint whose link was hit; -1 for none
+    bool has_point = false;          ///< point determined
+    bool has_force = false;          ///< force determined
+    Eigen::Vector3d point = Eigen::Vector3d::Zero(); ///< world [m] (the best point, also when undetermined)
+    Eigen::Vector3d force = Eigen::Vector3d::Zero(); ///< world [N] (the best force, also when undetermined)
+    double fit_error = 0.0;          ///< unweighted |J_c^T f - r| [Nm]; NaN for none
+    Determined determined = Determined::None;
+    IsolationCause cause = IsolationCause::NoSignificantJoint;
+    int first_candidate = -1;        ///< candidate links are first_candidate .. n-1
+    int candidate_count = 0;
+    int consistent_points = 0;       ///< points within the tolerance of the best on the chosen link
+    double point_spread = 0.0;       ///< their largest distance from the best point [m]; NaN if not applicable
+    double best_fit = 0.0;           ///< best weighted fit error over all candidate links
+    double tolerance = 0.0;          ///< fit_tolerance + relative_tolerance |W r|
+    int link_rank = 0;               ///< rank of the chosen link's Jacobian (its first link+1 columns)
+    int force_rank = 0;              ///< rank of J_p J_p^T at the best point
+    double force_variation = 0.0;    ///< relative magnitude spread of the consistent forces
+    double direction_variation_deg = 0.0; ///< their largest angle to the best force [deg]
+    double max_significance_ratio = 0.0;  ///< max_j |r_j| / significance_j
+  };
+
+  /// Isolation and identification on a fixed-base serial arm with revolute/prismatic joints (nq == nv == n).
+  class ContactIsolator
+  {
+  public:
+    /// Allocates everything. Throws ConfigError on bad input (sizes, signs, non-finite values).
+    void configure(
+      const pinocchio::Model & model, const std::vector<LinkSurfaceData> & surfaces, const IsolationParams & params);
+
+    /// Contact from the residual at q. Returns false (and out.determined = None) if q or residual has the wrong
+    /// size or a non-finite value. Allocation-free, never throws.
+    bool isolate(
+      const Eigen::Ref<const Eigen::VectorXd> & q,
+      const Eigen::Ref<const Eigen::VectorXd> & residual,
+      ContactEstimateData & out) noexcept;
+
+    int nv() const noexcept
+    {
+      return n_;
+    }
+    const Eigen::VectorXd & weights() const noexcept
+    {
+      return weights_;
+    }
+
+  private:
+    using Rows3 = LinkSurfaceData::Rows3;
+    using Jac = Eigen::Matrix<double, 6, Eigen::Dynamic>;
+
+    struct LinkBuffers
+    {
+      Rows3 points_local; ///< (m, 3)
+      Rows3 generators;   ///< (m K, 3) unit edges of the pyramid, joint frame
+      Rows3 facet_normals; ///< (m K, 3) inward facet normals, joint frame
+      Rows3 points;       ///< (m, 3) world, at the last fit
+      Rows3 forces;       ///< (m, 3) best force per point
+      Eigen::VectorXd errors; ///< (m) weighted fit errors
+      Eigen::Matrix<double, Eigen::Dynamic, 12, Eigen::RowMajor> gram; ///< (m, 12): A (9) and b (3) per point
+      Jac jacobian;       ///< LOCAL_WORLD_ALIGNED joint Jacobian at the last call
+      Eigen::Matrix3d rotation;
+      Eigen::Vector3d origin;
+      int best = -1;
+      double best_error = 0.0;
+    };
+
+    void fitLink(int link) noexcept;
+    void estimateLink(int link, double tolerance, ContactEstimateData & out) noexcept;
+    int linkRank(int link) noexcept;
+    double wrenchError(int link) noexcept;
+
+    pinocchio::Model model_;
+    pinocchio::Data data_;
+    int n_ = 0;
+    int K_ = 8;
+    IsolationParams params_;
+    Eigen::VectorXd significance_, weights_;
+    Eigen::VectorXd residual_, weighted_residual_, wrench_r_;
+    Eigen::VectorXd h_, gg_, g12_, x1_, x2_, t_;
+    Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> d_world_, c_world_, jpt_;
+    Eigen::MatrixXd wrench_b_;
+    Eigen::JacobiSVD<Eigen::MatrixXd> wrench_svd_;
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> link_eig_;
+    std::vector<LinkBuffers> links_;
+  };
+
+} // namespace reflexarm

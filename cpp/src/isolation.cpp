@@ -1,0 +1,500 @@
+// reflexarm::ContactIsolator: the C++ port of reflexarm.control.collision.isolate / identify (see isolation.hpp).
+// Each step follows the Python (vectorised) code line by line, in the same order of operations where it decides
+// something (argmin, argmax, the tolerance tests), so that the two agree to round-off.
+#include "reflexarm/isolation.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include "pinocchio/algorithm/jacobian.hpp"
+
+namespace reflexarm
+{
+  namespace
+  {
+    // the constants of identify.py
+    constexpr double kRankTolerance = 1e-6;
+    constexpr double kInteriorCondition = 1e-9;
+    constexpr double kFacetCondition = 1e-10;
+    constexpr double kEdgeFloor = 1e-14;
+    constexpr double kForceAgreement = 0.10;
+    constexpr double kDirectionAgreementDeg = 10.0;
+    constexpr double kInf = std::numeric_limits<double>::infinity();
+    constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+    constexpr double kTiny = std::numeric_limits<double>::min(); // np.finfo(float).tiny
+
+    bool allFinite(const Eigen::Ref<const Eigen::MatrixXd> & a)
+    {
+      return a.allFinite();
+    }
+
+    double sign(double x)
+    {
+      return x > 0.0 ? 1.0 : (x < 0.0 ? -1.0 : 0.0);
+    }
+  } // namespace
+
+  void ContactIsolator::configure(
+    const pinocchio::Model & model, const std::vector<LinkSurfaceData> & surfaces, const IsolationParams & params)
+  {
+    const int n = static_cast<int>(model.nv);
+    if (model.nq != model.nv || model.njoints != model.nv + 1)
+      throw ConfigError(
+        "ContactIsolator needs a fixed-base arm with one degree of freedom per joint (nq == nv == njoints - 1); got nq "
+        + std::to_string(model.nq) + ", nv " + std::to_string(model.nv) + ", njoints "
+        + std::to_string(model.njoints));
+    if (static_cast<int>(surfaces.size()) != n)
+      throw ConfigError(
+        "surfaces: one per joint expected (" + std::to_string(n) + "); got " + std::to_string(surfaces.size()));
+    const Eigen::Index ns = params.significance.size();
+    if (ns != 1 && ns != n)
+      throw ConfigError(
+        "significance: size 1 or " + std::to_string(n) + " expected; got " + std::to_string(ns));
+    if (!params.significance.allFinite() || (params.significance.array() <= 0.0).any())
+      throw ConfigError("significance must be finite and > 0 [Nm]");
+    const auto nonNegative = [](const char * name, double v) {
+      if (!std::isfinite(v) || v < 0.0)
+        throw ConfigError(std::string(name) + " must be a finite number >= 0; got " + std::to_string(v));
+    };
+    nonNegative("fit_tolerance", params.fit_tolerance);
+    nonNegative("relative_tolerance", params.relative_tolerance);
+    nonNegative("friction_coefficient", params.friction_coefficient);
+    if (params.cone_edges < 3)
+      throw ConfigError("cone_edges must be an integer >= 3; got " + std::to_string(params.cone_edges));
+
+    model_ = model;
+    data_ = pinocchio::Data(model_);
+    n_ = n;
+    K_ = params.cone_edges;
+    params_ = params;
+    significance_ = ns == 1 ? Eigen::VectorXd::Constant(n, params.significance[0]) : params.significance;
+    weights_ = significance_.minCoeff() / significance_.array();
+    residual_.resize(n);
+    wrench_r_.resize(n);
+    weighted_residual_.resize(n);
+    h_.resize(K_);
+    gg_.resize(K_);
+    g12_.resize(K_);
+    x1_.resize(K_);
+    x2_.resize(K_);
+    t_.resize(K_);
+    d_world_.resize(K_, 3);
+    c_world_.resize(K_, 3);
+    jpt_.resize(n, 3);
+    wrench_b_.resize(n, 6);
+    wrench_svd_ = Eigen::JacobiSVD<Eigen::MatrixXd>(n, 6, Eigen::ComputeThinU);
+
+    const double mu = params.friction_coefficient;
+    links_.assign(static_cast<size_t>(n), LinkBuffers());
+    for (int link = 0; link < n; ++link)
+    {
+      const LinkSurfaceData & s = surfaces[static_cast<size_t>(link)];
+      const Eigen::Index m = s.points.rows();
+      if (s.normals.rows() != m)
+        throw ConfigError(
+          "surface of joint " + std::to_string(link) + ": " + std::to_string(m) + " points but "
+          + std::to_string(s.normals.rows()) + " normals");
+      if (!allFinite(s.points) || !allFinite(s.normals))
+        throw ConfigError("surface of joint " + std::to_string(link) + ": non-finite point or normal");
+      if (m > 0 && (s.normals.rowwise().norm().array() - 1.0).abs().maxCoeff() > 1e-6)
+        throw ConfigError("surface of joint " + std::to_string(link) + ": normals must be unit vectors");
+      LinkBuffers & L = links_[static_cast<size_t>(link)];
+      L.points_local = s.points;
+      L.generators.resize(m * K_, 3);
+      L.facet_normals.resize(m * K_, 3);
+      L.points.resize(m, 3);
+      L.forces.resize(m, 3);
+      L.errors.resize(m);
+      L.gram.resize(m, 12);
+      L.jacobian = Jac::Zero(6, n);
+      for (Eigen::Index i = 0; i < m; ++i)
+      {
+        const Eigen::Vector3d nout = s.normals.row(i).transpose();
+        // _tangent_basis: a fixed rule
+        const Eigen::Vector3d helper =
+          std::abs(nout[0]) < 0.9 ? Eigen::Vector3d(1.0, 0.0, 0.0) : Eigen::Vector3d(0.0, 1.0, 0.0);
+        Eigen::Vector3d t1 = nout.cross(helper);
+        t1 /= t1.norm();
+        const Eigen::Vector3d t2 = nout.cross(t1);
+        for (int k = 0; k < K_; ++k)
+        {
+          const double a = 2.0 * M_PI * k / K_;
+          const double ca = std::cos(a), sa = std::sin(a);
+          Eigen::Vector3d d;
+          for (int j = 0; j < 3; ++j)
+            d[j] = -nout[j] + mu * (ca * t1[j] + sa * t2[j]);
+          d /= d.norm();
+          L.generators.row(i * K_ + k) = d.transpose();
+        }
+        for (int k = 0; k < K_; ++k)
+        {
+          const Eigen::Vector3d dk = L.generators.row(i * K_ + k).transpose();
+          const Eigen::Vector3d dl = L.generators.row(i * K_ + (k + 1) % K_).transpose();
+          Eigen::Vector3d c = dk.cross(dl); // normal of the facet spanned by edges k, k+1
+          c *= sign(c.dot(-nout));          // oriented into the pyramid
+          L.facet_normals.row(i * K_ + k) = c.transpose();
+        }
+      }
+    }
+  }
+
+  int ContactIsolator::linkRank(int link) noexcept
+  {
+    const Jac & J = links_[static_cast<size_t>(link)].jacobian;
+    Eigen::Matrix<double, 6, 6> G;
+    for (int i = 0; i < 6; ++i)
+      for (int j = 0; j < 6; ++j)
+      {
+        double s = 0.0;
+        for (int c = 0; c <= link; ++c)
+          s += J(i, c) * J(j, c);
+        G(i, j) = s;
+      }
+    link_eig_.compute(G, Eigen::EigenvaluesOnly);
+    const auto & w = link_eig_.eigenvalues(); // ascending; squared singular values of J[:, :link+1]
+    const double top = w[5];
+    if (!(top > 0.0))
+      return 0;
+    int rank = 0;
+    for (int i = 0; i < 6; ++i)
+      rank += w[i] > kRankTolerance * kRankTolerance * top;
+    return rank;
+  }
+
+  double ContactIsolator::wrenchError(int link) noexcept
+  {
+    // |r - J^T w*| for the best wrench at the link origin: r minus its projection on the range of (J W)^T
+    const Jac & J = links_[static_cast<size_t>(link)].jacobian;
+    for (int c = 0; c < n_; ++c)
+      for (int i = 0; i < 6; ++i)
+        wrench_b_(c, i) = J(i, c) * weights_[c];
+    wrench_svd_.compute(wrench_b_);
+    const auto & s = wrench_svd_.singularValues();
+    const auto & U = wrench_svd_.matrixU();
+    const double cutoff = std::numeric_limits<double>::epsilon() * std::max(n_, 6) * (s.size() ? s[0] : 0.0);
+    wrench_r_ = weighted_residual_;
+    for (Eigen::Index k = 0; k < s.size(); ++k)
+      if (s[k] > cutoff)
+        wrench_r_ -= U.col(k) * U.col(k).dot(weighted_residual_);
+    return wrench_r_.norm();
+  }
+
+  void ContactIsolator::fitLink(int link) noexcept
+  {
+    LinkBuffers & L = links_[static_cast<size_t>(link)];
+    const Eigen::Index m = L.points_local.rows();
+    if (m == 0)
+    {
+      L.best = -1;
+      L.best_error = wrenchError(link);
+      return;
+    }
+    const Eigen::Matrix3d & R = L.rotation;
+    const Eigen::Vector3d & o = L.origin;
+    const Jac & J = L.jacobian;
+    const Eigen::VectorXd & r = weighted_residual_;
+    const Eigen::VectorXd & w = weights_;
+
+    auto pointJacobianT = [&](const Eigen::Vector3d & d) {
+      for (int c = 0; c < n_; ++c)
+      {
+        const Eigen::Vector3d jv = J.col(c).head<3>(), jw = J.col(c).tail<3>();
+        jpt_.row(c) = ((jv + jw.cross(d)) * w[c]).transpose();
+      }
+    };
+
+    // pass 1: A = J_p W W J_p^T and b = J_p W W r per point, and the largest trace (the edges' floor)
+    double max_trace = -kInf;
+    for (Eigen::Index i = 0; i < m; ++i)
+    {
+      const Eigen::Vector3d d = R * L.points_local.row(i).transpose(); // p - o
+      L.points.row(i) = (d + o).transpose();
+      pointJacobianT(d);
+      auto g = L.gram.row(i);
+      for (int a = 0; a < 3; ++a)
+      {
+        for (int b = 0; b < 3; ++b)
+        {
+          double s = 0.0;
+          for (int c = 0; c < n_; ++c)
+            s += jpt_(c, a) * jpt_(c, b);
+          g[3 * a + b] = s;
+        }
+        double s = 0.0;
+        for (int c = 0; c < n_; ++c)
+          s += jpt_(c, a) * r[c];
+        g[9 + a] = s;
+      }
+      max_trace = std::max(max_trace, g[0] + g[4] + g[8]);
+    }
+    const double floor = kEdgeFloor * std::max(max_trace, kTiny);
+
+    // pass 2: the constrained fit per point (interior, facets, edges, apex), then its error
+    const int K = K_;
+    int best = 0;
+    double best_error = kInf;
+    for (Eigen::Index i = 0; i < m; ++i)
+    {
+      const auto g = L.gram.row(i);
+      Eigen::Matrix3d A;
+      A << g[0], g[1], g[2], g[3], g[4], g[5], g[6], g[7], g[8];
+      const Eigen::Vector3d b(g[9], g[10], g[11]);
+      for (int k = 0; k < K; ++k)
+      {
+        d_world_.row(k) = (R * L.generators.row(i * K + k).transpose()).transpose();
+        c_world_.row(k) = (R * L.facet_normals.row(i * K + k).transpose()).transpose();
+      }
+      for (int k = 0; k < K; ++k)
+      {
+        const Eigen::Vector3d dk = d_world_.row(k).transpose();
+        const Eigen::Vector3d Adk = A * dk;
+        h_[k] = dk.dot(b);
+        gg_[k] = dk.dot(Adk);
+      }
+      for (int k = 0; k < K; ++k)
+      {
+        const Eigen::Vector3d dl = d_world_.row((k + 1) % K).transpose();
+        g12_[k] = d_world_.row(k).dot((A * dl).transpose());
+      }
+      // edges: f = t d_k, t >= 0
+      for (int k = 0; k < K; ++k)
+        t_[k] = gg_[k] > floor ? std::max(h_[k], 0.0) / gg_[k] : 0.0;
+      // interior: the unconstrained solve, if inside the pyramid
+      Eigen::Matrix3d adj;
+      adj(0, 0) = A(1, 1) * A(2, 2) - A(1, 2) * A(2, 1);
+      adj(0, 1) = A(0, 2) * A(2, 1) - A(0, 1) * A(2, 2);
+      adj(0, 2) = A(0, 1) * A(1, 2) - A(0, 2) * A(1, 1);
+      adj(1, 0) = A(1, 2) * A(2, 0) - A(1, 0) * A(2, 2);
+      adj(1, 1) = A(0, 0) * A(2, 2) - A(0, 2) * A(2, 0);
+      adj(1, 2) = A(0, 2) * A(1, 0) - A(0, 0) * A(1, 2);
+      adj(2, 0) = A(1, 0) * A(2, 1) - A(1, 1) * A(2, 0);
+      adj(2, 1) = A(0, 1) * A(2, 0) - A(0, 0) * A(2, 1);
+      adj(2, 2) = A(0, 0) * A(1, 1) - A(0, 1) * A(1, 0);
+      const double detA = A(0, 0) * adj(0, 0) + A(0, 1) * adj(1, 0) + A(0, 2) * adj(2, 0);
+      const double tr = A(0, 0) + A(1, 1) + A(2, 2);
+      const double tr3 = tr / 3.0;
+      const bool well = detA > kInteriorCondition * std::pow(tr3, 3.0);
+      Eigen::Vector3d f_int = adj * b;
+      f_int /= well ? detA : 1.0;
+      bool inside = true;
+      for (int k = 0; k < K; ++k)
+        inside = inside && (c_world_.row(k).dot(f_int.transpose()) >= 0.0);
+      // the best feasible candidate: first maximum over [interior, facets, edges, apex], as np.argmax
+      int choice = 0;
+      double top = (well && inside) ? f_int.dot(b) : -kInf;
+      for (int k = 0; k < K; ++k)
+      {
+        const int l = (k + 1) % K;
+        const double det = gg_[k] * gg_[l] - g12_[k] * g12_[k];
+        bool ok = gg_[k] > floor && gg_[l] > floor && det > kFacetCondition * gg_[k] * gg_[l];
+        const double safe = ok ? det : 1.0;
+        x1_[k] = (gg_[l] * h_[k] - g12_[k] * h_[l]) / safe;
+        x2_[k] = (gg_[k] * h_[l] - g12_[k] * h_[k]) / safe;
+        ok = ok && x1_[k] >= 0.0 && x2_[k] >= 0.0;
+        const double red = ok ? x1_[k] * h_[k] + x2_[k] * h_[l] : -kInf;
+        if (red > top)
+        {
+          top = red;
+          choice = 1 + k;
+        }
+      }
+      for (int k = 0; k < K; ++k)
+      {
+        const double red = t_[k] * h_[k];
+        if (red > top)
+        {
+          top = red;
+          choice = 1 + K + k;
+        }
+      }
+      if (0.0 > top)
+        choice = 1 + 2 * K;
+      Eigen::Vector3d f = Eigen::Vector3d::Zero();
+      if (choice == 0)
+        f = f_int;
+      else if (choice <= K)
+      {
+        const int k = choice - 1;
+        f = x1_[k] * d_world_.row(k).transpose() + x2_[k] * d_world_.row((k + 1) % K).transpose();
+      }
+      else if (choice <= 2 * K)
+      {
+        const int k = choice - 1 - K;
+        f = t_[k] * d_world_.row(k).transpose();
+      }
+      L.forces.row(i) = f.transpose();
+      // error |W (J_p^T f - r)|
+      const Eigen::Vector3d d = R * L.points_local.row(i).transpose();
+      pointJacobianT(d);
+      double e2 = 0.0;
+      for (int c = 0; c < n_; ++c)
+      {
+        const double e = jpt_.row(c).dot(f.transpose()) - r[c];
+        e2 += e * e;
+      }
+      L.errors[i] = std::sqrt(e2);
+      if (L.errors[i] < best_error)
+      {
+        best_error = L.errors[i];
+        best = static_cast<int>(i);
+      }
+    }
+    L.best = best;
+    L.best_error = L.errors[best];
+  }
+
+  void ContactIsolator::estimateLink(int link, double tolerance, ContactEstimateData & out) noexcept
+  {
+    LinkBuffers & L = links_[static_cast<size_t>(link)];
+    out.link = link;
+    out.has_point = out.has_force = false;
+    out.link_rank = linkRank(link);
+    if (L.best < 0)
+    {
+      out.point.setZero();
+      out.force.setZero();
+      out.fit_error = L.best_error;
+      out.determined = Determined::LinkOnly;
+      out.cause = IsolationCause::NoGeometry;
+      out.consistent_points = 0;
+      out.point_spread = kNaN;
+      out.force_rank = 0;
+      return;
+    }
+    const int best = L.best;
+    const Eigen::Vector3d pb = L.points.row(best).transpose();
+    const Eigen::Vector3d fb = L.forces.row(best).transpose();
+    const Eigen::Vector3d d = pb - L.origin;
+    const Jac & J = L.jacobian;
+    double e2 = 0.0;
+    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+    for (int c = 0; c < n_; ++c)
+    {
+      const Eigen::Vector3d jv = J.col(c).head<3>(), jw = J.col(c).tail<3>();
+      const Eigen::Vector3d jp = jv + jw.cross(d);
+      const double e = jp.dot(fb) - residual_[c];
+      e2 += e * e;
+      A += jp * jp.transpose();
+    }
+    out.point = pb;
+    out.force = fb;
+    out.fit_error = std::sqrt(e2);
+    const double limit = L.errors[best] + tolerance;
+    int count = 0;
+    double spread = 0.0, max_rel = 0.0, min_cos = kInf;
+    const double ref = fb.norm();
+    for (Eigen::Index i = 0; i < L.errors.size(); ++i)
+    {
+      if (!(L.errors[i] <= limit))
+        continue;
+      ++count;
+      spread = std::max(spread, (L.points.row(i).transpose() - pb).norm());
+      const Eigen::Vector3d fi = L.forces.row(i).transpose();
+      const double mag = fi.norm();
+      min_cos = std::min(min_cos, fi.dot(fb) / std::max(mag * ref, kTiny));
+      max_rel = std::max(max_rel, std::abs(mag - ref));
+    }
+    out.consistent_points = count;
+    out.point_spread = spread;
+    out.force_variation = max_rel / std::max(ref, kTiny);
+    out.direction_variation_deg = std::acos(std::clamp(min_cos, -1.0, 1.0)) * (180.0 / M_PI);
+    // rank of J_p J_p^T at the best point (eigenvalues: squared singular values)
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(A, Eigen::EigenvaluesOnly);
+    const auto & ev = eig.eigenvalues();
+    int force_rank = 0;
+    if (ev[2] > 0.0)
+      for (int i = 0; i < 3; ++i)
+        force_rank += ev[i] > kRankTolerance * kRankTolerance * ev[2];
+    out.force_rank = force_rank;
+    if (force_rank < 3)
+    {
+      out.determined = Determined::LinkOnly;
+      out.cause = IsolationCause::ForceRankDeficient;
+      return;
+    }
+    if (out.link_rank >= 5)
+    {
+      out.determined = Determined::PointAndForce;
+      out.cause = IsolationCause::Determined;
+      out.has_point = out.has_force = true;
+      return;
+    }
+    if (out.force_variation <= kForceAgreement && out.direction_variation_deg <= kDirectionAgreementDeg)
+    {
+      out.determined = Determined::ForceOnly;
+      out.cause = IsolationCause::Determined;
+      out.has_force = true;
+      return;
+    }
+    out.determined = Determined::LinkOnly;
+    out.cause = IsolationCause::ForcesDisagree;
+  }
+
+  bool ContactIsolator::isolate(
+    const Eigen::Ref<const Eigen::VectorXd> & q,
+    const Eigen::Ref<const Eigen::VectorXd> & residual,
+    ContactEstimateData & out) noexcept
+  {
+    out = ContactEstimateData();
+    out.fit_error = kNaN;
+    out.point_spread = kNaN;
+    if (n_ == 0 || q.size() != n_ || residual.size() != n_ || !q.allFinite() || !residual.allFinite())
+      return false;
+    residual_ = residual;
+    int last = -1;
+    double ratio = 0.0;
+    for (int j = 0; j < n_; ++j)
+    {
+      const double a = std::abs(residual[j]);
+      if (a > significance_[j])
+        last = j;
+      ratio = std::max(ratio, a / significance_[j]);
+    }
+    out.max_significance_ratio = ratio;
+    if (last < 0)
+    {
+      out.determined = Determined::None;
+      out.cause = IsolationCause::NoSignificantJoint;
+      return true;
+    }
+    out.first_candidate = last;
+    out.candidate_count = n_ - last;
+    weighted_residual_ = weights_.cwiseProduct(residual);
+
+    pinocchio::computeJointJacobians(model_, data_, q);
+    for (int link = last; link < n_; ++link)
+    {
+      LinkBuffers & L = links_[static_cast<size_t>(link)];
+      const auto jid = static_cast<pinocchio::JointIndex>(link + 1);
+      L.rotation = data_.oMi[jid].rotation();
+      L.origin = data_.oMi[jid].translation();
+      L.jacobian.setZero();
+      pinocchio::getJointJacobian(model_, data_, jid, pinocchio::LOCAL_WORLD_ALIGNED, L.jacobian);
+      fitLink(link);
+    }
+    const double tol = params_.fit_tolerance + params_.relative_tolerance * weighted_residual_.norm();
+    double best = kInf;
+    for (int link = last; link < n_; ++link)
+      best = std::min(best, links_[static_cast<size_t>(link)].best_error);
+    int chosen = last;
+    for (int link = last; link < n_; ++link)
+      if (links_[static_cast<size_t>(link)].best_error <= best + tol)
+      {
+        chosen = link;
+        break;
+      }
+    out.best_fit = best;
+    out.tolerance = tol;
+    estimateLink(chosen, tol, out);
+    if (!(best <= tol))
+    {
+      out.determined = Determined::LinkOnly;
+      out.cause = IsolationCause::NoSingleContact;
+      out.has_point = out.has_force = false;
+    }
+    return true;
+  }
+
+} // namespace reflexarm

@@ -1,0 +1,220 @@
+"""The C++ ContactIsolator (reflexarm._core) against the Python one: same link, same determination, same numbers.
+
+The Python :class:`ContactIsolator` is the reference (itself checked against the slow independent reference in
+``test_collision_isolation.py``); :class:`CoreContactIsolator` must return the same :class:`ContactEstimate` on
+seeded contacts of every arm, exact and noisy residuals, and refuse bad input with the Python class's messages.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+import reflexarm._core as core
+
+from reflexarm.control.collision.contact import Determined
+from reflexarm.control.collision.isolate import ContactIsolator
+from reflexarm.control.collision.isolate_core import CoreContactIsolator
+from reflexarm.errors import ConfigError, SignalError
+from reflexarm.experiments.isolation_study import draw_contacts
+from reflexarm.robots import load_robot, write_ur_like_arm
+from reflexarm.robots.collision_geometry import link_collision_geometry
+
+#: Candidate point spacing [m] (coarser than the default 1 cm to keep the Python reference fast; the code paths
+#: are the same).
+SPACING = 0.02
+#: Contacts per arm and variant.
+CONTACTS = 200
+#: Both compute the same expressions in the same order up to the summation order of numpy's einsum/matmul, so
+#: the results differ by round-off only. The point is a candidate point moved by the same R p + o: 1e-12 m is
+#: ~1e4 ulp of a 1 m coordinate. The force comes from 2x2/3x3 solves whose condition number on thin links
+#: reaches ~1e4: round-off 1e-16 x 1e4 x 100 N ~ 1e-10 N at worst (measured <= 2e-11 N); 1e-8 N leaves margin
+#: and is still 1e-10 of the 20-100 N contact forces. The fit error is a norm of ~10-100 Nm residual terms:
+#: measured <= 2e-13 Nm, asserted to 1e-9 Nm.
+POINT_ATOL = 1e-12
+FORCE_ATOL = 1e-8
+FIT_ATOL = 1e-9
+#: Noisy variant: residual noise [Nm] per joint (Gaussian), its significance level and fit tolerance.
+NOISE = 0.05
+NOISY_SIGNIFICANCE = 0.25
+NOISY_FIT_TOLERANCE = 0.3
+
+
+@pytest.fixture(scope="module")
+def arms(tmp_path_factory):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ur = load_robot(write_ur_like_arm(tmp_path_factory.mktemp("ur")), tip="tool0")
+        out = {"atlas": load_robot("atlas_v5_left_arm"), "panda": load_robot("panda"), "ur_like": ur}
+        try:
+            out["iiwa14"] = load_robot("iiwa14")
+        except Exception:  # as test_collision_isolation.py: the built-in iiwa14 may be missing
+            pass
+    return out
+
+
+ARMS = ["atlas", "panda", "ur_like", "iiwa14"]
+
+
+def _arm(arms, name):
+    if name not in arms:
+        pytest.skip(f"robot {name} not available")
+    return arms[name]
+
+
+def _assert_same(a, b, where, tie=None):
+    """``b`` (core) equals ``a`` (Python). ``tie``: when the point is undetermined (LINK_ONLY), a callable checking
+    that the core's best point ties with Python's (their scores equal to round-off) where the two picked different
+    points of an exact tie: the spread and the numbers of the reason are then measured from another point."""
+    assert (b.link, b.link_name, b.determined) == (a.link, a.link_name, a.determined), where
+    assert b.candidate_links == a.candidate_links, where
+    assert b.consistent_points == a.consistent_points, where
+    for label, x, y, atol in (("point", a.point, b.point, POINT_ATOL), ("force", a.force, b.force, FORCE_ATOL)):
+        assert (x is None) == (y is None), f"{where}: {label} {x} vs {y}"
+        if x is not None:
+            np.testing.assert_allclose(y, x, rtol=0, atol=atol, err_msg=f"{where}: {label}")
+    np.testing.assert_allclose(b.fit_error, a.fit_error, rtol=0, atol=FIT_ATOL, err_msg=f"{where}: fit_error")
+    same_spread = np.isclose(b.point_spread, a.point_spread, rtol=0, atol=POINT_ATOL, equal_nan=True)
+    if a.determined is Determined.LINK_ONLY and tie is not None and not (same_spread and b.reason == a.reason):
+        tie()
+        return
+    assert same_spread, f"{where}: spread {b.point_spread} vs {a.point_spread}"
+    assert b.reason == a.reason, where
+
+
+def _tie_check(py, cc, q, r, where):
+    """The core's best point on the chosen link scores as well as Python's best (an exact tie), in Python's fit."""
+
+    def check():
+        out = cc._core.isolate(np.asarray(q, float), np.asarray(r, float))
+        fit = next(f for f in py.fit(q, r) if f.link == out["link"])
+        if fit.best < 0:
+            return
+        k = int(np.argmin(np.linalg.norm(fit.points - out["best_point"], axis=1)))
+        assert np.linalg.norm(fit.points[k] - out["best_point"]) < POINT_ATOL, where
+        assert fit.errors[k] <= fit.errors[fit.best] + FIT_ATOL, f"{where}: core best point is no tie"
+
+    return check
+
+
+@pytest.mark.parametrize("noisy", [False, True], ids=["exact", "noisy"])
+@pytest.mark.parametrize("name", ARMS)
+def test_core_matches_python(arms, name, noisy):
+    robot = _arm(arms, name)
+    geometry = link_collision_geometry(robot, spacing=SPACING)
+    truth = link_collision_geometry(robot, spacing=0.004, seed=3)
+    if noisy:
+        kw = {"significance": np.full(robot.n, NOISY_SIGNIFICANCE), "fit_tolerance": NOISY_FIT_TOLERANCE}
+    else:
+        kw = {"significance": 1e-6}  # the study's exact variant
+    py = ContactIsolator(robot, geometry=geometry, **kw)
+    cc = CoreContactIsolator(robot, geometry=geometry, **kw)
+    rng = np.random.default_rng(7)
+    seen = set()
+    for i, c in enumerate(draw_contacts(robot, truth, CONTACTS, seed=21 + noisy)):
+        r = c.torque + (rng.normal(0.0, NOISE, robot.n) if noisy else 0.0)
+        a, b = py.isolate(c.q, r), cc.isolate(c.q, r)
+        _assert_same(a, b, f"{name} contact {i}", _tie_check(py, cc, c.q, r, f"{name} contact {i}"))
+        seen.add(a.determined)
+    assert Determined.POINT_AND_FORCE in seen  # the comparison covered the determined case
+
+
+def test_no_contact_and_undetectable(arms):
+    robot = arms["panda"]
+    geometry = link_collision_geometry(robot, spacing=SPACING)
+    py = ContactIsolator(robot, significance=1.0, geometry=geometry)
+    cc = CoreContactIsolator(robot, significance=1.0, geometry=geometry)
+    q = robot.home
+    for r in (np.zeros(robot.n), np.full(robot.n, 0.5), np.r_[np.zeros(robot.n - 1), 50.0]):
+        _assert_same(py.isolate(q, r), cc.isolate(q, r), f"r = {r}")
+    assert cc.isolate(q, np.zeros(robot.n)).determined is Determined.NONE
+
+
+def test_link_without_geometry(arms):
+    """Atlas' link 4 has no collision geometry: the wrench-at-origin score and LINK_ONLY 'point unknown'."""
+    robot = arms["atlas"]
+    geometry = link_collision_geometry(robot, spacing=SPACING)
+    assert 4 in geometry.links_without_geometry()
+    py = ContactIsolator(robot, significance=1e-6, geometry=geometry)
+    cc = CoreContactIsolator(robot, significance=1e-6, geometry=geometry)
+    rng = np.random.default_rng(3)
+    hits = 0
+    for _ in range(100):
+        q = rng.uniform(-1.0, 1.0, robot.n)
+        r = np.r_[rng.normal(0.0, 20.0, 5), np.zeros(robot.n - 5)]  # joints 0..4 only: a wrench on link 4
+        a, b = py.isolate(q, r), cc.isolate(q, r)
+        _assert_same(a, b, f"q = {q}")
+        hits += "point unknown" in a.reason
+    assert hits > 0
+
+
+def test_weighted_fit_matches(arms):
+    """Unequal significance levels: the weighted norm |W (J_p^T f - r)| on both sides."""
+    robot = arms["iiwa14"] if "iiwa14" in arms else arms["panda"]
+    geometry = link_collision_geometry(robot, spacing=SPACING)
+    truth = link_collision_geometry(robot, spacing=0.004, seed=5)
+    sig = np.linspace(0.5, 0.1, robot.n)
+    py = ContactIsolator(robot, significance=sig, geometry=geometry, fit_tolerance=0.2)
+    cc = CoreContactIsolator(robot, significance=sig, geometry=geometry, fit_tolerance=0.2)
+    rng = np.random.default_rng(9)
+    for i, c in enumerate(draw_contacts(robot, truth, 50, seed=4)):
+        r = c.torque + rng.normal(0.0, 0.05, robot.n)
+        _assert_same(py.isolate(c.q, r), cc.isolate(c.q, r), f"contact {i}")
+
+
+# ------------------------------------------------------------------ bad input
+@pytest.fixture(scope="module")
+def panda_core(arms):
+    robot = arms["panda"]
+    return CoreContactIsolator(robot, significance=1.0, geometry=link_collision_geometry(robot, spacing=0.05))
+
+
+def test_wrong_size_is_refused(panda_core):
+    with pytest.raises(SignalError, match=r"q must be a real \(7,\) array \(one value per joint\); got shape \(6,\)"):
+        panda_core.isolate(np.zeros(6), np.zeros(7))
+    with pytest.raises(SignalError, match=r"residual must be a real \(7,\) array .* got shape \(7, 1\)"):
+        panda_core.isolate(np.zeros(7), np.zeros((7, 1)))
+
+
+def test_nan_is_refused(panda_core):
+    r = np.ones(7)
+    r[2] = np.nan
+    with pytest.raises(SignalError, match=r"residual must be finite; got .* \(non-finite at joint\(s\) \[2\]\)"):
+        panda_core.isolate(np.zeros(7), r)
+    q = np.zeros(7)
+    q[6] = np.inf
+    with pytest.raises(SignalError, match=r"q must be finite; .* \(non-finite at joint\(s\) \[6\]\)"):
+        panda_core.isolate(q, np.ones(7))
+
+
+def test_core_refuses_bad_input_itself(panda_core):
+    """The bare core (no Python checks) refuses instead of computing on bad input."""
+    c = panda_core._core
+    with pytest.raises(ValueError, match=r"q and residual must be finite vectors of size 7"):
+        c.isolate(np.zeros(6), np.zeros(7))
+    with pytest.raises(ValueError, match=r"q and residual must be finite vectors of size 7"):
+        c.isolate(np.zeros(7), np.full(7, np.nan))
+    with pytest.raises(TypeError):  # float32 is refused, not copied silently
+        c.isolate(np.zeros(7, dtype=np.float32), np.zeros(7))
+
+
+def test_bad_configuration(arms):
+    robot = arms["panda"]
+    geometry = link_collision_geometry(robot, spacing=0.05)
+    with pytest.raises(ConfigError, match="significance must be positive"):
+        CoreContactIsolator(robot, significance=-1.0, geometry=geometry)
+    with pytest.raises(ConfigError, match="cone_edges must be an integer >= 3; got 2"):
+        CoreContactIsolator(robot, significance=1.0, geometry=geometry, cone_edges=2)
+    text = robot.pin_model.saveToString()
+    pts = [np.ascontiguousarray(s.points) for s in geometry.links]
+    nrm = [np.ascontiguousarray(s.normals) for s in geometry.links]
+    sig = np.ones(robot.n)
+    with pytest.raises(ValueError, match=r"surfaces: one per joint expected \(7\); got 6"):
+        core.ContactIsolator(text, pts[:6], nrm[:6], sig, 0.0, 0.05, 0.5, 8)
+    with pytest.raises(ValueError, match=r"surface of joint 1: \d+ points but \d+ normals"):
+        core.ContactIsolator(text, pts, [nrm[0], nrm[0][:1]] + nrm[2:], sig, 0.0, 0.05, 0.5, 8)
+    with pytest.raises(ValueError, match=r"significance must be finite and > 0"):
+        core.ContactIsolator(text, pts, nrm, np.r_[sig[:6], 0.0], 0.0, 0.05, 0.5, 8)
+    with pytest.raises(ValueError, match=r"friction_coefficient must be a finite number >= 0"):
+        core.ContactIsolator(text, pts, nrm, sig, 0.0, 0.05, np.nan, 8)
