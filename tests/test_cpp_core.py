@@ -43,7 +43,7 @@ RUN_TICKS = 400
 #: the phases each reaction goes through in such a run
 PHASES = {"gravity": ["gravity"], "brake": ["braking", "holding"], "retract": ["retracting", "holding"],
           "compliant": ["holding"], "none": ["none"]}  # fmt: skip
-#: C++ disagreement with law (2) during the retract (see the report in tests/test_reactions.py)
+#: C++ disagreement with law (2) during the retract (reported to the lead; the test is xfail until it is settled)
 RETRACT_FEEDFORWARD = (
     "cpp/src/reaction.cpp Controller::reactionLaw, Retracting branch: the law (2) along the minimum-jerk path has "
     "no feed-forward M(q_d) ddq_d of the path's acceleration (dq_plan 60 s (1 - 3 s + 2 s^2) / T^2); the oracle, "
