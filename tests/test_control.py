@@ -7,7 +7,14 @@ import pytest
 import scipy.linalg
 
 from pinsim import RigidBodyPlant
-from reflexarm.control import CollisionDetector, Controller, JointImpedanceController, MomentumObserver, modal_damping
+from reflexarm.control import (
+    CollisionDetector,
+    Controller,
+    JointImpedanceController,
+    MomentumObserver,
+    ReactionSettings,
+    modal_damping,
+)
 from reflexarm.errors import ConfigError
 from reflexarm.robots import CoulombViscousFriction
 from reflexarm.signals import Measurement, Reference
@@ -347,7 +354,11 @@ def test_compliant_reaction_drops_compensation_and_reset_restores_it(atlas):
     push[0] = 25.0
     plant = RigidBodyPlant(robot, tau_ext=lambda t: push if 0.3 <= t < 0.8 else np.zeros(robot.n))
     plant.reset(robot.home)
-    ctrl = Controller(robot, stiffness=150, observer_gain=10, threshold=11, reaction="compliant", kappa_eps=1)
+    # the compliant hold at the default 0.1 K (15 Nm/rad) lets this 25 Nm push carry shz out of its range (a
+    # fault); the full stiffness keeps it inside, which is what this test needs to see the switches
+    settings = ReactionSettings(compliant_stiffness_factor=1.0)
+    ctrl = Controller(robot, stiffness=150, observer_gain=10, threshold=11, reaction="compliant", kappa_eps=1,
+                      reaction_settings=settings)  # fmt: skip
     _, _, cmds = run(plant, ctrl, lambda t: Reference.hold(robot.home), 1200)
     assert cmds[0].mode == "precise_stiff"
     assert cmds[-1].collision and cmds[-1].mode == "compliant" and ctrl.kappa_eps == 0

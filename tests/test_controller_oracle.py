@@ -34,12 +34,7 @@ SHORT = ReactionSettings(brake_duration=0.04, retract_speed=0.5, rest_time=0.1)
 RUN_TICKS = 400
 PHASES = {"gravity": ["gravity"], "brake": ["braking", "holding"], "retract": ["retracting", "holding"],
           "compliant": ["holding"], "none": ["none"]}  # fmt: skip
-RETRACT_FEEDFORWARD = (
-    "cpp/src/reaction.cpp Controller::reactionLaw, Retracting branch: law (2) along the minimum-jerk path without "
-    "its feed-forward M(q_d) ddq_d; the oracle, written from law (2), has it (tens of Nm on the first retract ticks)"
-)
-REACTION_PARAMS = [pytest.param(r, marks=pytest.mark.xfail(strict=True, reason=RETRACT_FEEDFORWARD))
-                   if r == "retract" else r for r in PHASES]  # fmt: skip
+REACTION_PARAMS = list(PHASES)
 
 
 def controller_like(robot, o: Oracle) -> Controller:
@@ -265,11 +260,6 @@ def test_reset_while_the_damping_is_being_computed_starts_over_like_oracle(atlas
     assert in_flight == [True, True], "the resets did not fall inside a damping computation: the test proves little"
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "src/reflexarm/control/controller.py: Controller.mode returns self._mode, refreshed only in set_switches, reset "
-    "and _finish when n_over > 0; a brake -> hold (or retract -> hold) change on a tick without a threshold "
-    "crossing leaves Controller.mode at 'braking' for good, and the Commands _finish builds (saturated ticks) say "
-    "'braking' too, while the core's mode (and its own Commands) say 'holding'"))  # fmt: skip
 def test_mode_follows_a_phase_change_without_a_threshold_crossing(atlas):
     """A 15 ms push (detected), released: the residual is back under the threshold when the brake's 0.1 s end and
     the arm is held; Controller.mode and every Command.mode must say so."""

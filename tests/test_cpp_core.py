@@ -43,12 +43,6 @@ RUN_TICKS = 400
 #: the phases each reaction goes through in such a run
 PHASES = {"gravity": ["gravity"], "brake": ["braking", "holding"], "retract": ["retracting", "holding"],
           "compliant": ["holding"], "none": ["none"]}  # fmt: skip
-#: C++ disagreement with law (2) during the retract (reported to the lead; the test is xfail until it is settled)
-RETRACT_FEEDFORWARD = (
-    "cpp/src/reaction.cpp Controller::reactionLaw, Retracting branch: the law (2) along the minimum-jerk path has "
-    "no feed-forward M(q_d) ddq_d of the path's acceleration (dq_plan 60 s (1 - 3 s + 2 s^2) / T^2); the oracle, "
-    "written from law (2), has it: tens of Nm apart on the first retract ticks"
-)
 
 
 def compare(k: int, want: dict, ctrl: Any, status: int, o: Oracle | None = None, tau: bool = True) -> None:
@@ -118,9 +112,7 @@ def test_tick_equals_oracle_for_every_switch_combination(atlas, kappa_f, kappa_e
 
 
 REACTIONS = ["gravity", "brake", "retract", "compliant", "none"]
-#: the reactions, the retract's torque marked as the known disagreement
-REACTION_PARAMS = [pytest.param(r, marks=pytest.mark.xfail(strict=True, reason=RETRACT_FEEDFORWARD))
-                   if r == "retract" else r for r in REACTIONS]  # fmt: skip
+REACTION_PARAMS = REACTIONS
 
 
 @pytest.mark.parametrize("reaction", REACTION_PARAMS)
@@ -153,7 +145,7 @@ def test_detection_and_reaction_equal_oracle(atlas, reaction, detection_gain, di
 @pytest.mark.parametrize("measured", [False, True])
 @pytest.mark.parametrize("discretization", ["euler", "exact"])
 def test_retract_plan_and_phases_equal_oracle(atlas, reaction, measured, discretization):
-    """The retract apart from its torque (the known disagreement, see RETRACT_FEEDFORWARD): its goal q_target (the
+    """The retract apart from its torque: its goal q_target (the
     direction and length of the motion), the phases, modes, residuals and the rest of the record equal the oracle's.
     The run's measurements do not depend on the commands, so nothing here depends on the torque either."""
     o = Oracle(atlas, kappa_eps=1, kappa_ext=0, reaction=reaction, contact_reaction=reaction,
@@ -214,11 +206,6 @@ def test_a_perturbed_brake_time_is_caught(atlas, discretization):
 @pytest.mark.parametrize(
     "second_push", [pytest.param(8.0, id="below-threshold"), pytest.param(20.0, id="above-threshold")]
 )
-@pytest.mark.xfail(strict=True, reason=(
-    "cpp/src/reaction.cpp Controller::followEvent: a re-contact is counted whenever some |r_i| rises to 0.5 zeta_i "
-    "after all were below it (the `else if (e.below_since)` branch ignores n_over), not when the residual crosses "
-    "the threshold again as CollisionEvent.recrossings and collision_event.hpp document: 24 'recrossings' where no "
-    "detection happened (8 Nm), 6 for one re-contact (20 Nm)"))  # fmt: skip
 def test_recrossings_count_detections_after_the_residual_fell_below_half(atlas, second_push):
     """A 40 Nm push (ticks 100-199), released (the residual falls below half of every threshold), then a second push
     of 8 Nm (under the 11 Nm threshold: no re-contact) or 20 Nm (one re-contact). On this random reference the

@@ -48,22 +48,13 @@ def residuals(ctrl: Controller, robot, dt: float, n_ticks: int) -> np.ndarray:
 
 # ---------------------------------------------------------------------------------------------- observer
 #: Python Controller refusing the exact form at K_o dt >= 1 (the C++ core accepts it)
-EXACT_REFUSED = (
-    "src/reflexarm/control/controller.py Controller.__init__ builds MomentumObserver(n, observer_gain, dt) (whose "
-    "__init__, control/momentum_observer.py:37, refuses observer_gain * dt >= 1) before it looks at "
-    "observer_discretization, so 'exact' is refused at K_o dt >= 1 (5000 1/s at 1 kHz, 500 1/s at 100 Hz: the "
-    "docstring's own example) with the Euler message; the C++ core accepts these gains (configure.cpp checks "
-    "K_o dt only when !exact)"
-)
 
 
 def exact_cases():
     for gain in (5.0, 500.0, 5000.0):
         for rate in (1000.0, 100.0):
             for face in ("core", "Controller"):
-                refused = face == "Controller" and gain / rate >= 1.0
-                marks = pytest.mark.xfail(strict=True, raises=ConfigError, reason=EXACT_REFUSED) if refused else ()
-                yield pytest.param(gain, rate, face, marks=marks, id=f"{gain:g}-{rate:g}Hz-{face}")
+                yield pytest.param(gain, rate, face, id=f"{gain:g}-{rate:g}Hz-{face}")
 
 
 @pytest.mark.parametrize(("gain", "rate", "face"), list(exact_cases()))
@@ -108,7 +99,7 @@ def test_euler_observer_is_refused_where_unstable_and_exact_is_not(atlas, gain, 
         Controller(atlas, observer_gain=gain, dt=dt)
     ctrl = core_controller(core, atlas, Oracle(atlas, observer_gain=gain, discretization="exact"), dt=dt)
     _, m, ref = next(held_still(atlas, dt, 1))
-    assert ctrl.update(*m, *ref) == 0  # the core takes the exact form at this gain (the Controller: EXACT_REFUSED)
+    assert ctrl.update(*m, *ref) == 0  # the core takes the exact form at this gain
 
 
 @pytest.mark.parametrize("gain", [2500.0, 5000.0])

@@ -259,6 +259,10 @@ namespace reflexarm
     K_hold_ = K_;
     q_from_.setZero(n);
     dq_plan_.setZero(n);
+    qd_r_.setZero(n);
+    dqd_r_.setZero(n);
+    ddqd_r_.setZero(n);
+    ff_r_.setZero(n);
     dq_f_.setZero(n);
     p_f_.setZero(n);
     J_r_.setZero(6, n);

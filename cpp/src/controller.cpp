@@ -356,6 +356,8 @@ namespace reflexarm
   {
     const Eigen::MatrixXd & C = data_c_.C;
     const double kappa_f = static_cast<double>(kappa_f_);
+    if (reacted_ && event_.phase == ReactionPhase::Retracting)
+      retractReference();
     for (int i = 0; i < n_; ++i)
     {
       double tau;

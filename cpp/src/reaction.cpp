@@ -19,6 +19,7 @@
 
 #include "pinocchio/algorithm/frames.hpp"
 #include "pinocchio/algorithm/jacobian.hpp"
+#include "pinocchio/algorithm/rnea.hpp"
 
 #include "reflexarm/controller.hpp"
 
@@ -235,16 +236,13 @@ namespace reflexarm
       tau = g_[i] + c_dq - p_[i] / params_.reaction_params.brake_time;
       return true;
     }
-    double d_e = 0.0, q_d = event_.q_target[i];
-    if (phase == ReactionPhase::Retracting)
+    double d_e = 0.0, q_d = event_.q_target[i], ff = 0.0;
+    if (phase == ReactionPhase::Retracting) // law (2) along the path of retractReference()
     {
-      const double tau_s = std::min(std::max((last_t_ - t_phase_) / retract_time_, 0.0), 1.0);
-      const double t2 = tau_s * tau_s, t3 = t2 * tau_s;
-      const double pos = t3 * (10.0 - 15.0 * tau_s + 6.0 * t2);        // minimum jerk
-      const double vel = 30.0 * t2 * (1.0 - 2.0 * tau_s + t2) / retract_time_; // its derivative [1/s]
-      q_d = q_from_[i] + dq_plan_[i] * pos;
+      q_d = qd_r_[i];
+      ff = ff_r_[i];
       for (int j = 0; j < n_; ++j)
-        d_e += D_(i, j) * (dq_plan_[j] * vel - s.dq[j]);
+        d_e += D_(i, j) * (dqd_r_[j] - s.dq[j]);
     }
     else
     {
@@ -252,8 +250,28 @@ namespace reflexarm
         d_e += D_(i, j) * (-s.dq[j]);
       d_e *= hold_damping_scale_;
     }
-    tau = K_hold_[i] * (q_d - s.q[i]) + d_e + g_[i] + c_dq + static_cast<double>(kappa_f_) * frictionTorque(i, s.dq[i]);
+    tau = K_hold_[i] * (q_d - s.q[i]) + d_e + g_[i] + c_dq + ff
+          + static_cast<double>(kappa_f_) * frictionTorque(i, s.dq[i]);
     return true;
+  }
+
+  // The retract's reference this tick: the minimum-jerk path q_from + dq_plan s(tau), tau = (t - t0) / T, and the
+  // feed-forward M(q_d) ddq_d of law (2)
+  void Controller::retractReference() noexcept
+  {
+    const double tau_s = std::min(std::max((last_t_ - t_phase_) / retract_time_, 0.0), 1.0);
+    const double t2 = tau_s * tau_s, t3 = t2 * tau_s, T = retract_time_;
+    const double pos = t3 * (10.0 - 15.0 * tau_s + 6.0 * t2);             // s
+    const double vel = 30.0 * t2 * (1.0 - 2.0 * tau_s + t2) / T;           // ds/dt [1/s]
+    const double acc = 60.0 * tau_s * (1.0 - 3.0 * tau_s + 2.0 * t2) / (T * T); // d2s/dt2 [1/s^2]
+    for (int i = 0; i < n_; ++i)
+    {
+      qd_r_[i] = q_from_[i] + dq_plan_[i] * pos;
+      dqd_r_[i] = dq_plan_[i] * vel;
+      ddqd_r_[i] = dq_plan_[i] * acc;
+    }
+    const ConstVectorRef zeros(zeros_);
+    ff_r_ = pinocchio::rnea(model0_, data_ff_, ConstVectorRef(qd_r_), zeros, ConstVectorRef(ddqd_r_));
   }
 
   // ---------------------------------------------------------------------------------- after detection
@@ -301,7 +319,7 @@ namespace reflexarm
       quiet = std::abs(r[i]) < 0.5 * threshold_[i];
     if (quiet)
       e.below_since = true;
-    else if (e.below_since)
+    else if (e.below_since && n_over > 0)
     {
       ++e.recrossings; // the residual crossed again after falling below half of every threshold: a new contact
       e.below_since = false;

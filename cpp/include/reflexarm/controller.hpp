@@ -164,6 +164,7 @@ namespace reflexarm
     void planRetract(const State & s) noexcept;
     void followEvent(double t, const State & s, int n_over, int n_sat) noexcept;
     void advanceReaction(double t, const State & s) noexcept;
+    void retractReference() noexcept;
     bool reactionLaw(const State & s, int i, double & tau) const noexcept;
     double kineticEnergy() const noexcept;
     void filterVelocity(const State & s) noexcept;
@@ -192,7 +193,7 @@ namespace reflexarm
     Eigen::VectorXd v_lim_, q_safe_lo_, q_safe_hi_; // velocity limits (+inf: none), reaction posture bounds
     // the reaction under way (reaction.cpp)
     CollisionEvent event_;
-    Eigen::VectorXd K_hold_, q_from_, dq_plan_;
+    Eigen::VectorXd K_hold_, q_from_, dq_plan_, qd_r_, dqd_r_, ddqd_r_, ff_r_;
     Eigen::VectorXd dq_f_, p_f_; // low-passed dq and M(q) dq for the guard's kinetic energy
     bool has_filter_ = false;
     Eigen::Matrix<double, 6, Eigen::Dynamic> J_r_;

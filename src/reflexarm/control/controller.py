@@ -180,9 +180,17 @@ class Controller:
         n = self.robot.n
         self.n = n
         # the observers validate their gains here; below they are rebuilt on the core's state
-        self.observer = MomentumObserver(n, observer_gain, self.dt)
+        if observer_discretization not in OBSERVER_DISCRETIZATIONS:
+            raise ConfigError(
+                f"unknown observer_discretization {observer_discretization!r}; choose one of: "
+                f"{', '.join(OBSERVER_DISCRETIZATIONS)}"
+            )
+        euler = observer_discretization == "euler"
+        self.observer = MomentumObserver(n, observer_gain, self.dt, _euler=euler)
         self.detection_observer = (
-            None if detection_observer_gain is None else MomentumObserver(n, detection_observer_gain, self.dt)
+            None
+            if detection_observer_gain is None
+            else MomentumObserver(n, detection_observer_gain, self.dt, _euler=euler)
         )
         self.detector = None if threshold is None else CollisionDetector(n, threshold)
         self.reaction = check_reaction(reaction)
@@ -193,11 +201,6 @@ class Controller:
         if not isinstance(self.reaction_settings, ReactionSettings):
             raise ConfigError(
                 f"reaction_settings must be a ReactionSettings; got {type(reaction_settings).__name__}"
-            )
-        if observer_discretization not in OBSERVER_DISCRETIZATIONS:
-            raise ConfigError(
-                f"unknown observer_discretization {observer_discretization!r}; choose one of: "
-                f"{', '.join(OBSERVER_DISCRETIZATIONS)}"
             )
         self.observer_discretization = observer_discretization
         self._kappa_init = (
@@ -227,10 +230,10 @@ class Controller:
         except ValueError as e:  # the core's ConfigError: the checks above should have caught it
             raise ConfigError(f"the C++ core refused the controller's parameters: {e}") from e
         views = c.observer_arrays  # live, writable views of the core's observer states
-        self.observer = MomentumObserver(n, self.observer.observer_gain, self.dt, _state=views[:3])
+        self.observer = MomentumObserver(n, self.observer.observer_gain, self.dt, _state=views[:3], _euler=euler)
         if self.detection_observer is not None:
             gain = self.detection_observer.observer_gain
-            self.detection_observer = MomentumObserver(n, gain, self.dt, _state=views[3:])
+            self.detection_observer = MomentumObserver(n, gain, self.dt, _state=views[3:], _euler=euler)
         self.impedance.damping = c.damping  # read-only live view of the damping matrix the tick uses
         self._update = c.update
         c.set_command_type(Command)
@@ -284,7 +287,7 @@ class Controller:
     @property
     def mode(self) -> str:
         """Active mode name (see :data:`MODES`; ``"fault"`` appears only in commands)."""
-        return self._mode
+        return str(self._core.mode)
 
     @property
     def detection_residual(self) -> np.ndarray:
@@ -387,7 +390,8 @@ class Controller:
                 self.detector.record(collided, float(t))
                 self._mode = self._core.mode  # the reaction may have switched it
             detected = self.detector.detected
-        return Command(self._tau.copy(), self._residual.copy(), detected, collided, self._mode, "", saturated)
+        mode = self._core.command_mode  # a reaction may change it on any tick (brake -> hold)
+        return Command(self._tau.copy(), self._residual.copy(), detected, collided, mode, "", saturated)
 
     def _reject(self, code: int) -> Command:
         """The safe command the core computed for a rejected tick (a wrong shape raises SignalError)."""
