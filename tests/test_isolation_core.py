@@ -31,7 +31,7 @@ CONTACTS = 200
 #: ~1e4 ulp of a 1 m coordinate. The force comes from 2x2/3x3 solves whose condition number on thin links
 #: reaches ~1e4: round-off 1e-16 x 1e4 x 100 N ~ 1e-10 N at worst (measured <= 2e-11 N); 1e-8 N leaves margin
 #: and is still 1e-10 of the 20-100 N contact forces. The fit error is a norm of ~10-100 Nm residual terms:
-#: measured <= 2e-13 Nm, asserted to 1e-9 Nm.
+#: measured <= 2e-11 Nm, asserted to 1e-9 Nm.
 POINT_ATOL = 1e-12
 FORCE_ATOL = 1e-8
 FIT_ATOL = 1e-9
