@@ -77,11 +77,14 @@ class Oracle:
       sensor frame along the measured force (class contact), else the far end of the most distal crossing link
       (the next joint's origin, the sensor frame for the last link) along the residual on the joints up to it;
       |J d| = retract_distance, |d_i| <= max_retract_angle, T >= retract_distance / retract_speed, >= 0.1 s, and
-      the path's peak speed 1.875 |d_i| / T <= velocity_fraction x v_lim_i; q_target inside the safe range;
+      the path's peak speed 1.875 |d_i| / T <= velocity_fraction x v_lim_i; q_target inside the safe range; a T
+      beyond max_retract_time shortens d and T in proportion (both scale with d); retract_planned = |J d|;
     * hold: law (2) with q_d = q_target, dq_d = ddq_d = 0, no disturbance compensation; compliant holds q_detect
       from the detection on (kappa_eps -> 0) at c K with the modal damping of c K, c = compliant_stiffness_factor:
       L^-1 (c K) L^-T = c U diag(lambda) U^T has the same U and c lambda, so that damping is sqrt(c) D;
     * the reaction's law replaces (2) from the tick after detection; the torque limits bound it like any command;
+      every reaction's law (13 included) adds K (clip(q, safe range) - q) and, above a joint's velocity limit,
+      -(M dq)_i / brake_time x (1 - v_lim_i / |dq_i|);
     * classification: with kappa_ext = 0, |wrist force| > contact_level at detection is a "contact"
       (contact_reaction), else a "collision" (reaction).
     """
@@ -338,10 +341,24 @@ class Oracle:
     def reaction_torque(self, t, q, dq, g, C, p, tau_f) -> np.ndarray | None:
         """The reaction's law on this tick (None: law (2)); the event's phase is the one the last tick left."""
         if self.gravity_mode:
-            return g  # (13)
+            return g + self.limits(q, dq, p)  # (13)
         ev = self.event
         if not self.reacted or ev is None or ev["phase"] not in ("braking", "retracting", "holding"):
             return None
+        return self.reaction_law(t, q, dq, g, C, p, tau_f) + self.limits(q, dq, p)
+
+    def limits(self, q, dq, p) -> np.ndarray:
+        """What every reaction adds: K (safe bound - q) outside the safe range; above the velocity limit, the
+        brake's damping M dq / T_b times the excess share (1 - v_lim / |dq|)."""
+        out = self.stiffness * (np.clip(q, self.safe_lo, self.safe_hi) - q)
+        speed = np.abs(dq)
+        fast = speed > self.v_lim
+        out[fast] -= p[fast] / self.settings.brake_time * (1.0 - self.v_lim[fast] / speed[fast])
+        return out
+
+    def reaction_law(self, t, q, dq, g, C, p, tau_f) -> np.ndarray:
+        ev = self.event
+        assert ev is not None
         if ev["phase"] == "braking":  # M ddq = -M dq / T_b after the model terms cancel
             return g + C @ dq - p / self.settings.brake_time
         q_d, dq_d, ff = ev["q_target"], np.zeros(self.n), np.zeros(self.n)
@@ -383,7 +400,8 @@ class Oracle:
         self.event = ev = {
             "detected": True, "t_detect": t, "joints": over.copy(), "distal_joint": int(np.flatnonzero(over)[-1]),
             "contact_class": "contact" if measured else "collision", "reaction": reaction, "phase": "none",
-            "residual": r, "q_detect": q.copy(), "q_target": q.copy(), "wrist_force": force,
+            "residual": r, "q_detect": q.copy(), "q_target": q.copy(), "retract_planned": math.nan,
+            "wrist_force": force,
             "peak_residual": float(np.max(np.abs(r)) / zeta), "energy_detect": e, "energy_rest": math.nan,
             "energy_max": e, "moved": 0.0, "t_hold": math.nan, "recrossings": 0, "torque_limited": False,
             "overspeed": False, "still_moving": False, "guard_checked": False, "text": "",
@@ -437,10 +455,14 @@ class Oracle:
         scale = min(scale, rs.max_retract_angle / float(np.max(np.abs(d)))) if np.any(d) else scale
         goal = np.clip(q + scale * d, self.safe_lo, self.safe_hi)
         self.dq_plan = goal - q
-        ev["q_target"] = goal
         finite = np.isfinite(self.v_lim)
         peak = 1.875 * np.abs(self.dq_plan[finite]) / (rs.velocity_fraction * self.v_lim[finite])
         self.retract_time = max(0.1, rs.retract_distance / rs.retract_speed, *peak.tolist())
+        if self.retract_time > rs.max_retract_time:  # shortened: distance and duration scale together
+            self.dq_plan = self.dq_plan * (rs.max_retract_time / self.retract_time)
+            self.retract_time = rs.max_retract_time
+        ev["q_target"] = q + self.dq_plan
+        ev["retract_planned"] = float(np.linalg.norm(J @ self.dq_plan))
 
     def advance(self, t, q, dq, over, saturated) -> None:
         """A tick after the detecting one: phase changes, then the record (peak, motion, re-contacts, guard)."""

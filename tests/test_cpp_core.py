@@ -378,3 +378,34 @@ def test_step_signals_takes_tuples_of_float64_arrays_and_leaves_everything_else_
             np.testing.assert_array_equal(out.residual, twin.residual, err_msg=f"tick {k}")
         np.testing.assert_array_equal(ctrl.tau, twin.tau, err_msg=f"tick {k}")
     assert kinds == {int, Command}  # plain ticks and ticks with events or faults were both seen
+
+
+def _tight(robot):
+    """The arm with velocity limits of 0.3 rad/s and ranges of home +- 0.25 rad: the run's random reference (home +-
+    0.3 rad at up to 0.66 rad/s) leaves the reactions' safe range (+-0.2 rad) and exceeds the velocity limits."""
+    from reflexarm.robots import RobotModel
+
+    m = robot.pin_model.copy()
+    m.velocityLimit = np.full(robot.n, 0.3)
+    m.lowerPositionLimit = robot.home - 0.25
+    m.upperPositionLimit = robot.home + 0.25
+    return RobotModel(m, ee_frame=robot.ee_frame, sensor_frame=robot.sensor_frame, friction=robot.friction,
+                      home=robot.home)  # fmt: skip
+
+
+@pytest.mark.parametrize("reaction", ["gravity", "brake", "retract", "compliant"])
+def test_reaction_limits_and_shortened_retract_equal_oracle(atlas, reaction):
+    """Every reaction (13 included) pulls a joint back into its range and brakes a joint above its velocity limit;
+    a retract longer than max_retract_time is shortened (distance and duration together). Equal to the oracle on
+    every tick, and the limits' torque was nonzero on many ticks (else the test would prove nothing)."""
+    robot = _tight(atlas)
+    settings = ReactionSettings(brake_duration=0.04, retract_speed=0.5, rest_time=0.1, max_retract_time=0.05)
+    o = Oracle(robot, kappa_eps=1, kappa_ext=1, reaction=reaction, detection_observer_gain=30.0, settings=settings)
+    ctrl = core_controller(core, robot, o)
+    active = []
+    limits = o.limits
+    o.limits = lambda q, dq, p: active.append(bool(np.any(out := limits(q, dq, p)))) or out  # type: ignore[method-assign]
+    run_both(robot, o, ctrl, push=40.0, n_ticks=RUN_TICKS)
+    assert ctrl.event["reaction"] == reaction and sum(active) > 50
+    if reaction == "retract":  # the 0.1 s floor of the plan (retract_speed 0.5 m/s) became 0.05 s: half the way
+        assert np.isfinite(ctrl.event["retract_planned"]) and ctrl.event["retract_planned"] < settings.retract_distance

@@ -29,6 +29,7 @@ namespace reflexarm_bindings
     d["residual"] = Eigen::VectorXd(e.residual);
     d["q_detect"] = Eigen::VectorXd(e.q_detect);
     d["q_target"] = Eigen::VectorXd(e.q_target);
+    d["retract_planned"] = e.retract_planned;
     d["wrist_force"] = e.wrist_force;
     d["peak_residual"] = e.peak_residual;
     d["energy_detect"] = e.energy_detect;

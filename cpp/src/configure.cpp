@@ -145,14 +145,14 @@ namespace reflexarm
     const bool exact = p.observer_discretization == ObserverDiscretization::Exact;
     const ReactionParams & rp = p.reaction_params;
     const double rvals[] = {rp.brake_time,        rp.brake_duration,     rp.retract_distance,
-                            rp.max_retract_angle, rp.retract_speed,      rp.velocity_fraction,
+                            rp.max_retract_angle, rp.retract_speed,      rp.max_retract_time, rp.velocity_fraction,
                             rp.compliant_stiffness_factor, rp.rest_time, rp.rest_energy_fraction,
                             rp.rest_energy_floor, rp.energy_filter_time, rp.contact_level};
     const char * rnames[] = {"brake_time",        "brake_duration",       "retract_distance",
-                             "max_retract_angle", "retract_speed",        "velocity_fraction",
+                             "max_retract_angle", "retract_speed",        "max_retract_time", "velocity_fraction",
                              "compliant_stiffness_factor", "rest_time",   "rest_energy_fraction",
                              "rest_energy_floor", "energy_filter_time",   "contact_level"};
-    for (int k = 0; k < 12; ++k)
+    for (int k = 0; k < 13; ++k)
       checkPositive(rvals[k], (std::string("ReactionParams.") + rnames[k]).c_str());
     if (!std::isfinite(rp.position_margin) || rp.position_margin < 0.0)
       throw ConfigError("ReactionParams.position_margin must be a non-negative number of radians");

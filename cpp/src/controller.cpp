@@ -361,11 +361,10 @@ namespace reflexarm
     for (int i = 0; i < n_; ++i)
     {
       double tau;
-      if (gravity_mode_) // reaction (13)
-        tau = g_[i];
-      else if (reactionLaw(s, i, tau)) // brake / retract / hold (reaction.cpp)
-      {
-      }
+      if (gravity_mode_) // reaction (13), within the joint and velocity limits
+        tau = g_[i] + limitTorque(s, i);
+      else if (reactionLaw(s, i, tau)) // brake / retract / hold (reaction.cpp), within the limits
+        tau += limitTorque(s, i);
       else // control law (2)
       {
         double c_dq = 0.0, d_e = 0.0;

@@ -212,11 +212,41 @@ namespace reflexarm
     {
       const double goal = std::min(std::max(s.q[i] + dq_plan_[i], q_safe_lo_[i]), q_safe_hi_[i]);
       dq_plan_[i] = goal - s.q[i];
-      e.q_target[i] = goal;
-      if (std::isfinite(v_lim_[i]))
+      if (std::isfinite(v_lim_[i])) // the minimum-jerk path's peak speed is 1.875 x its mean
         duration = std::max(duration, 1.875 * std::abs(dq_plan_[i]) / (rp.velocity_fraction * v_lim_[i]));
     }
-    retract_time_ = duration; // the minimum-jerk path's peak speed is 1.875 x its mean
+    if (duration > rp.max_retract_time) // shorter and slower-bounded: both terms scale with the motion
+    {
+      dq_plan_ *= rp.max_retract_time / duration;
+      duration = rp.max_retract_time;
+    }
+    double planned = 0.0; // how far the point moves [m]
+    for (int k = 0; k < 3; ++k)
+    {
+      double v = 0.0;
+      for (int i = 0; i < n_; ++i)
+        v += J_r_(k, i) * dq_plan_[i];
+      planned += v * v;
+    }
+    e.retract_planned = std::sqrt(planned);
+    e.q_target = s.q + dq_plan_;
+    retract_time_ = duration;
+  }
+
+  // The limits every reaction keeps (added to its law, (13) included): a joint outside its range (minus the
+  // reaction's margin) is pulled back with the controller's stiffness; a joint faster than its velocity limit is
+  // braked in proportion to the excess, with the brake's damping M(q) / brake_time (its row of M dq).
+  double Controller::limitTorque(const State & s, int i) const noexcept
+  {
+    double tau = 0.0;
+    if (s.q[i] < q_safe_lo_[i])
+      tau += K_[i] * (q_safe_lo_[i] - s.q[i]);
+    else if (s.q[i] > q_safe_hi_[i])
+      tau += K_[i] * (q_safe_hi_[i] - s.q[i]);
+    const double speed = std::abs(s.dq[i]);
+    if (speed > v_lim_[i])
+      tau -= p_[i] / params_.reaction_params.brake_time * (1.0 - v_lim_[i] / speed);
+    return tau;
   }
 
   // ---------------------------------------------------------------------------------- the reaction's law

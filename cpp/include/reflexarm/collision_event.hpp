@@ -62,6 +62,7 @@ namespace reflexarm
     double moved = 0.0;          ///< largest max_i |q_i - q_detect_i| from detection on [rad]
     double t_hold = kNaN;        ///< stamp the reaction started to hold a posture
     Eigen::VectorXd q_target;    ///< posture the reaction holds (brake / compliant) or retracts to [rad]
+    double retract_planned = kNaN; ///< retract: how far its plan moves the point it moves [m]
     int recrossings = 0;         ///< detections again after the residual fell below half of every threshold
     bool below_since = false;    ///< (internal) residual below all thresholds since the last crossing
     bool torque_limited = false; ///< the reaction's torque was saturated on some tick
@@ -99,6 +100,7 @@ namespace reflexarm
       moved = 0.0;
       t_hold = kNaN;
       q_target.setZero();
+      retract_planned = kNaN;
       recrossings = 0;
       below_since = false;
       torque_limited = false;

@@ -165,6 +165,7 @@ namespace reflexarm
     void followEvent(double t, const State & s, int n_over, int n_sat) noexcept;
     void advanceReaction(double t, const State & s) noexcept;
     void retractReference() noexcept;
+    double limitTorque(const State & s, int i) const noexcept;
     bool reactionLaw(const State & s, int i, double & tau) const noexcept;
     double kineticEnergy() const noexcept;
     void filterVelocity(const State & s) noexcept;

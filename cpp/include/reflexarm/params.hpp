@@ -54,6 +54,9 @@ namespace reflexarm
     double retract_distance = 0.05; ///< [m] retract: how far the contact (link end) moves along the residual
     double max_retract_angle = 0.5; ///< [rad] retract: largest joint motion of the retract
     double retract_speed = 0.2;     ///< [m/s] retract: mean speed of the link end along its path
+    /// [s] retract: longest retract; a longer plan (its joints' velocity bound) is shortened to this, its distance
+    /// with it, so that the arm rests within the guard's rest_time
+    double max_retract_time = 0.3;
     double velocity_fraction = 0.5; ///< reference motions of a reaction stay below this x velocity limit
     double compliant_stiffness_factor = 0.1; ///< compliant: K of the hold = this x stiffness
     double rest_time = 0.5;         ///< [s] guard: the arm must be at rest this long after detection

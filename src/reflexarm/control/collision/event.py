@@ -33,9 +33,11 @@ class CollisionEvent:
         residual: the detection residual at detection (n,) [Nm].
         q_detect: posture at detection (n,) [rad].
         q_target: posture the reaction holds or retracts to (n,) [rad] (q_detect for gravity / none).
+        retract_planned: retract: how far its plan moves the point it moves (NaN for other reactions) [m].
         wrist_force: |wrist force| at detection [N].
         peak_residual: largest max_i |residual_i| / threshold_i from detection on [-].
-        energy_detect: kinetic energy 0.5 dq^T M(q) dq at detection, from the measured dq [J].
+        energy_detect: kinetic energy 0.5 dq_f^T (M(q) dq)_f at detection, from the measured dq and M dq low-passed
+            with ``ReactionSettings.energy_filter_time`` [J].
         energy_rest: the same ``rest_time`` after detection (NaN until then) [J].
         energy_max: largest kinetic energy from detection on [J].
         moved: largest joint displacement from q_detect since detection [rad].
@@ -56,6 +58,7 @@ class CollisionEvent:
     residual: np.ndarray
     q_detect: np.ndarray
     q_target: np.ndarray
+    retract_planned: float
     wrist_force: float
     peak_residual: float
     energy_detect: float

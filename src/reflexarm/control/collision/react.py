@@ -18,6 +18,10 @@ stay below ``velocity_fraction`` x the joints' velocity limits and ``position_ma
   compensation off (kappa_eps -> 0, the compliant mode of Fig. 3).
 * ``"none"``: detection is reported only.
 
+Every reaction (gravity (13) included) keeps the limits: a joint outside its range minus ``position_margin`` is
+pulled back with the controller's stiffness, a joint above its velocity limit is braked in proportion to the
+excess with the brake's damping M(q) / ``brake_time``. The paper's experiments never reach either.
+
 The reaction is chosen per class of contact (:mod:`reflexarm.control.collision.classify`): ``reaction`` for a
 collision the wrist sensor does not measure, ``contact_reaction`` for an end-effector contact it measures.
 """
@@ -53,6 +57,9 @@ class ReactionSettings:
         retract_distance: retract: how far the contacted link's far end moves away [m].
         max_retract_angle: retract: largest motion of any joint [rad].
         retract_speed: retract: mean speed of the link end along the retract [m/s].
+        max_retract_time: retract: longest retract [s]; a plan that its joints' velocity bound makes longer is
+            shortened to this (and its distance with it: ``CollisionEvent.retract_planned``), so that the arm
+            rests within ``rest_time``.
         velocity_fraction: reference motions of a reaction stay below this x each joint's velocity limit [-].
         compliant_stiffness_factor: compliant: stiffness of the hold = this x the controller's [-].
         rest_time: the guard checks the kinetic energy this long after detection [s].
@@ -71,6 +78,7 @@ class ReactionSettings:
     retract_distance: float = 0.05
     max_retract_angle: float = 0.5
     retract_speed: float = 0.2
+    max_retract_time: float = 0.3
     velocity_fraction: float = 0.5
     compliant_stiffness_factor: float = 0.1
     rest_time: float = 0.5
