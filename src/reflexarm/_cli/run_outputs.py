@@ -8,6 +8,12 @@ in ``with SceneCapture(args, out, "name") as scene:``; every closed-loop run ins
 so experiment functions need no extra argument). ``scene.finish(run_names, summary=path)`` then writes
 ``<name>_still.png`` (the first run with contact, at its largest external torque; else the first run's
 start), names the videos ``<name>_<run>.mp4`` and records both in the JSON summary under ``"scene"``.
+
+The collision event (issue 15) is drawn from each run's trace, known only after the run: ``finish`` also
+writes ``<name>_event.png``, the first run with a detection at its detecting tick with the estimated contact
+force beside the true one (:meth:`~reflexarm.sim.video.StillCapture.save_event`), and the videos render their
+frames then (deferred), with the event drawn from detection on. The traces are given as ``traces=`` or read
+from the files :func:`write_traces` wrote beside them (``<name>_<slug(run)>.npz``).
 """
 
 from __future__ import annotations
@@ -167,7 +173,7 @@ class SceneCapture:
         video = None
         if self.video:
             path = self.out / f"{self.name}_run{len(self.runs) + 1}.mp4"
-            video = VideoRecorder(path, fps=self.fps, width=self.width, height=self.height)
+            video = VideoRecorder(path, fps=self.fps, width=self.width, height=self.height, defer=True)
         run = _RunObserver(StillCapture(), video)
         self.runs.append(run)
         return run
@@ -183,7 +189,8 @@ class SceneCapture:
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> None:
         try:
-            self._close_videos()
+            if exc_type is not None:  # no finish() will come: write the videos without the event
+                self._close_videos()
         finally:
             if self._context is not None:
                 self._context.__exit__(exc_type, exc, tb)
@@ -194,23 +201,70 @@ class SceneCapture:
             if run.video is not None:
                 run.video.close()
 
-    def finish(self, run_names: Sequence[str] | None = None, *, summary: Path | None = None) -> dict[str, Any]:
-        """Write the still, name the videos after ``run_names`` (when there is one name per run), and add
-        ``{"still": ..., "videos": [...]}`` under ``"scene"`` to the JSON ``summary`` file when it holds an
-        object (else write it to ``<name>_scene.json``).
+    def _traces(self, names: list[str] | None, traces: Sequence[Trace] | None) -> list[Trace | None]:
+        """One trace per run: ``traces`` when it has one per run, else the files written beside (or None)."""
+        from reflexarm.sim import Trace
+
+        if traces is not None and len(traces) == len(self.runs):
+            return list(traces)
+        found: list[Trace | None] = []
+        for i in range(len(self.runs)):
+            path = self.out / f"{self.name}_{slug(names[i])}.npz" if names else None
+            try:
+                found.append(Trace.load(path) if path is not None and path.is_file() else None)
+            except Exception:  # an unreadable file: no event for that run, never a failed command
+                found.append(None)
+        return found
+
+    def _event_still(self, names: list[str] | None, traces: list[Trace | None]) -> dict[str, Any] | None:
+        """``<name>_event.png`` of the first run with a detection (None when no run has one)."""
+        for i, (run, tr) in enumerate(zip(self.runs, traces, strict=True)):
+            if tr is None or not tr.meta.get("collision_event"):
+                continue
+            path = self.out / f"{self.name}_event.png"
+            try:
+                info = run.still.save_event(path, tr, width=self.width, height=self.height)
+            except Exception as e:  # a still never fails a command
+                info = {"file": None, "notes": [f"the event still could not be drawn ({type(e).__name__}: {e})"]}
+            info["run"] = names[i] if names else i + 1
+            return info
+        return None
+
+    def finish(
+        self,
+        run_names: Sequence[str] | None = None,
+        *,
+        summary: Path | None = None,
+        traces: Sequence[Trace] | None = None,
+    ) -> dict[str, Any]:
+        """Write the still (and the event still), name the videos after ``run_names`` (when there is one name
+        per run), and add ``{"still": ..., "event_still": ..., "videos": [...]}`` under ``"scene"`` to the
+        JSON ``summary`` file when it holds an object (else write it to ``<name>_scene.json``).
+
+        Args:
+            run_names: one name per run (file names of the videos; the traces' files).
+            summary: the command's JSON summary.
+            traces: the runs' traces, one per run, for the collision event (default: read from
+                ``<name>_<slug(run)>.npz`` beside, when written).
 
         Returns:
-            The ``"scene"`` record (``still``: file, moment, t, run; ``videos``: file names, frames).
+            The ``"scene"`` record (``still``: file, moment, t, run; ``event_still``: file, t, t_detect,
+            arrows, notes, run, or None without a detection; ``videos``: file names, frames).
         """
-        self._close_videos()
         names = list(run_names) if run_names is not None and len(run_names) == len(self.runs) else None
-        record: dict[str, Any] = {"still": None, "videos": []}
+        run_traces = self._traces(names, traces)
+        for run, tr in zip(self.runs, run_traces, strict=True):
+            if run.video is not None and tr is not None:
+                run.video.annotate(tr)
+        self._close_videos()
+        record: dict[str, Any] = {"still": None, "event_still": None, "videos": []}
         if self.runs:
             with_contact = [i for i, r in enumerate(self.runs) if r.still.contact]
             i = with_contact[0] if with_contact else 0
             info = self.runs[i].still.save(self.out / f"{self.name}_still.png", width=self.width, height=self.height)
             info["run"] = names[i] if names else i + 1
             record["still"] = info
+            record["event_still"] = self._event_still(names, run_traces)
         for i, run in enumerate(self.runs):
             if run.video is None or run.video.frames == 0:
                 continue
@@ -218,9 +272,10 @@ class SceneCapture:
             if names:
                 target = self.out / f"{self.name}_{slug(names[i])}.mp4"
                 path = path.replace(target)
-            record["videos"].append(
-                {"file": path.name, "run": names[i] if names else i + 1, "frames": run.video.frames}
-            )
+            video: dict[str, Any] = {"file": path.name, "run": names[i] if names else i + 1, "frames": run.video.frames}
+            if run.video.event_frames:  # frames with the collision event drawn (from detection on)
+                video["event_frames"] = run.video.event_frames
+            record["videos"].append(video)
         doc = json.loads(summary.read_text()) if summary is not None and summary.is_file() else None
         if summary is not None and isinstance(doc, dict):
             doc["scene"] = record
@@ -236,6 +291,10 @@ class SceneCapture:
         if not still:
             return "no closed-loop run: no still"
         text = f"still of the scene: {still['file']} ({still['moment']}, t = {still['t']:.3f} s, run {still['run']})"
+        event = record.get("event_still")
+        if event and event.get("file"):
+            drawn = ", ".join(a["label"] for a in event.get("arrows", [])) or "no arrow"
+            text += f"; event at detection: {event['file']} (run {event['run']}: {drawn})"
         videos = record.get("videos") or []
         if videos:
             text += f"; videos: {', '.join(v['file'] for v in videos)}"

@@ -6,6 +6,7 @@ The compensation figures are built by ``*_figure`` functions returning a :class:
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -31,7 +32,9 @@ __all__ = [
     "crossover_levels",
     "efc_step_figure",
     "free_motion_figure",
+    "guard_verdict",
     "mode_table_figure",
+    "phase_spans",
     "plot_compliance_loss",
     "plot_compliance_sweep",
     "plot_efc_step",
@@ -45,21 +48,94 @@ __all__ = [
 
 _COLORS = {"Stiff": "tab:red", "Compliant": "tab:blue", "Coll.Det": "tab:green"}
 
+#: Shading of the reaction's phases after detection (the trace's ``mode``), one colour per mode.
+_PHASE_COLORS = {
+    "gravity_compensation": "tab:olive",
+    "braking": "tab:orange",
+    "retracting": "tab:purple",
+    "holding": "tab:cyan",
+    "compliant": "tab:gray",
+    "fault": "tab:red",
+}
+
+
+def phase_spans(trace: Trace) -> list[tuple[str, float, float]]:
+    """The reaction's phases: (mode, start, end) [s] of each run of equal ``trace.mode`` from the first
+    detection on (empty without a detection); each span ends where the next begins (the last at the end)."""
+    det = np.flatnonzero(trace.collision)
+    if det.size == 0:
+        return []
+    k0 = int(det[0])
+    mode = trace.mode[k0:]
+    starts = np.flatnonzero(np.r_[True, mode[1:] != mode[:-1]]) + k0
+    ends = [*trace.t[starts[1:]].tolist(), float(trace.t[-1])]
+    return [(str(trace.mode[k]), float(trace.t[k]), e) for k, e in zip(starts, ends, strict=True)]
+
+
+def guard_verdict(trace: Trace) -> str:
+    """One line on what the reaction left the arm doing, from the controller's event record: the guard's
+    report, "at rest" when the guard checked and found nothing, else why there is no verdict."""
+    event = trace.meta.get("collision_event")
+    if not isinstance(event, dict):
+        return "no detection"
+    head = f"{event.get('reaction', '?')} ({event.get('contact_class', '?')})"
+    if event.get("text"):
+        return f"{head}: {event['text']}"
+    if event.get("guard_checked"):
+        return f"{head}: the arm came to rest"
+    return f"{head}: not checked yet (the run ended before the guard's window)"
+
+
+def _mark_event(axes: Sequence[Any], trace: Trace, color: str | None, name: str, shaded: set[str]) -> str | None:
+    """Detection (dotted line) and the reaction's phases (shaded spans, one legend entry per mode) of one run;
+    returns the line of its guard's verdict (None without a detection)."""
+    det = np.flatnonzero(trace.collision)
+    if det.size == 0:
+        return None
+    t_det = float(trace.t[det[0]])
+    for ax in axes:
+        ax.axvline(t_det, color=color, ls=":", lw=1)
+    for mode, t0, t1 in phase_spans(trace):
+        label = None if mode in shaded else f"phase: {mode}"
+        shaded.add(mode)
+        for i, ax in enumerate(axes):
+            ax.axvspan(t0, t1, color=_PHASE_COLORS.get(mode, "0.8"), alpha=0.12, lw=0, label=label if i == 0 else None)
+    return f"{name}: detected {t_det:.3f} s; {guard_verdict(trace)}"
+
+
+def _verdicts(ax: Any, lines: Sequence[str]) -> None:
+    """The guards' verdicts in a box in the upper right of ``ax``."""
+    if lines:
+        ax.text(
+            0.99,
+            0.97,
+            "\n".join(textwrap.fill(x, 70) for x in lines),
+            transform=ax.transAxes,
+            ha="right",
+            va="top",
+            fontsize=7,
+            bbox={"facecolor": "white", "alpha": 0.8, "edgecolor": "0.7"},
+        )
+
 
 def plot_fig8(traces: Sequence[Trace], path: Path, threshold: float = 11.0) -> Path:
-    """|f_ext,EE|, residual of joint 1 with the threshold, and q_1 for each run (Fig. 8)."""
+    """|f_ext,EE|, residual of joint 1 with the threshold, and q_1 for each run (Fig. 8); for a run with a
+    detection its time (dotted), the reaction's phases from the trace's mode (shaded) and the guard's verdict
+    (box in the q_1 panel)."""
     fig, axes = plt.subplots(3, 1, figsize=(7, 7.5), sharex=True)
+    shaded: set[str] = set()
+    verdicts: list[str] = []
     for tr in traces:
         name = str(tr.meta["setting"]["name"])
         c = _COLORS.get(name)
         axes[0].plot(tr.t, np.linalg.norm(tr.f_ext_ee, axis=1), color=c, label=name)
         axes[1].plot(tr.t, tr.residual[:, 0], color=c, label=name)
         axes[2].plot(tr.t, tr.q[:, 0], color=c, label=name)
-        det = np.flatnonzero(tr.collision)
-        if det.size:
-            for ax in axes:
-                ax.axvline(tr.t[det[0]], color=c, ls=":", lw=1)
+        verdict = _mark_event(axes, tr, c, name, shaded)
+        if verdict:
+            verdicts.append(verdict)
     axes[2].plot(traces[0].t, traces[0].q_d[:, 0], color="k", ls="--", lw=1, label="q_d,1")
+    _verdicts(axes[2], verdicts)
     for s in (1, -1):
         axes[1].axhline(s * threshold, color="k", ls="--", lw=1)
     axes[0].set_ylabel("|f_ext,EE| [N]")
@@ -79,7 +155,8 @@ def plot_fig8(traces: Sequence[Trace], path: Path, threshold: float = 11.0) -> P
 
 
 def plot_fig10(trace: Trace, tau_model: np.ndarray, path: Path, threshold: float = 11.0, joint: int = 0) -> Path:
-    """q_1, model torque, residual and measured motor torque of one joint during a link collision (Fig. 10)."""
+    """q_1, model torque, residual and measured motor torque of one joint during a link collision (Fig. 10),
+    with the detection, the reaction's phases and the guard's verdict marked as in :func:`plot_fig8`."""
     fig, axes = plt.subplots(2, 1, figsize=(7, 5.5), sharex=True)
     axes[0].plot(trace.t, trace.q[:, joint], label=f"q_{joint + 1}")
     axes[0].plot(trace.t, trace.q_d[:, joint], "k--", lw=1, label=f"q_d,{joint + 1}")
@@ -89,10 +166,8 @@ def plot_fig10(trace: Trace, tau_model: np.ndarray, path: Path, threshold: float
     axes[1].plot(trace.t, trace.tau_m[:, joint], label=f"tau_m,{joint + 1}", alpha=0.7)
     for s in (1, -1):
         axes[1].axhline(s * threshold, color="k", ls="--", lw=1)
-    det = np.flatnonzero(trace.collision)
-    if det.size:
-        for ax in axes:
-            ax.axvline(trace.t[det[0]], color="tab:green", ls=":", lw=1)
+    verdict = _mark_event(axes, trace, "tab:green", "Coll.Det", set())
+    _verdicts(axes[1], [verdict] if verdict else [])
     axes[1].set_ylabel("[Nm]")
     axes[1].set_xlabel("t [s]")
     axes[0].set_title("Link collision at the elbow (cf. Fig. 10)")

@@ -18,7 +18,9 @@ import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
 
 from reflexarm.errors import ConfigError
 from reflexarm.experiments.collision import (
@@ -27,16 +29,29 @@ from reflexarm.experiments.collision import (
     run_ee_collision,
     run_link_collision,
 )
-from reflexarm.experiments.collision_events import CollisionOutcome, collision_outcome, write_outcomes
+from reflexarm.experiments.collision_events import (
+    KE_RESIDUAL_SHARE,
+    CollisionOutcome,
+    collision_outcome,
+    write_outcomes,
+)
 from reflexarm.robots import RobotModel, load_robot
-from reflexarm.sim import PAPER_NOISE, SensorNoise
+from reflexarm.sim import PAPER_NOISE, SensorNoise, Trace
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 __all__ = [
+    "KE_RATIO_GOAL",
+    "PEAK_RATIO_GOAL",
     "SCENARIOS",
     "STUDY_ARMS",
     "STUDY_REACTIONS",
     "ReactionStudy",
     "StudyArm",
+    "plot_reaction_study",
+    "reaction_measures",
+    "reaction_study_figure",
     "run_reaction_study",
     "study_arm",
 ]
@@ -116,7 +131,21 @@ class ReactionStudy:
         return paths
 
 
-def _run_one(arm: StudyArm, scenario: str, reaction: str, kwargs: dict[str, Any]) -> CollisionOutcome:
+def _guard(trace: Trace) -> dict[str, Any]:
+    """The guard's verdict from the controller's event record (``trace.meta["collision_event"]``)."""
+    event = trace.meta.get("collision_event")
+    if not isinstance(event, dict):
+        return {"guard": "no detection", "guard_still_moving": None}
+    if event.get("text"):
+        verdict = str(event["text"])
+    elif event.get("guard_checked"):
+        verdict = "at rest"
+    else:
+        verdict = "not checked (run ended first)"
+    return {"guard": verdict, "guard_still_moving": bool(event.get("still_moving"))}
+
+
+def _run_one(arm: StudyArm, scenario: str, reaction: str, kwargs: dict[str, Any]) -> tuple[CollisionOutcome, Trace]:
     if scenario == "demo":
         coll_det = next(s for s in EE_SETTINGS if s.name == "Coll.Det")
         trace = run_ee_collision(
@@ -129,7 +158,7 @@ def _run_one(arm: StudyArm, scenario: str, reaction: str, kwargs: dict[str, Any]
             plant_friction=arm.plant_friction,
             **kwargs,
         )
-    return collision_outcome(trace, arm.robot, name=f"{arm.name}/{scenario}/{reaction}")
+    return collision_outcome(trace, arm.robot, name=f"{arm.name}/{scenario}/{reaction}"), trace
 
 
 def run_reaction_study(
@@ -190,10 +219,93 @@ def run_reaction_study(
                     "error": None,
                 }
                 try:
-                    row.update(_run_one(arm, scenario, reaction, kwargs).as_dict())
+                    outcome, trace = _run_one(arm, scenario, reaction, kwargs)
+                    row.update(outcome.as_dict())
+                    row.update(_guard(trace))
                 except ConfigError as e:  # e.g. a reaction this controller does not offer (yet)
                     row["error"] = str(e)
                 study.rows.append(row)
                 if progress is not None:
                     progress(row)
     return study
+
+
+#: The issue's marks on the study's figure: kinetic energy below 1 % of its value at detection within 0.5 s,
+#: and no peak after detection above the level at detection (ratio 1.0).
+KE_RATIO_GOAL = KE_RESIDUAL_SHARE
+PEAK_RATIO_GOAL = 1.0
+
+
+def reaction_measures(row: dict[str, Any]) -> dict[str, Any]:
+    """The study's printed measures of one row: the contact level at detection and its peak after detection
+    (|f_ext,EE| [N] for an end-effector contact, max_j |tau_ext,j| [Nm] for a link collision) and their ratio,
+    the kinetic energy ratio at +0.5 s, the distance moved after detection, the peak speed over the limit,
+    re-contact and the guard's verdict (None where not applicable)."""
+    if row.get("contact_class") == "end_effector":
+        at, peak, unit = row.get("force_at_detection_N"), row.get("peak_force_after_detection_N"), "N"
+    else:
+        at, peak = row.get("external_torque_at_detection_Nm"), row.get("peak_external_torque_after_detection_Nm")
+        unit = "Nm"
+    detected = row.get("detected_s") is not None
+    return {
+        "level_unit": unit,
+        "level_at_detection": at,
+        "peak_after_detection": peak,
+        "peak_ratio": None if at is None or peak is None or at <= 0.0 else peak / at,
+        "level_text": "-" if at is None else f"{at:.1f} -> {'-' if peak is None else f'{peak:.1f}'} {unit}",
+        "ke_ratio": row.get("kinetic_energy_ratio"),
+        "moved_m": row.get("moved_after_detection_m"),
+        "peak_speed_ratio": row.get("peak_speed_ratio"),
+        "recontact": None if not detected else ("yes" if row.get("recontact") else "no"),
+        "guard": row.get("guard") if row.get("error") is None else f"error: {row['error']}",
+    }
+
+
+def reaction_study_figure(study: ReactionStudy) -> Figure:
+    """Per scenario (columns), bars per arm grouped by reaction: the kinetic energy ratio at +0.5 s (top, log
+    scale, the issue's 1 % line) and the peak after detection over the level at detection (bottom, the 1.0
+    line). A missing bar: no detection, an error, or a ratio that does not apply."""
+    from matplotlib.figure import Figure
+
+    scenarios = list(dict.fromkeys(r["scenario"] for r in study.rows)) or list(SCENARIOS)
+    arms = list(dict.fromkeys(r["arm"] for r in study.rows))
+    reactions = list(dict.fromkeys(r["reaction"] for r in study.rows))
+    fig = Figure(figsize=(max(6.0, 3.2 * len(scenarios) + 0.6 * len(arms)), 6.5), layout="constrained")
+    axes = fig.subplots(2, len(scenarios), squeeze=False, sharex="col")
+    width = 0.8 / max(len(reactions), 1)
+    x = np.arange(len(arms))
+    by_key = {(r["arm"], r["scenario"], r["reaction"]): reaction_measures(r) for r in study.rows}
+    for c, scenario in enumerate(scenarios):
+        top, bottom = axes[0, c], axes[1, c]
+        for i, reaction in enumerate(reactions):
+            m = [by_key.get((a, scenario, reaction), {}) for a in arms]
+            off = x + (i - (len(reactions) - 1) / 2) * width
+            ke = [np.nan if v.get("ke_ratio") is None else float(v["ke_ratio"]) for v in m]
+            pk = [np.nan if v.get("peak_ratio") is None else float(v["peak_ratio"]) for v in m]
+            top.bar(off, ke, width, color=f"C{i}", label=reaction)
+            bottom.bar(off, pk, width, color=f"C{i}", label=reaction)
+        top.axhline(KE_RATIO_GOAL, color="k", ls="--", lw=1, label=f"{100 * KE_RATIO_GOAL:g} % (issue 15)")
+        bottom.axhline(PEAK_RATIO_GOAL, color="k", ls="--", lw=1, label=f"{PEAK_RATIO_GOAL:g} (issue 15)")
+        top.set_yscale("log")
+        top.set_title(f"scenario: {scenario}", fontsize=9)
+        top.set_ylabel("KE(+0.5 s) / KE(detection) [-]")
+        bottom.set_ylabel("peak after / at detection [-]")
+        bottom.set_xticks(x, arms, rotation=20, fontsize=7, ha="right")
+        for ax in (top, bottom):
+            ax.grid(alpha=0.3, axis="y", which="both")
+    axes[0, 0].legend(fontsize=7)
+    cond = study.conditions
+    fig.suptitle(
+        f"Reactions after detection: +-{100 * float(cond.get('model_error', 0.1)):g} % model error, "
+        f"noise {cond.get('noise', '?')}, seed {cond.get('seed', '?')}",
+        fontsize=9,
+    )
+    return fig
+
+
+def plot_reaction_study(study: ReactionStudy, path: str | Path) -> Path:
+    """Write :func:`reaction_study_figure` as PNG at ``path`` (folders created)."""
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    reaction_study_figure(study).savefig(p, dpi=120)
+    return p

@@ -5,12 +5,14 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, NamedTuple
 
 import mujoco
 import numpy as np
 
 from reflexarm.errors import ConfigError, SimulationError
+from reflexarm.sim._event_drawing import ForceArrow, add_force_arrows
 
 if TYPE_CHECKING:
     from reflexarm.signals import Command
@@ -31,6 +33,8 @@ FORCE_ARROW_SCALE = 0.003
 #: Diameter of a contact force arrow and of a contact point's disc [m].
 FORCE_ARROW_WIDTH = 0.012
 CONTACT_POINT_WIDTH = 0.03
+#: Distance of the near clipping plane from the camera [m].
+NEAR_CLIP = 0.01
 #: Lower bounds of the headlight's ambient and diffuse intensity [-] (MuJoCo's default 0.1 / 0.4 leaves
 #: an arm without scene lights nearly black).
 HEADLIGHT_AMBIENT = 0.35
@@ -147,12 +151,14 @@ class _Painter:
         opt.flags[mujoco.mjtVisFlag.mjVIS_TRANSPARENT] = True  # arrows inside a body stay visible
         opt.flags[mujoco.mjtVisFlag.mjVIS_PERTFORCE] = True  # applied forces (xfrc_applied: force steps)
         self.option = opt
+        self.arrow_geoms: list[int] = []  #: scene indices of the arrows added to the last frame
         scn = self.renderer.scene
         scn.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = False  # 4x faster offscreen, see notes/bags-and-video.md
         scn.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = False
 
-    def render(self, data: mujoco.MjData, text: str = "") -> np.ndarray:
-        """The (height, width, 3) uint8 image of ``data``'s state, ``text`` in the top-left corner."""
+    def render(self, data: mujoco.MjData, text: str = "", arrows: Sequence[ForceArrow] = ()) -> np.ndarray:
+        """The (height, width, 3) uint8 image of ``data``'s state, ``text`` in the top-left corner and
+        ``arrows`` (:class:`~reflexarm.sim._event_drawing.ForceArrow`) added to the scene as MuJoCo geoms."""
         m = self.plant.model
         view = self.camera_view or frame_scene(self.plant, data=data, aspect=self.width / self.height)
         cam = mujoco.MjvCamera()
@@ -161,6 +167,7 @@ class _Painter:
         cam.distance, cam.azimuth, cam.elevation = view.distance, view.azimuth, view.elevation
         light, scale, size = m.vis.headlight, m.vis.scale, float(m.stat.meansize)
         saved = (
+            float(m.vis.map.znear),
             float(m.vis.map.force),
             light.ambient.copy(),
             light.diffuse.copy(),
@@ -170,8 +177,10 @@ class _Painter:
         )
         # drawing settings only, restored at once (the physics never reads them). MuJoCo draws a contact
         # force F as an arrow F * map.force / meanmass long and sizes arrows and contact points relative to
-        # meansize, which an object parked far away inflates: set them in metres. The headlight lights a
+        # meansize, which an object parked far away inflates: set them in metres, and the near clipping plane
+        # (a share of the extent, which the parked object inflates as well). The headlight lights a
         # scene without lights of its own.
+        m.vis.map.znear = NEAR_CLIP / max(float(m.stat.extent), 1e-9)
         m.vis.map.force = FORCE_ARROW_SCALE * float(m.stat.meanmass)
         scale.forcewidth = FORCE_ARROW_WIDTH / size
         scale.contactwidth, scale.contactheight = CONTACT_POINT_WIDTH / size, 0.2 * CONTACT_POINT_WIDTH / size
@@ -180,8 +189,9 @@ class _Painter:
         try:
             self.renderer.update_scene(data, camera=cam, scene_option=self.option)
         finally:
-            m.vis.map.force, light.ambient, light.diffuse = saved[:3]
-            scale.forcewidth, scale.contactwidth, scale.contactheight = saved[3:]
+            m.vis.map.znear, m.vis.map.force, light.ambient, light.diffuse = saved[:4]
+            scale.forcewidth, scale.contactwidth, scale.contactheight = saved[4:]
+        self.arrow_geoms = add_force_arrows(self.renderer.scene, arrows)
         image = np.asarray(self.renderer.render())
         return _draw_text(image, text) if text else image
 

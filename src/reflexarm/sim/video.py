@@ -23,6 +23,14 @@ import mujoco
 import numpy as np
 
 from reflexarm.errors import ConfigError, SimulationError
+from reflexarm.sim._event_drawing import (
+    EventDrawing,
+    ForceArrow,
+    detection_tick,
+    event_drawing,
+    rebuild_state,
+    side_azimuth,
+)
 from reflexarm.sim._rendering import (
     DEFAULT_SIZE,
     CameraView,
@@ -37,11 +45,24 @@ if TYPE_CHECKING:
     from reflexarm.signals import Command, Measurement
     from reflexarm.sim.plant import Plant
     from reflexarm.sim.run_observers import CompiledStill
+    from reflexarm.sim.trace import Trace
 
-__all__ = ["CameraView", "StillCapture", "VideoRecorder", "frame_scene", "render_frame", "save_still"]
+__all__ = [
+    "CameraView",
+    "EventDrawing",
+    "ForceArrow",
+    "StillCapture",
+    "VideoRecorder",
+    "frame_scene",
+    "render_frame",
+    "save_still",
+]
 
 #: What a still keeps of the plant: MuJoCo's integration state (time, qpos, qvel, mocap, applied forces).
 _STATE = mujoco.mjtState.mjSTATE_INTEGRATION
+#: The event still looks from this share of the framed distance, at a point this share of the way from the
+#: contact to the framed centre: the arrows large, the arm and the scene object mostly in the picture.
+EVENT_ZOOM = 0.6
 #: Default video rate [frames per second of simulated time].
 DEFAULT_FPS = 30.0
 #: Below this |tau_ext| [Nm] on every joint nothing touches the arm: the still shows the start instead.
@@ -170,6 +191,84 @@ class StillCapture:
             "peak_external_torque_Nm": self.peak_torque,
         }
 
+    def save_event(
+        self,
+        path: str | os.PathLike[str],
+        trace: Trace,
+        *,
+        width: int = DEFAULT_SIZE[0],
+        height: int = DEFAULT_SIZE[1],
+    ) -> dict[str, Any]:
+        """Render the run's collision event to a PNG: the scene at the detecting tick of ``trace`` (this
+        capture's run) with the estimated contact force beside the true one and the event's text
+        (:func:`~reflexarm.sim._event_drawing.event_drawing`).
+
+        The state at detection is rebuilt from the kept state (contact, else start) and the trace (the arm's
+        true q and dq, the recorded scene poses; :func:`~reflexarm.sim._event_drawing.rebuild_state`). A
+        missing piece never fails the still: without a detection the kept moment is drawn, without an
+        estimate or a truth its arrow is left out, and ``notes`` (also written in the picture) say why.
+
+        Returns:
+            ``file``, ``moment``, ``t``, ``t_detect`` (None without a detection), ``arrows`` (what was drawn:
+            label, point [m], force [N]) and ``notes``.
+
+        Raises:
+            SimulationError: the capture has not seen a run.
+        """
+        if self.plant is None or self._start is None:
+            raise SimulationError("no still to save: this StillCapture was not called by any run")
+        width, height = _check_size(width, height)
+        plant = self.plant
+        state, cmd = (self._peak, self._peak_cmd) if self.contact else (self._start, self._start_cmd)
+        base = mujoco.MjData(plant.model)
+        mujoco.mj_setState(plant.model, base, state, _STATE)
+        mujoco.mj_forward(plant.model, base)
+        data, drawing, notes = base, None, []
+        k = detection_tick(trace) if trace.n == plant.n else None
+        if k is None:
+            notes.append("no detection in this run: no event to draw")
+        else:
+            try:
+                data = rebuild_state(plant, base, trace, k)
+                drawing = event_drawing(trace, plant, k)
+            except Exception as e:  # a still never fails a run
+                data, drawing = base, None
+                notes.append(f"the event could not be drawn ({type(e).__name__}: {e})")
+        text = f"t = {float(data.time):6.3f} s"
+        if drawing is not None:
+            text += "\n" + drawing.text()
+            notes += list(drawing.notes)
+        elif cmd is not None:
+            text = _status(plant, float(data.time), cmd)
+        if notes and drawing is None:
+            text += "\n" + "\n".join(notes)
+        view = frame_scene(plant, data=data, aspect=width / height)
+        if drawing is not None and drawing.arrows:
+            # look across the force, so that the arrows show their length, and closer, at the contact
+            view = frame_scene(plant, data=data, aspect=width / height, azimuth=side_azimuth(drawing, view.azimuth))
+            at = np.mean([a.point for a in drawing.arrows], axis=0)
+            centre = EVENT_ZOOM * np.asarray(view.lookat) + (1.0 - EVENT_ZOOM) * at
+            lookat = (float(centre[0]), float(centre[1]), float(centre[2]))
+            view = view._replace(lookat=lookat, distance=EVENT_ZOOM * view.distance)
+        painter = _Painter(plant, width, height, view)
+        try:
+            image = painter.render(data, text, drawing.arrows if drawing is not None else ())
+        finally:
+            painter.close()
+        out = _write_png(path, image)
+        return {
+            "file": out.name,
+            "moment": "detection" if drawing is not None else ("contact" if self.contact else "start"),
+            "t": float(data.time),
+            "t_detect": None if drawing is None else drawing.t_detect,
+            "arrows": [] if drawing is None else [_arrow_record(a) for a in drawing.arrows],
+            "notes": notes,
+        }
+
+
+def _arrow_record(arrow: ForceArrow) -> dict[str, Any]:
+    return {"label": arrow.label, "point_m": arrow.point.tolist(), "force_N": arrow.force.tolist()}
+
 
 class VideoRecorder:
     """A run callback that renders frames at ``fps`` (of simulated time) into an H.264 MP4.
@@ -185,6 +284,9 @@ class VideoRecorder:
         width, height: frame size [px], multiples of 16.
         camera: a fixed camera; default framed from the first frame's state.
         overlay: write time, mode and detection state in the top-left corner.
+        defer: keep each frame's MuJoCo state and render the frames on :meth:`close`, so that the run's
+            collision event, known only after the run, is drawn on the frames at and after detection
+            (give the run's trace to :meth:`annotate` before closing). A few hundred floats per frame.
 
     Raises:
         ConfigError: bad size or rate, or imageio / imageio-ffmpeg missing (``pip install reflexarm[video]``).
@@ -199,6 +301,7 @@ class VideoRecorder:
         height: int = DEFAULT_SIZE[1],
         camera: CameraView | None = None,
         overlay: bool = True,
+        defer: bool = False,
     ) -> None:
         self.width, self.height = _check_size(width, height)
         if not isinstance(fps, (int, float)) or not math.isfinite(fps) or fps <= 0:
@@ -209,9 +312,18 @@ class VideoRecorder:
         self._writer: Any = None
         self._painter: _Painter | None = None
         self._t0 = 0.0
+        self.defer = bool(defer)
+        self._plant: Plant | None = None
+        self._view: CameraView | None = camera
+        self._pending: list[tuple[float, np.ndarray, str]] = []  # deferred frames: (t, state, text)
+        self._trace: Trace | None = None
+        self.event_frames = 0  #: frames written with the collision event drawn
 
     def __call__(self, k: int, plant: Plant, measurement: Measurement, command: Command) -> None:
         t = plant.time
+        if self.defer:
+            self._keep(plant, command)
+            return
         if self._painter is None:
             view = self.camera or frame_scene(plant, aspect=self.width / self.height)
             self._painter = _Painter(plant, self.width, self.height, view)
@@ -227,8 +339,59 @@ class VideoRecorder:
         self._writer.append_data(self._painter.render(plant.data, text))
         self.frames += 1
 
+    def _keep(self, plant: Plant, command: Command) -> None:
+        """A deferred frame: the state and the corner text, when a frame is due."""
+        t = plant.time
+        if self._plant is None:
+            self._plant, self._t0 = plant, t
+            self._view = self._view or frame_scene(plant, aspect=self.width / self.height)
+        if t - self._t0 + 0.5 * plant.control_period < self.frames / self.fps:
+            return
+        state = np.empty(mujoco.mj_stateSize(plant.model, _STATE))
+        mujoco.mj_getState(plant.model, plant.data, state, _STATE)
+        self._pending.append((t, state, _status(plant, t, command) if self.overlay else ""))
+        self.frames += 1
+
+    def annotate(self, trace: Trace) -> None:
+        """Draw ``trace``'s collision event (this recorder's run) on the deferred frames at and after its
+        detection: the estimated force beside the true one, and the event's text."""
+        self._trace = trace
+
+    def _render_pending(self) -> None:
+        plant, pending = self._plant, self._pending
+        self._pending = []
+        if plant is None or not pending:
+            return
+        trace = self._trace if self._trace is not None and self._trace.n == plant.n else None
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        writer = self._imageio.get_writer(
+            self.path, fps=self.fps, codec="libx264", pixelformat="yuv420p", macro_block_size=16
+        )
+        painter = _Painter(plant, self.width, self.height, self._view)
+        data = mujoco.MjData(plant.model)
+        try:
+            for t, state, text in pending:
+                mujoco.mj_setState(plant.model, data, state, _STATE)
+                mujoco.mj_forward(plant.model, data)
+                drawing = None
+                if trace is not None:
+                    k = int(np.argmin(np.abs(trace.t - t)))
+                    try:
+                        drawing = event_drawing(trace, plant, k)
+                    except Exception as e:  # a frame never fails: draw it without the event
+                        text += f"\nthe event could not be drawn ({type(e).__name__}: {e})"
+                if drawing is not None:
+                    text = (text + "\n" if self.overlay else "") + drawing.text()
+                    self.event_frames += 1
+                writer.append_data(painter.render(data, text, drawing.arrows if drawing is not None else ()))
+        finally:
+            writer.close()
+            painter.close()
+
     def close(self) -> None:
-        """Finish the file (idempotent)."""
+        """Finish the file (idempotent); a deferred recorder renders its frames now."""
+        if self.defer:
+            self._render_pending()
         if self._writer is not None:
             self._writer.close()
             self._writer = None
