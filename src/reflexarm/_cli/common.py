@@ -255,10 +255,14 @@ def _gain(value: float | None, flag: str) -> float | None:
     return value
 
 
-def read_threshold(value: str, robot: RobotModel) -> tuple[float | tuple[float, ...], str, float | None]:
+def read_threshold(
+    value: str, robot: RobotModel, gain: float | None = None
+) -> tuple[float | tuple[float, ...], str, float | None]:
     """(zeta, its source, the detecting k_o it was tuned for) from ``--threshold``: a number [Nm], a comma
     list with one positive level per joint of ``robot``, or a ``thresholds.json`` of ``tune-thresholds``
     (its ``collision_Nm``, checked against the robot's joints by count and, when the file has them, names).
+    A file with (k_o, zeta) pairs (``tune-thresholds --detection-gains``) gives the pair tuned at ``gain``,
+    the detecting k_o of the run [1/s], when it has one; else its top-level levels.
 
     Raises:
         ConfigError: a non-positive or non-finite level, a list of the wrong length, a missing or malformed
@@ -267,7 +271,7 @@ def read_threshold(value: str, robot: RobotModel) -> tuple[float | tuple[float, 
     text = str(value).strip()
     path = Path(text)
     if path.suffix.lower() == ".json" or path.is_file():
-        return _read_threshold_file(path, robot)
+        return _read_threshold_file(path, robot, gain)
     parts = [s.strip() for s in text.split(",")]
     try:
         levels = [float(s) for s in parts]
@@ -289,7 +293,20 @@ def read_threshold(value: str, robot: RobotModel) -> tuple[float | tuple[float, 
     return tuple(levels), "command line", None
 
 
-def _read_threshold_file(path: Path, robot: RobotModel) -> tuple[tuple[float, ...], str, float | None]:
+def _pair_at(doc: object, gain: float | None) -> dict[str, object] | None:
+    """The ``detection_pairs`` entry of a thresholds file tuned at ``gain`` [1/s], if any."""
+    if gain is None or not isinstance(doc, dict) or not isinstance(doc.get("detection_pairs"), dict):
+        return None
+    for pair in doc["detection_pairs"].get("pairs", []):
+        k = pair.get("detection_observer_gain") if isinstance(pair, dict) else None
+        if isinstance(k, (int, float)) and math.isclose(float(k), gain, rel_tol=1e-9):
+            return pair  # type: ignore[no-any-return]
+    return None
+
+
+def _read_threshold_file(
+    path: Path, robot: RobotModel, gain: float | None = None
+) -> tuple[tuple[float, ...], str, float | None]:
     import json
 
     if not path.is_file():
@@ -298,6 +315,9 @@ def _read_threshold_file(path: Path, robot: RobotModel) -> tuple[tuple[float, ..
         doc = json.loads(path.read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
         raise ConfigError(f"--threshold: {str(path)!r} is not a JSON file: {e}") from e
+    pair = _pair_at(doc, gain)
+    if pair is not None:
+        doc = {**doc, "collision_Nm": pair.get("collision_Nm"), "observer": {"detection_observer_gain": gain}}
     levels = doc.get("collision_Nm") if isinstance(doc, dict) else None
     if not isinstance(levels, list) or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in levels):
         raise ConfigError(
@@ -317,7 +337,8 @@ def _read_threshold_file(path: Path, robot: RobotModel) -> tuple[tuple[float, ..
         raise ConfigError(f"--threshold: {str(path)!r} has non-positive levels {levels}")
     observer = doc.get("observer") if isinstance(doc.get("observer"), dict) else {}
     tuned = observer.get("detection_observer_gain") or observer.get("observer_gain")
-    return tuple(float(v) for v in levels), str(path), None if tuned is None else float(tuned)
+    label = str(path) if pair is None else f"{path} (its pair at detection k_o = {gain:g} 1/s)"
+    return tuple(float(v) for v in levels), label, None if tuned is None else float(tuned)
 
 
 def detection_choice(args: argparse.Namespace, robot: RobotModel) -> DetectionChoice:
@@ -326,7 +347,8 @@ def detection_choice(args: argparse.Namespace, robot: RobotModel) -> DetectionCh
     Raises:
         ConfigError: a bad ``--threshold`` (see :func:`read_threshold`) or a non-positive gain.
     """
-    zeta, source, tuned = read_threshold(args.threshold, robot)
+    running = args.detection_observer_gain if args.detection_observer_gain is not None else args.observer_gain
+    zeta, source, tuned = read_threshold(args.threshold, robot, running)
     return DetectionChoice(
         threshold=zeta,
         observer_gain=_gain(args.observer_gain, "--observer-gain"),

@@ -73,6 +73,25 @@ def register(sub: argparse._SubParsersAction) -> None:
     t.add_argument(
         "--allow-extrapolation", action="store_true", help="warn instead of refusing when the logs are too short"
     )
+    d = p.add_argument_group("(k_o, zeta) pairs (exact discretization)")
+    d.add_argument(
+        "--detection-gains", default=None, metavar="K1,K2,...",
+        help="also propose levels for a detection observer at each of these gains [1/s] (exact form), with the "
+        "lag each gives and its false alarms on --heldout logs; written under 'detection_pairs' of thresholds.json "
+        "(--threshold FILE --detection-observer-gain K then runs the pair at K)",
+    )  # fmt: skip
+    d.add_argument(
+        "--heldout", nargs="+", default=[], metavar="LOG",
+        help="free-motion logs of other seeds than LOG: false alarms per gain counted on them",
+    )  # fmt: skip
+    d.add_argument(
+        "--ramp-slope", type=float, default=1000.0, metavar="NM_PER_S",
+        help="ramp of external torque whose lag is reported [Nm/s] (default 1000)",
+    )  # fmt: skip
+    d.add_argument(
+        "--step-size", type=float, default=2.0, metavar="X",
+        help="step of external torque whose lag is reported, in multiples of zeta (default 2)",
+    )  # fmt: skip
     p.add_argument(
         "--recorded-residual",
         action="store_true",
@@ -145,7 +164,44 @@ def _tune(args: argparse.Namespace) -> int:
             "residuals recorded online by the traces' controllers, with the model and observer each run used: "
             "--model, --model-error and the observer options were not applied (the delays use --observer-gain)"
         )
+    pairs = _pairs(args, model, settings) if args.detection_gains else None
+    if pairs is not None:
+        proposal.detection_pairs = pairs.as_dict()
     files = proposal.write(args.out, figure=not args.no_figure)
     print(proposal.report())
+    if pairs is not None:
+        import pandas as pd
+
+        files["pairs_csv"] = Path(args.out) / "detection_pairs.csv"
+        pd.DataFrame(pairs.rows()).to_csv(files["pairs_csv"], index=False, float_format="%.6g")
+        print("\n" + pairs.report())
     print(f"\nwrote {', '.join(str(f) for f in files.values())}")
     return 0
+
+
+def _pairs(args: argparse.Namespace, model: Any, settings: Any) -> Any:
+    """The (k_o, zeta) pairs of ``--detection-gains`` on the same logs, held out on ``--heldout``."""
+    from reflexarm.errors import ConfigError
+    from reflexarm.tuning import ThresholdWarning, parse_gains, propose_detection_pairs
+
+    if args.recorded_residual:
+        raise ConfigError("--detection-gains replays the logs at each gain; it cannot use --recorded-residual")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ThresholdWarning)
+        pairs = propose_detection_pairs(
+            args.logs,
+            model,
+            parse_gains(args.detection_gains),
+            heldout=args.heldout,
+            settings=settings,
+            rate_per_hour=args.rate,
+            contact_rate_per_hour=args.contact_rate,
+            ramp_slope=args.ramp_slope,
+            step_size=args.step_size,
+            method=args.method,
+            allow_extrapolation=args.allow_extrapolation,
+            load=lambda path: _load(args, str(path), model),
+        )
+    for w in caught:
+        print(f"warning (pairs): {w.message}", file=sys.stderr)
+    return pairs

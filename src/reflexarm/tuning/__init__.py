@@ -3,6 +3,8 @@
 :func:`tune_thresholds` replays the product's observer on free-motion logs (:func:`replay_residual`),
 fits the tail of each joint's |residual| (:mod:`reflexarm.tuning.tail`) and proposes a collision and a
 lower contact level per joint for false-alarm rates the user gives, with the detection delay each implies.
+:func:`propose_detection_pairs` does so for a list of detection observer gains, the (k_o, zeta) pairs with
+the lag and held-out false alarms of each (:mod:`reflexarm.tuning.pairs`).
 :func:`record_free_motion_log` writes such logs in simulation (the built-in Atlas arm).
 
 The names below are imported from their modules on first use: the study pulls in SciPy and the
@@ -17,8 +19,16 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from reflexarm.tuning.defaults import DEFAULT_CONTACT_RATE, DEFAULT_METHOD, DEFAULT_RATE
-    from reflexarm.tuning.delays import FORCE_DIRECTIONS, detection_delay, force_step_delays
+    from reflexarm.tuning.delays import FORCE_DIRECTIONS, detection_delay, force_step_delays, ramp_lag
     from reflexarm.tuning.free_motion_log import FreeMotionRun, record_free_motion_log
+    from reflexarm.tuning.gains import refilter, synthetic_lags
+    from reflexarm.tuning.pairs import (
+        DEFAULT_DETECTION_GAINS,
+        DetectionPairs,
+        GainPair,
+        parse_gains,
+        propose_detection_pairs,
+    )
     from reflexarm.tuning.replay import (
         ObserverSettings,
         ResidualReplay,
@@ -39,12 +49,15 @@ if TYPE_CHECKING:
 
 __all__ = [
     "DEFAULT_CONTACT_RATE",
+    "DEFAULT_DETECTION_GAINS",
     "DEFAULT_METHOD",
     "DEFAULT_RATE",
     "FORCE_DIRECTIONS",
     "MAX_EXTRAPOLATION",
     "METHODS",
+    "DetectionPairs",
     "FreeMotionRun",
+    "GainPair",
     "JointThresholds",
     "LogTooShortError",
     "ObserverSettings",
@@ -58,15 +71,24 @@ __all__ = [
     "force_step_delays",
     "is_trace_file",
     "load_free_motion_log",
+    "parse_gains",
+    "propose_detection_pairs",
+    "ramp_lag",
     "record_free_motion_log",
     "recorded_residual",
+    "refilter",
     "replay_residual",
+    "synthetic_lags",
     "tune_thresholds",
 ]
 
 #: The module of each public name.
 _SOURCES = {
-    **dict.fromkeys(("FORCE_DIRECTIONS", "detection_delay", "force_step_delays"), "delays"),
+    **dict.fromkeys(("FORCE_DIRECTIONS", "detection_delay", "force_step_delays", "ramp_lag"), "delays"),
+    **dict.fromkeys(("refilter", "synthetic_lags"), "gains"),
+    **dict.fromkeys(
+        ("DEFAULT_DETECTION_GAINS", "DetectionPairs", "GainPair", "parse_gains", "propose_detection_pairs"), "pairs"
+    ),
     **dict.fromkeys(("DEFAULT_CONTACT_RATE", "DEFAULT_METHOD", "DEFAULT_RATE"), "defaults"),
     **dict.fromkeys(("FreeMotionRun", "record_free_motion_log"), "free_motion_log"),
     **dict.fromkeys(

@@ -17,9 +17,10 @@ import math
 import numpy as np
 import numpy.typing as npt
 
+from reflexarm.errors import ConfigError
 from reflexarm.robots.robot_model import RobotModel
 
-__all__ = ["FORCE_DIRECTIONS", "detection_delay", "force_step_delays"]
+__all__ = ["FORCE_DIRECTIONS", "detection_delay", "force_step_delays", "ramp_lag"]
 
 #: The directions of the end-effector force step: the base frame's axes, both signs.
 FORCE_DIRECTIONS = {
@@ -66,3 +67,23 @@ def force_step_delays(
             }
         )
     return rows
+
+
+def ramp_lag(zeta: float, slope: float, time_constant: float) -> float:
+    """The detector's own lag [s] on a ramp of external torque: tau(t) = ``slope`` t [Nm/s] from 0 crosses
+    ``zeta`` [Nm] at t_0 = zeta / slope; the first-order residual r(t) = slope (t - T (1 - e^{-t/T})) of (8)
+    crosses it at t_d, and the lag is t_d - t_0 = T (1 + W_0(-e^{-(1 + t_0 / T)})) (W_0: the principal
+    branch of Lambert's W). It rises with t_0 / T towards T = ``time_constant`` (a slow ramp: the residual
+    trails the torque by T), so T bounds the lag of any ramp; a step (t_0 -> 0) is :func:`detection_delay`.
+    """
+    from scipy.special import lambertw
+
+    if not (zeta > 0 and slope > 0 and time_constant > 0):
+        raise ConfigError(
+            f"ramp_lag needs zeta, slope and time_constant > 0; got {zeta!r}, {slope!r}, {time_constant!r}"
+        )
+    x = zeta / slope / time_constant
+    # W_0 near its branch point -1/e is ill-conditioned for tiny x; the series lag ~ sqrt(2 x) T - x T holds there
+    if x < 1e-6:
+        return float(time_constant * (math.sqrt(2.0 * x) - x))
+    return float(time_constant * (1.0 + lambertw(-math.exp(-(1.0 + x)), 0).real))

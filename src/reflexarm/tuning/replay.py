@@ -10,6 +10,7 @@ does not change it.
 
 from __future__ import annotations
 
+import math
 import os
 import warnings
 from dataclasses import asdict, dataclass
@@ -55,6 +56,8 @@ class ObserverSettings:
         kappa_ext: wrist-wrench term in the observer (6), "EFC" (0/1); needs a wrench in the log.
         kappa_eps: disturbance compensation (0/1); recorded for the summary, it changes the command only,
             not the residual.
+        observer_discretization: "euler" (explicit Euler of (4), k_o dt < 1) or "exact" (the first-order
+            filter's zero-order-hold form, stable at any gain), as ``Controller(observer_discretization=)``.
     """
 
     observer_gain: float = 5.0
@@ -62,11 +65,22 @@ class ObserverSettings:
     kappa_f: int = 0
     kappa_ext: int = 0
     kappa_eps: int = 0
+    observer_discretization: str = "euler"
 
     @property
     def detection_gain(self) -> float:
         """k_o of the residual the detector looks at [1/s]."""
         return float(self.observer_gain if self.detection_observer_gain is None else self.detection_observer_gain)
+
+    def time_constant(self, dt: float) -> float:
+        """Time constant of the detecting residual's step response at the period ``dt`` [s]: 1/k_o for the
+        exact form; -dt / ln(1 - k_o dt) for Euler (1/k_o to 0.3 % for k_o dt <= 0.005)."""
+        k_o = self.detection_gain
+        if self.observer_discretization == "exact":
+            return 1.0 / k_o
+        if k_o * dt >= 1.0:
+            raise ConfigError(f"the Euler observer is unstable at k_o dt = {k_o * dt:g} >= 1; use the exact form")
+        return -dt / math.log1p(-k_o * dt)
 
     def as_dict(self) -> dict[str, object]:
         """JSON-ready settings."""
@@ -82,6 +96,9 @@ class ResidualReplay:
         t: time (N,) [s]; residual: tau_eps_hat (N, n) [Nm] (the detector's residual); dt: the log's
             median period [s] (the controller's nominal period); fault_ticks: ticks the controller
             rejected (their residual is the previous one, as on the robot); faults: the first fault texts.
+        detection_gain: k_o of the residual [1/s] and discretization ("euler"/"exact") of its observer, when
+            known (a replay knows them; a recorded residual does not): :func:`~reflexarm.tuning.refilter`
+            needs them to give the residual of another gain.
     """
 
     source: str
@@ -90,6 +107,8 @@ class ResidualReplay:
     dt: float
     fault_ticks: int
     faults: tuple[str, ...]
+    detection_gain: float | None = None
+    discretization: str | None = None
 
     @property
     def duration(self) -> float:
@@ -126,6 +145,7 @@ def replay_residual(log: RobotLog, robot: RobotModel, settings: ObserverSettings
         kappa_f=s.kappa_f,
         kappa_ext=s.kappa_ext,
         kappa_eps=s.kappa_eps,
+        observer_discretization=s.observer_discretization,
         dt=dt,
         torque_limit=None,
     )
@@ -155,7 +175,7 @@ def replay_residual(log: RobotLog, robot: RobotModel, settings: ObserverSettings
             ThresholdWarning,
             stacklevel=2,
         )
-    return ResidualReplay(log.source, t, out, dt, n_fault, tuple(faults))
+    return ResidualReplay(log.source, t, out, dt, n_fault, tuple(faults), s.detection_gain, s.observer_discretization)
 
 
 #: Columns of a reflexarm trace (:class:`~reflexarm.sim.Trace` Parquet layout) a replay reads.

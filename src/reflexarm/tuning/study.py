@@ -16,7 +16,8 @@ carry: refused (:class:`LogTooShortError`, with the minimum duration) unless ``a
 
 For each level the detection delay of a step of external torque s [Nm] at the joint follows from the
 observer's first-order response (8), r(t) = b + s (1 - exp(-t / T_o)) with T_o = -dt / ln(1 - k_o dt)
-(the discrete observer's time constant, 1/k_o to 0.3 %): the residual crosses zeta at
+(the Euler observer's time constant, 1/k_o to 0.3 %; T_o = 1/k_o for the exact form): the residual crosses
+zeta at
 
     t_d = -T_o ln(1 - (zeta - b) / s)     (never if s <= zeta - b),
 
@@ -150,6 +151,8 @@ class ThresholdProposal:
     step_force: float | None = None
     force_posture: list[float] | None = None
     force_steps: dict[str, list[dict[str, object]]] = field(default_factory=dict)
+    #: (k_o, zeta) pairs of :func:`~reflexarm.tuning.propose_detection_pairs` (its ``as_dict``), or None
+    detection_pairs: dict[str, object] | None = None
 
     @property
     def collision(self) -> np.ndarray:
@@ -174,7 +177,8 @@ class ThresholdProposal:
                 "scale = mean excess) or generalized Pareto by probability-weighted moments, levels at the "
                 "per-joint rate; 90 % bootstrap interval",
                 "per_joint_rate": "the arm's rate split evenly over the joints (rate / n)",
-                "delay": "t_d = -T_o ln(1 - (zeta - b) / s), T_o = -dt / ln(1 - k_o dt); b = 0 (nominal) or "
+                "delay": "t_d = -T_o ln(1 - (zeta - b) / s), T_o = -dt / ln(1 - k_o dt) (Euler) or 1 / k_o (exact); "
+                "b = 0 (nominal) or "
                 "-q95 of |r| (unfavourable)",
             },
             "rate_per_hour": self.rate_per_hour,
@@ -199,6 +203,7 @@ class ThresholdProposal:
                 "levels": self.force_steps,
             },
             "notes": list(self.notes),
+            **({} if self.detection_pairs is None else {"detection_pairs": self.detection_pairs}),
         }
 
     def report(self) -> str:
@@ -308,7 +313,7 @@ def tune_thresholds(
                 f"logs of different periods cannot be pooled: {replays[0].source} {dt:g} s, {r.source} {r.dt:g} s"
             )
     k_o = s.detection_gain
-    time_constant = -dt / math.log1p(-k_o * dt)
+    time_constant = s.time_constant(dt)
     gap = GAP_TIME_CONSTANTS / k_o if gap_s is None else float(gap_s)
     duration = sum(r.duration for r in replays)
     n = robot.n

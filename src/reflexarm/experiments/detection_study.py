@@ -1,0 +1,365 @@
+"""Detection study (issue 15, item 5): the detection observer's gain and levels against lag and false alarms.
+
+Per arm of :data:`~reflexarm.experiments.reaction_study.STUDY_ARMS`, three disjoint sets of seeds (model
+errors +-10 % and the paper's sensor noise):
+
+* **A, tuning**: free-motion logs (``motion``, :func:`~reflexarm.experiments.collision.free_motion_trajectory`)
+  of ``tune_models`` model seeds; :func:`~reflexarm.tuning.propose_detection_pairs` gives the per-joint levels
+  of every gain for ``rate_per_hour`` false alarms of the arm.
+* **C, false alarms**: ``heldout_s`` (default one hour) of free motion; the alarms of every pair are counted on
+  its residual (the held-out logs of the pairs).
+* **B, contacts**: the demo's end-effector contact and the link collision, run with each pair (exact observer,
+  reaction (13)); the detection lag = t_detect - the first time the true |tau_ext_j| exceeds zeta_j on any joint
+  (negative: detected before), the contact-to-detection delay of
+  :func:`~reflexarm.experiments.collision_events.collision_outcome` beside it; and short impacts, ``pulses``
+  force pulses of 10-30 ms on random links during free motion (:class:`~reflexarm.sim.LinkForce`), caught when
+  a joint's residual crosses its level during the pulse or :data:`PULSE_GRACE_S` after it.
+
+The free-motion runs are compiled closed loops with the observer at the largest gain (exact form, detection
+off, reaction "none"), in chunks of ``chunk_s`` (the controller restarts each chunk); every other gain's
+residual is the same controller's at that gain (:func:`~reflexarm.tuning.refilter`, equal to a replay to
+round-off). The "model error" a pulse is compared with is the largest |residual| of the slow observer (the
+first gain) in the tuning logs, per joint: what the model errors and friction leave after the filter. The
+residual noise grows with the gain as k_o M(q) sigma_dq; :func:`noise_growth` measures it per joint.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from reflexarm.control import Controller
+from reflexarm.experiments.collision import CollisionSetting, controller_model, free_motion_trajectory
+from reflexarm.experiments.reaction_study import STUDY_ARMS, StudyArm, study_arm
+from reflexarm.robots import CoulombViscousFriction, RobotModel
+from reflexarm.sim import PAPER_NOISE, Plant, Trace
+from reflexarm.tuning import DEFAULT_DETECTION_GAINS, ObserverSettings, ResidualReplay, refilter
+
+__all__ = [
+    "PULSE_GRACE_S",
+    "DetectionSetting",
+    "DetectionStudy",
+    "contact_lag",
+    "free_motion_residuals",
+    "noise_growth",
+    "run_detection_study",
+]
+
+#: Target of issue 15: detection at most this long after the true external torque exceeds the level [s].
+TARGET_LAG_S = 0.010
+#: A pulse counts as caught when a residual crosses its level up to this long after the pulse ends [s].
+PULSE_GRACE_S = 0.010
+#: Seed offsets of the three disjoint sets: tuning (A), contacts and pulses (B), the false-alarm hour (C).
+SEEDS = {"A": 1000, "B": 2000, "C": 3000}
+
+
+@dataclass(frozen=True)
+class DetectionSetting(CollisionSetting):
+    """A :class:`~reflexarm.experiments.collision.CollisionSetting` whose controller runs the observers in
+    ``observer_discretization`` (default "exact", stable at any gain)."""
+
+    observer_discretization: str = "exact"
+
+    def controller(self, robot: RobotModel) -> Controller:
+        return Controller(
+            robot,
+            stiffness=self.stiffness,
+            damping_ratio=self.damping_ratio,
+            observer_gain=self.observer_gain,
+            detection_observer_gain=self.detection_observer_gain,
+            threshold=self.threshold,
+            reaction=self.reaction,
+            observer_discretization=self.observer_discretization,
+        )
+
+
+def _plant(arm: StudyArm, seed: int, scene: Any = None) -> Plant:
+    friction = CoulombViscousFriction.zeros(arm.robot.n) if arm.plant_friction == "none" else None
+    return Plant(arm.robot, scene=scene, noise=PAPER_NOISE, seed=seed, true_friction=friction)
+
+
+def free_motion_residuals(
+    arm: StudyArm,
+    duration: float,
+    *,
+    gain: float,
+    model_seed: int,
+    seed: int,
+    motion: str = "loaded",
+    chunk_s: float = 300.0,
+    scene: Any = None,
+    keep: Callable[[Trace], None] | None = None,
+) -> list[ResidualReplay]:
+    """Free motion of ``arm`` for ``duration`` [s] (model errors +-10 % of ``model_seed``, noise ``seed``),
+    compiled, the detection observer at ``gain`` (exact), in chunks of ``chunk_s``: one replay per chunk
+    (the controller's online residual; :func:`~reflexarm.tuning.refilter` gives other gains). ``keep`` sees
+    each chunk's trace (e.g. the true external torque of a ``scene``)."""
+    from reflexarm.sim.compiled_loop import run_fast
+
+    model, _ = controller_model(arm.robot, 0.1, model_seed, None)
+    traj = free_motion_trajectory(duration, motion, arm.robot)
+    plant = _plant(arm, seed, scene)
+    plant.reset(traj.sample(0.0).q_d)
+    ctrl = Controller(
+        model, stiffness=300.0, observer_gain=5.0, detection_observer_gain=gain, observer_discretization="exact",
+        threshold=None, reaction="none",
+    )  # fmt: skip
+    out, done = [], 0.0
+    while done < duration - 1e-9:
+        span = min(chunk_s, duration - done)
+        trace = run_fast(plant, ctrl, traj, span)
+        name = (
+            f"{arm.name} free motion {motion} model seed {model_seed} noise seed {seed} [{done:g}, {done + span:g}] s"
+        )
+        dt = float(np.median(np.diff(trace.t)))
+        out.append(ResidualReplay(name, trace.t.copy(), trace.residual.copy(), dt, 0, (), gain, "exact"))
+        if keep is not None:
+            keep(trace)
+        done += span
+        del trace
+    return out
+
+
+def noise_growth(replays: Sequence[ResidualReplay], gains: Sequence[float]) -> dict[str, Any]:
+    """Per gain and joint: the residual's standard deviation and its largest |value| in ``replays`` [Nm]
+    (the growth ~ k_o M(q) sigma_dq of the velocity noise passed by (4))."""
+    rows = []
+    for k in gains:
+        reps = [refilter(r, k) for r in replays]
+        res = np.concatenate([r.residual for r in reps])
+        rows.append(
+            {"gain": float(k), "std_Nm": res.std(axis=0).tolist(), "max_abs_Nm": np.abs(res).max(axis=0).tolist()}
+        )
+    return {"rows": rows}
+
+
+def contact_lag(trace: Trace, levels: np.ndarray) -> dict[str, Any]:
+    """Detection lag of a run: t_detect - the first time the true |tau_ext_j| exceeds zeta_j on any joint [s]
+    (None without detection or without a true crossing; negative: detected before), and on the joints
+    that crossed at detection (the detecting joints)."""
+    t = trace.t
+    over = np.abs(trace.tau_ext) > levels
+    first = [int(np.argmax(over[:, j])) if over[:, j].any() else None for j in range(levels.size)]
+    i_d = int(np.argmax(trace.collision)) if trace.collision.any() else None
+    crossings = [t[i] for i in first if i is not None]
+    t_cross = float(min(crossings)) if crossings else None
+    row: dict[str, Any] = {"detected_s": None if i_d is None else float(t[i_d]), "true_crossing_s": t_cross}
+    row["lag_s"] = None if i_d is None or t_cross is None else float(t[i_d]) - t_cross
+    if i_d is not None:
+        joints = np.flatnonzero(trace.collided[i_d])
+        lags = [float(t[i_d] - t[first[j]]) for j in joints if first[j] is not None]
+        row["detecting_joints"] = [int(j) + 1 for j in joints]
+        row["lag_detecting_joint_s"] = min(lags) if lags else None
+    row["peak_abs_tau_ext_Nm"] = np.abs(trace.tau_ext).max(axis=0).tolist()
+    return row
+
+
+@dataclass
+class DetectionStudy:
+    """The study's results per arm (JSON-ready dicts) and its conditions."""
+
+    arms: dict[str, dict[str, Any]] = field(default_factory=dict)
+    conditions: dict[str, Any] = field(default_factory=dict)
+
+    def rows(self) -> list[dict[str, Any]]:
+        """One flat row per (arm, gain): levels, lags, false alarms, contacts, pulses caught."""
+        rows = []
+        for name, a in self.arms.items():
+            for p in a["pairs"]["pairs"]:
+                k = p["detection_observer_gain"]
+                h = p["heldout"] or {}
+                row = {"arm": name, "gain_per_s": k, "time_constant_s": 1.0 / k,
+                       "max_collision_Nm": max(p["collision_Nm"]), "min_collision_Nm": min(p["collision_Nm"]),
+                       "ramp_lag_max_s": p["ramp_lag_max_s"], "step_lag_s": p["step_lag_s"],
+                       "measured_step_lag_median_s": p["measured_step_lag_median_s"],
+                       "measured_step_lag_max_s": p["measured_step_lag_max_s"],
+                       "measured_ramp_lag_median_s": p["measured_ramp_lag_median_s"],
+                       "measured_ramp_lag_max_s": p["measured_ramp_lag_max_s"],
+                       "heldout_hours": h.get("duration_s", 0.0) / 3600.0, "false_alarms": h.get("alarms"),
+                       "false_alarms_per_hour": h.get("alarms_per_hour")}  # fmt: skip
+                for scen, c in a.get("contacts", {}).get(str(k), {}).items():
+                    row[f"{scen}_lag_s"], row[f"{scen}_delay_s"] = c.get("lag_s"), c.get("delay_s")
+                pul = a.get("pulses", {}).get("caught", {}).get(str(k))
+                if pul is not None:
+                    row["pulses_caught_share"], row["pulses_eligible"] = pul["share_eligible"], pul["eligible"]
+                rows.append(row)
+        return rows
+
+    def write(self, folder: str | Path, name: str = "detection_study") -> dict[str, Path]:
+        """``{name}.json``, ``{name}.csv`` and the trade-off figure ``{name}.png`` into ``folder``."""
+        import pandas as pd
+
+        out = Path(folder)
+        out.mkdir(parents=True, exist_ok=True)
+        paths = {"json": out / f"{name}.json", "csv": out / f"{name}.csv", "figure": out / f"{name}.png"}
+        paths["json"].write_text(json.dumps({"conditions": self.conditions, "arms": self.arms}, indent=2))
+        pd.DataFrame(self.rows()).to_csv(paths["csv"], index=False, float_format="%.6g")
+        plot_tradeoff(self, paths["figure"])
+        return paths
+
+
+def plot_tradeoff(study: DetectionStudy, path: str | Path) -> Path:
+    """Lag against false alarms per hour over the gains, one line per arm (and the contacts' lags)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.8))
+    rows = study.rows()
+    for name in study.arms:
+        r = [x for x in rows if x["arm"] == name]
+        fa = [max(x["false_alarms_per_hour"] or 0.0, 0.3) for x in r]  # 0 drawn at 0.3/h (log axis)
+        lag = [1e3 * (x["measured_ramp_lag_max_s"] or np.nan) for x in r]
+        (line,) = axes[0].plot(lag, fa, "o-", label=name)
+        for x, a, b in zip(r, lag, fa, strict=True):
+            axes[0].annotate(f"{x['gain_per_s']:g}", (a, b), fontsize=7, textcoords="offset points", xytext=(3, 3))
+        for scen, marker in (("demo", "s"), ("link", "^")):
+            vals = [1e3 * x[f"{scen}_lag_s"] if x.get(f"{scen}_lag_s") is not None else np.nan for x in r]
+            axes[1].plot([x["gain_per_s"] for x in r], vals, marker, ls="-", color=line.get_color(),
+                         label=f"{name} {scen}")  # fmt: skip
+    axes[0].axvline(1e3 * TARGET_LAG_S, color="k", ls="--", lw=0.8)
+    axes[0].set(xlabel="detector lag, max over synthetic ramps [ms]", ylabel="false alarms per hour (0 drawn at 0.3)",
+                yscale="log", title="lag / false-alarm trade-off over k_o (labels: k_o [1/s])")  # fmt: skip
+    axes[1].axhline(1e3 * TARGET_LAG_S, color="k", ls="--", lw=0.8)
+    axes[1].set(xscale="log", xlabel="detection k_o [1/s]", ylabel="contact lag after true crossing [ms]",
+                title="demo contact and link collision")  # fmt: skip
+    axes[0].legend(fontsize=7)
+    axes[1].legend(fontsize=6, ncol=2)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return Path(path)
+
+
+def _contact_runs(arm: StudyArm, gain: float, levels: np.ndarray, seed: int) -> dict[str, Any]:
+    """The demo contact and the link collision with the pair (gain, levels), seeds B; lag and delay each."""
+    from reflexarm.experiments.collision import run_ee_collision, run_link_collision
+    from reflexarm.experiments.collision_events import collision_outcome
+
+    setting = DetectionSetting(
+        "Coll.Det", stiffness=300.0, observer_gain=5.0, detection_observer_gain=gain,
+        threshold=tuple(float(v) for v in levels), reaction="gravity",
+    )  # fmt: skip
+    kw: dict[str, Any] = {"robot": arm.robot, "model_error": 0.1, "model_seed": seed, "seed": seed,
+          "plant_friction": arm.plant_friction}  # fmt: skip
+    out = {}
+    for scen, run in (("demo", run_ee_collision), ("link", run_link_collision)):
+        trace = run(setting=setting, **kw)  # type: ignore[operator, unused-ignore]
+        row = contact_lag(trace, levels)
+        event = collision_outcome(trace, arm.robot, name=f"{arm.name}/{scen}/k_o {gain:g}")
+        row.update({"contact_s": event.contact_s, "delay_s": event.delay_s, "contact_class": event.contact_class})
+        out[scen] = row
+    return out
+
+
+def _pulse_scene(arm: StudyArm, count: int, rng: np.random.Generator) -> tuple[list[Any], list[dict[str, Any]]]:
+    """``count`` LinkForce pulses of 10-30 ms, 20-300 N (log-uniform), random direction and link, 1.5 s apart."""
+    import mujoco
+
+    from reflexarm.sim import LinkForce
+
+    plant = _plant(arm, 0)
+    bodies = [mujoco.mj_id2name(plant.model, mujoco.mjtObj.mjOBJ_BODY, int(plant.model.joint(j).bodyid[0]))
+              for j in plant.joint_names[1:]]  # fmt: skip
+    scenes, specs = [], []
+    for i in range(count):
+        t_on = 2.0 + 1.5 * i + float(rng.uniform(0.0, 0.5))
+        width = float(rng.uniform(0.010, 0.030))
+        u = rng.normal(size=3)
+        force = float(np.exp(rng.uniform(np.log(20.0), np.log(300.0))))
+        spec = {"t_on_s": t_on, "t_off_s": t_on + width, "body": bodies[int(rng.integers(len(bodies)))],
+                "force_N": force, "direction": (u / np.linalg.norm(u)).tolist()}  # fmt: skip
+        scenes.append(LinkForce(spec["body"], spec["force_N"], t_on, t_on + width, direction=spec["direction"]))
+        specs.append(spec)
+    return scenes, specs
+
+
+def _pulses(arm: StudyArm, pairs: Any, model_error: np.ndarray, count: int, seed: int) -> dict[str, Any]:
+    """Short impacts during free motion: the share caught by each pair, among pulses whose true joint torque
+    peaks above 3x the model error of some joint ("eligible") and among all."""
+    scenes, specs = _pulse_scene(arm, count, np.random.default_rng(seed))
+    traces: list[Trace] = []
+    gains = [p.gain for p in pairs.pairs]
+    (rep,) = free_motion_residuals(arm, 2.0 + 1.5 * count + 1.0, gain=max(gains), model_seed=seed, seed=seed,
+                                   chunk_s=1e9, scene=scenes, keep=traces.append)  # fmt: skip
+    t, tau_ext = traces[0].t, traces[0].tau_ext
+    caught: dict[str, dict[str, Any]] = {}
+    for p in pairs.pairs:
+        r = refilter(rep, p.gain).residual
+        hits = []
+        for s in specs:
+            on = (t >= s["t_on_s"]) & (t <= s["t_off_s"])
+            win = (t >= s["t_on_s"]) & (t <= s["t_off_s"] + PULSE_GRACE_S)
+            s["ratio_to_model_error"] = float(np.max(np.abs(tau_ext[on]).max(axis=0) / model_error))
+            hits.append(bool(np.any(np.abs(r[win]) > p.collision)))
+        ok = np.array(hits)
+        elig = np.array([s["ratio_to_model_error"] >= 3.0 for s in specs])
+        caught[str(p.gain)] = {"caught": int(ok.sum()), "pulses": len(specs), "eligible": int(elig.sum()),
+                               "caught_eligible": int((ok & elig).sum()),
+                               "share_eligible": float((ok & elig).sum() / elig.sum()) if elig.any() else None,
+                               "share_all": float(ok.mean()), "hits": hits}  # fmt: skip
+    return {"specs": specs, "model_error_Nm": model_error.tolist(), "caught": caught}
+
+
+def study_arm_detection(
+    arm: StudyArm,
+    gains: Sequence[float] = DEFAULT_DETECTION_GAINS,
+    *,
+    tune_s: float = 600.0,
+    tune_models: int = 3,
+    heldout_s: float = 3600.0,
+    pulses: int = 40,
+    rate_per_hour: float = 0.1,
+    chunk_s: float = 300.0,
+    motion: str = "loaded",
+) -> dict[str, Any]:
+    """One arm of the study (module docstring): pairs, false alarms, noise growth, contacts, pulses."""
+    import warnings
+
+    from reflexarm.tuning import ThresholdWarning, propose_detection_pairs
+
+    ref = max(gains)
+    fm = {"gain": ref, "motion": motion, "chunk_s": chunk_s}
+    tune = [r for i in range(tune_models) for r in free_motion_residuals(
+        arm, tune_s, model_seed=SEEDS["A"] + i, seed=SEEDS["A"] + i, **fm)]  # type: ignore[arg-type]  # fmt: skip
+    held = free_motion_residuals(arm, heldout_s, model_seed=SEEDS["C"], seed=SEEDS["C"], **fm)  # type: ignore[arg-type]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ThresholdWarning)
+        pairs = propose_detection_pairs(tune, arm.robot, gains, heldout=held, rate_per_hour=rate_per_hour,
+                                        allow_extrapolation=True, settings=ObserverSettings())  # fmt: skip
+    slow = [refilter(r, min(gains)) for r in tune]
+    model_error = np.max([np.abs(r.residual[int(5 / min(gains) / r.dt) :]).max(axis=0) for r in slow], axis=0)
+    out: dict[str, Any] = {"plant_friction": arm.plant_friction, "joints": arm.robot.joint_names,
+                           "pairs": pairs.as_dict(), "noise_growth": noise_growth(held[:1], gains),
+                           "warnings": sorted({str(w.message) for w in caught})[:20]}  # fmt: skip
+    out["contacts"] = {str(p.gain): _contact_runs(arm, p.gain, p.collision, SEEDS["B"]) for p in pairs.pairs}
+    out["pulses"] = _pulses(arm, pairs, model_error, pulses, SEEDS["B"] + 1) if pulses else {}
+    return out
+
+
+def run_detection_study(
+    arms: Sequence[str | StudyArm] = STUDY_ARMS,
+    gains: Sequence[float] = DEFAULT_DETECTION_GAINS,
+    *,
+    progress: Callable[[str, dict[str, Any]], None] | None = None,
+    **kwargs: Any,
+) -> DetectionStudy:
+    """The study on each arm (names of :data:`~reflexarm.experiments.reaction_study.STUDY_ARMS` or
+    :class:`StudyArm`); ``kwargs`` go to :func:`study_arm_detection` (durations, pulses, rate)."""
+    from reflexarm.tuning import parse_gains
+
+    g = parse_gains(gains)
+    study = DetectionStudy(conditions={"gains_per_s": list(g), "seeds": dict(SEEDS), "model_error": 0.1,
+                                       "noise": "paper", "target_lag_s": TARGET_LAG_S, **kwargs})  # fmt: skip
+    for a in arms:
+        arm = a if isinstance(a, StudyArm) else study_arm(a)
+        study.arms[arm.name] = study_arm_detection(arm, g, **kwargs)
+        if progress is not None:
+            progress(arm.name, study.arms[arm.name])
+    return study
