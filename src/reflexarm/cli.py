@@ -16,7 +16,16 @@ from collections.abc import Sequence
 from reflexarm import __version__
 from reflexarm.errors import ReflexArmError
 
-_COMMAND_MODULES = ("simulate", "identify", "experiments", "tools", "thresholds", "isolation", "reaction_study")
+_COMMAND_MODULES = (
+    "simulate",
+    "identify",
+    "experiments",
+    "tools",
+    "thresholds",
+    "isolation",
+    "reaction_study",
+    "detection",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
