@@ -91,7 +91,9 @@ def _check(args: argparse.Namespace) -> tuple[list[str], list[str], list[str], f
     from reflexarm.experiments.reaction_study import SCENARIOS, STUDY_ARMS
 
     arms = _names(args.arms, "--arms", STUDY_ARMS)
-    reactions = _names(args.reactions, "--reactions", None)  # the controller names the valid ones per row
+    from reflexarm.control.collision.react import REACTIONS
+
+    reactions = _names(args.reactions, "--reactions", REACTIONS)
     scenarios = _names(args.scenarios, "--scenarios", SCENARIOS)
     pct = float(args.model_error)
     if not math.isfinite(pct) or not 0.0 <= pct < 100.0:

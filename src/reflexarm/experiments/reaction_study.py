@@ -285,7 +285,9 @@ def reaction_study_figure(study: ReactionStudy) -> Figure:
             top.bar(off, ke, width, color=f"C{i}", label=reaction)
             bottom.bar(off, pk, width, color=f"C{i}", label=reaction)
         top.axhline(KE_RATIO_GOAL, color="k", ls="--", lw=1, label=f"{100 * KE_RATIO_GOAL:g} % (issue 15)")
-        bottom.axhline(PEAK_RATIO_GOAL, color="k", ls="--", lw=1, label=f"{PEAK_RATIO_GOAL:g} (issue 15)")
+        goal = bottom.axhline(PEAK_RATIO_GOAL, color="k", ls="--", lw=1, label=f"{PEAK_RATIO_GOAL:g} (issue 15)")
+        if c == 0:
+            bottom.legend(handles=[goal], fontsize=7, loc="lower right")
         top.set_yscale("log")
         top.set_title(f"scenario: {scenario}", fontsize=9)
         top.set_ylabel("KE(+0.5 s) / KE(detection) [-]")
