@@ -106,6 +106,10 @@ class Oracle:
     switch_time: float = 0.1
     damping_update_period: int = 10
     torque_rate_limit: float | None = None
+    #: the links' surfaces: a collision is isolated at detection by the plain Python ContactIsolator (significance
+    #: isolation_share x threshold) and a retract moves the estimated point along the estimated force
+    geometry: object | None = None
+    isolation_share: float = 0.25
     state: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -138,6 +142,12 @@ class Oracle:
         self.safe_lo = np.where(np.isfinite(lo), lo + margin, -np.inf)
         self.safe_hi = np.where(np.isfinite(hi), hi - margin, np.inf)
         self.D = np.zeros((n, n))
+        self.isolator = None
+        if self.geometry is not None and self.threshold is not None:
+            from reflexarm.control.collision import ContactIsolator
+
+            self.isolator = ContactIsolator(r, significance=self.isolation_share * self.threshold,
+                                            geometry=self.geometry)  # fmt: skip
         self.last_q = None
         self.prev_tau = None
         self.reacted = False
@@ -397,6 +407,12 @@ class Oracle:
         measured = not self.kappa_ext and force > rs.contact_level
         reaction = self.contact_reaction if measured else self.reaction
         e = self.energy()
+        # the isolation of a collision (plain Python ContactIsolator), when geometry is given: isolation_delay after
+        # detection, from the detection residual of that tick (at once for a delay of 0)
+        self.estimate = None
+        self.awaiting = self.isolator is not None and not measured
+        if self.awaiting and self.settings.isolation_delay <= 0.0:
+            self.estimate, self.awaiting = self.isolator.isolate(q, r), False
         self.event = ev = {
             "detected": True, "t_detect": t, "joints": over.copy(), "distal_joint": int(np.flatnonzero(over)[-1]),
             "contact_class": "contact" if measured else "collision", "reaction": reaction, "phase": "none",
@@ -412,6 +428,8 @@ class Oracle:
         if reaction == "gravity":
             ev["phase"] = "gravity"
         elif reaction == "brake":
+            ev["phase"] = "braking"
+        elif reaction == "retract" and self.awaiting:  # brake until isolated, then retract from the estimate
             ev["phase"] = "braking"
         elif reaction == "retract":
             self.plan_retract(q, wrench, measured)
@@ -430,7 +448,15 @@ class Oracle:
         the point it moves, both over the joints that move it."""
         ev, n = self.event, self.n
         assert ev is not None
-        last = n - 1 if measured else ev["distal_joint"]
+        est = self.estimate
+        if est is not None and est.point is not None and est.force is not None:
+            # the estimated point along the estimated force: J_p = J_v + J_w x (p - o) of its link's joint
+            pin.computeJointJacobians(self.model, self.data, q)
+            J6 = pin.getJointJacobian(self.model, self.data, est.link + 1, pin.LOCAL_WORLD_ALIGNED)
+            arm = est.point - self.data.oMi[est.link + 1].translation
+            Jp = J6[:3] + np.cross(J6[3:].T, arm).T
+            return Jp.T @ (est.force / np.linalg.norm(est.force)), Jp
+        last = n - 1 if measured else (est.link if est is not None and est.link >= 0 else ev["distal_joint"])
         if last == n - 1:  # the sensor frame (LOCAL: the wrench is measured in it)
             J = pin.computeFrameJacobian(self.model, self.data, q, self.robot.sensor_frame_id, pin.LOCAL)[:3]
         else:  # the origin of the next joint (Pinocchio joint ids are 1-based: joint i is id i + 1)
@@ -468,8 +494,14 @@ class Oracle:
         """A tick after the detecting one: phase changes, then the record (peak, motion, re-contacts, guard)."""
         ev, rs, zeta = self.event, self.settings, self.threshold
         assert ev is not None and zeta is not None
-        if self.reacted:
-            done_braking = ev["phase"] == "braking" and t - self.t_phase >= rs.brake_duration
+        if self.awaiting and t - ev["t_detect"] >= rs.isolation_delay - 1e-12:
+            self.estimate, self.awaiting = self.isolator.isolate(q, self.r_det().copy()), False
+            if self.reacted and ev["reaction"] == "retract":
+                self.plan_retract(q, np.zeros(6), False)
+                ev["phase"], self.t_phase, self.q_from = "retracting", t, q.copy()
+        elif self.reacted:
+            braking = ev["phase"] == "braking" and ev["reaction"] == "brake"
+            done_braking = braking and t - self.t_phase >= rs.brake_duration
             done_retracting = ev["phase"] == "retracting" and t - self.t_phase >= self.retract_time
             if done_braking:
                 ev["q_target"] = np.clip(q, self.safe_lo, self.safe_hi)  # hold where the brake stopped it

@@ -58,6 +58,8 @@ def controller_like(robot, o: Oracle) -> Controller:
         dt=DT,
         damping_update_period=o.damping_update_period,
         torque_rate_limit=o.torque_rate_limit,
+        contact_geometry=o.geometry,
+        isolation_share=o.isolation_share,
     )
 
 
@@ -274,3 +276,74 @@ def test_mode_follows_a_phase_change_without_a_threshold_crossing(atlas):
     assert o.event is not None and o.event["phase"] == "holding"
     wrong = [m for m in modes if not m[1] == m[2] == m[3]]
     assert not wrong, f"{len(wrong)} ticks with a wrong mode (tick, Command.mode, Controller.mode, oracle): {wrong[:3]}"
+
+
+@pytest.fixture(scope="module")
+def panda_contact():
+    """A seeded contact on a distal Panda link (where point and force are determined), strong enough to detect, whose
+    own joint carries more than the isolation's significance (0.25 x 11 Nm: a contact whose distal joints carry
+    less is isolated to a more proximal link, "link or later", by design)."""
+    import warnings
+
+    from reflexarm import load_robot
+    from reflexarm.control.collision.classify import controller_geometry
+    from reflexarm.experiments.isolation_study import draw_contacts
+    from reflexarm.robots import link_collision_geometry
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        robot = load_robot("panda")
+    truth = link_collision_geometry(robot, spacing=0.01, seed=3)
+    contact = next(c for c in draw_contacts(robot, truth, 1000, seed=1) if c.link >= 4 and np.abs(c.torque).max() > 25
+                   and abs(c.torque[c.link]) > 3.5)  # fmt: skip
+    return robot, controller_geometry(robot), contact
+
+
+@pytest.mark.parametrize("reaction", ["retract", "brake"])
+def test_tick_isolation_and_retract_equal_the_plain_isolator(panda_contact, reaction):
+    """A static arm at the contact's posture; from tick 100 the contact's J_c^T f appears (tau_m = g - J_c^T f). The
+    Controller isolates it in the tick (C++ ContactIsolator): link, point and force equal the plain Python
+    ContactIsolator on the same residual and geometry (the oracle's), every tick equals the oracle (retract: the
+    estimated point moved along the estimated force), and the estimate is the truth's: same link, point within
+    the candidate spacing, force along the true one (a step through the exact first-order observer scales J_c^T f
+    without turning it)."""
+    from reflexarm.control.collision import ContactIsolator, Determined
+
+    robot, geometry, c = panda_contact
+    settings = ReactionSettings(brake_duration=0.04, retract_speed=0.5, rest_time=0.1)
+    o = Oracle(robot, threshold=11.0, reaction=reaction, detection_observer_gain=200.0, discretization="exact",
+               settings=settings, geometry=geometry)  # fmt: skip
+    ctrl = controller_like(robot, o)
+    g = robot.compute_gravity(c.q)
+    zeros, gravity = np.zeros(robot.n), np.array([0.0, 0.0, -9.81])
+    residuals = {}
+    for k in range(400):
+        tau_m = g - (c.torque if k >= 100 else 0.0)
+        args = ((k + 1) * DT, c.q, zeros, tau_m, np.zeros(6), gravity, c.q, zeros, zeros)
+        want = o.step(*args)
+        cmd = ctrl.step(Measurement(*args[:6]), Reference(*args[6:]))
+        compare(k, want, cmd, ctrl, o)
+        residuals[args[0]] = ctrl.detection_residual.copy()
+    event = ctrl.event
+    assert event is not None and event.estimate is not None and event.contact_class == "collision"
+    # isolated from the detection residual isolation_delay (20 ms) after detection
+    assert event.t_estimate == pytest.approx(event.t_detect + settings.isolation_delay, abs=0.5 * DT)
+    plain = ContactIsolator(robot, significance=0.25 * 11.0, geometry=geometry).isolate(
+        c.q, residuals[event.t_estimate]
+    )
+    est = event.estimate
+    assert (est.link, est.determined) == (plain.link, plain.determined) == (c.link, Determined.POINT_AND_FORCE)
+    np.testing.assert_allclose(est.point, plain.point, atol=1e-12)  # the same candidate point
+    np.testing.assert_allclose(est.force, plain.force, rtol=1e-9, atol=1e-8)  # 3x3 solves: see test_isolation_core
+    assert np.linalg.norm(est.point - c.point) < geometry.spacing  # [m] the nearest candidate to the true point
+    cos = est.force @ c.force / (np.linalg.norm(est.force) * np.linalg.norm(c.force))
+    assert cos > np.cos(np.radians(10.0))
+    if reaction == "retract":  # the true point moves along the true force, by about retract_distance
+        from reflexarm.control.collision.identify import compute_link_kinematics
+
+        kin = compute_link_kinematics(robot, c.q)
+        J = kin.jacobians[c.link]
+        Jp = J[:3] + np.cross(J[3:].T, c.point - kin.origins[c.link]).T
+        moved = Jp @ (event.q_target - event.q_detect)
+        assert moved @ c.force > 0.8 * np.linalg.norm(moved) * np.linalg.norm(c.force)
+        assert abs(np.linalg.norm(moved) - event.retract_planned) < 0.2 * event.retract_planned

@@ -248,7 +248,7 @@ def test_core_equals_python_controller(atlas, springs, reaction, discretization)
     atlas = with_springs(atlas) if springs else atlas
     kw = {"kappa_f": 1, "kappa_eps": 1, "kappa_ext": 1, "threshold": 11.0, "reaction": reaction}
     py = Controller(atlas, detection_observer_gain=30.0, torque_rate_limit=3000.0, reaction_settings=SHORT,
-                    observer_discretization=discretization, **kw)  # fmt: skip
+                    observer_discretization=discretization, contact_geometry=None, **kw)  # fmt: skip
     o = Oracle(atlas, detection_observer_gain=30.0, torque_rate_limit=3000.0, settings=SHORT,
                discretization=discretization, **kw)  # fmt: skip
     ctrl = core_controller(core, atlas, o)
@@ -267,6 +267,7 @@ def test_core_equals_python_controller(atlas, springs, reaction, discretization)
     record = {**event.to_dict(), "joints": np.isin(np.arange(atlas.n), event.joints), "detected": True}
     core_record = {k: (None if isinstance(v, float) and np.isnan(v) else v) for k, v in ctrl.event.items()}
     core_record["joints"] = np.asarray(core_record["joints"]).astype(bool)
+    assert core_record.pop("estimate_from_sensor") is False and core_record["estimate"] is None  # no geometry
     for key, value in core_record.items():
         np.testing.assert_array_equal(np.asarray(record[key], dtype=object), np.asarray(value, dtype=object),
                                       err_msg=key)  # fmt: skip

@@ -300,6 +300,21 @@ NB_MODULE(_closed_loop, m)
       },
       nb::rv_policy::move, "(spec, start tick, start state, peak tick (-1: none), peak state, peak sum of tau_ext_i^2), copied.")
     .def("reset_controller", [](PyLoop & self) { self.loop.controller().reset(); })
+    .def(
+      "set_contact_geometry",
+      [](PyLoop & self, const std::vector<reflexarm_bindings::Rows3> & points,
+         const std::vector<reflexarm_bindings::Rows3> & normals, double significance_share, double fit_tolerance,
+         double relative_tolerance, double friction_coefficient, int cone_edges) {
+        reflexarm::IsolationParams p;
+        p.fit_tolerance = fit_tolerance;
+        p.relative_tolerance = relative_tolerance;
+        p.friction_coefficient = friction_coefficient;
+        p.cone_edges = cone_edges;
+        self.loop.controller().setContactGeometry(
+          reflexarm_bindings::surfacesFrom(points, normals), significance_share, p);
+      },
+      "points"_a, "normals"_a, "significance_share"_a, "fit_tolerance"_a, "relative_tolerance"_a,
+      "friction_coefficient"_a, "cone_edges"_a, "As reflexarm._core.Controller.set_contact_geometry.")
     .def_prop_rw(
       "quiet_timers", [](PyLoop & self) { return self.loop.quietTimers(); },
       [](PyLoop & self, bool on) { self.loop.setQuietTimers(on); },

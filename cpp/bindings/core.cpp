@@ -186,7 +186,8 @@ NB_MODULE(_core, m)
     .def_rw("rest_energy_fraction", &RP::rest_energy_fraction)
     .def_rw("rest_energy_floor", &RP::rest_energy_floor)
     .def_rw("contact_level", &RP::contact_level)
-    .def_rw("position_margin", &RP::position_margin);
+    .def_rw("position_margin", &RP::position_margin)
+    .def_rw("isolation_delay", &RP::isolation_delay);
 
   nb::class_<reflexarm::InputBounds>(m, "InputBounds")
     .def(nb::init<>())
@@ -300,6 +301,22 @@ NB_MODULE(_core, m)
       c.cmd.fault_code = reflexarm::FaultCode::None; // the last command's fault text is cleared as well
       c.cmd.fault_text[0] = '\0';
     })
+    .def(
+      "set_contact_geometry",
+      [](PyController & c, const std::vector<reflexarm_bindings::Rows3> & points,
+         const std::vector<reflexarm_bindings::Rows3> & normals, double significance_share, double fit_tolerance,
+         double relative_tolerance, double friction_coefficient, int cone_edges) {
+        reflexarm::IsolationParams p;
+        p.fit_tolerance = fit_tolerance;
+        p.relative_tolerance = relative_tolerance;
+        p.friction_coefficient = friction_coefficient;
+        p.cone_edges = cone_edges;
+        c.ctrl.setContactGeometry(reflexarm_bindings::surfacesFrom(points, normals), significance_share, p);
+      },
+      "points"_a, "normals"_a, "significance_share"_a, "fit_tolerance"_a, "relative_tolerance"_a,
+      "friction_coefficient"_a, "cone_edges"_a,
+      "The links' collision surfaces (per joint (m, 3) points and outward normals in the joint frame): detected "
+      "collisions are then isolated in update().")
     .def(
       "set_switches",
       [](PyController & c, int kappa_f, int kappa_eps, int kappa_ext) {

@@ -9,6 +9,7 @@
 #include <nanobind/stl/string.h>
 
 #include "reflexarm/controller.hpp"
+#include "estimate_dict.hpp"
 
 namespace reflexarm_bindings
 {
@@ -30,6 +31,9 @@ namespace reflexarm_bindings
     d["q_detect"] = Eigen::VectorXd(e.q_detect);
     d["q_target"] = Eigen::VectorXd(e.q_target);
     d["retract_planned"] = e.retract_planned;
+    d["estimate"] = e.estimated ? nb::object(estimateDict(e.estimate)) : nb::none();
+    d["estimate_from_sensor"] = e.from_sensor;
+    d["t_estimate"] = e.t_estimate;
     d["wrist_force"] = e.wrist_force;
     d["peak_residual"] = e.peak_residual;
     d["energy_detect"] = e.energy_detect;

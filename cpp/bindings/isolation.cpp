@@ -14,15 +14,17 @@
 
 #include "reflexarm/isolation.hpp"
 #include "reflexarm/model_io.hpp"
+#include "estimate_dict.hpp"
 
 namespace nb = nanobind;
 using namespace nb::literals;
 
 namespace
 {
-  using Rows3 = nb::ndarray<const double, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu>;
+  using reflexarm_bindings::Rows3;
+  using reflexarm_bindings::estimateDict;
+  using reflexarm_bindings::surfacesFrom;
   using Vec = nb::ndarray<const double, nb::shape<-1>, nb::c_contig, nb::device::cpu>;
-  using Out3 = nb::ndarray<nb::numpy, double, nb::shape<3>>;
   using Map = Eigen::Map<const Eigen::VectorXd>;
 
   struct PyIsolator
@@ -31,47 +33,11 @@ namespace
     reflexarm::ContactEstimateData out;
   };
 
-  nb::object vector3(const Eigen::Vector3d & v)
-  {
-    auto * data = new double[3]{v[0], v[1], v[2]};
-    nb::capsule owner(data, [](void * p) noexcept { delete[] static_cast<double *>(p); });
-    return nb::cast(Out3(data, {3}, owner));
-  }
-
   Map view(const Vec & a)
   {
     return Map(a.data(), static_cast<Eigen::Index>(a.shape(0)));
   }
 
-  reflexarm::LinkSurfaceData::Rows3 rows(const Rows3 & a)
-  {
-    return Eigen::Map<const reflexarm::LinkSurfaceData::Rows3>(a.data(), static_cast<Eigen::Index>(a.shape(0)), 3);
-  }
-
-  nb::dict toDict(const reflexarm::ContactEstimateData & e)
-  {
-    nb::dict d;
-    d["link"] = e.link;
-    d["point"] = e.has_point ? vector3(e.point) : nb::none();
-    d["force"] = e.has_force ? vector3(e.force) : nb::none();
-    d["best_point"] = vector3(e.point);
-    d["best_force"] = vector3(e.force);
-    d["fit_error"] = e.fit_error;
-    d["determined"] = static_cast<int>(e.determined);
-    d["cause"] = static_cast<int>(e.cause);
-    d["first_candidate"] = e.first_candidate;
-    d["candidate_count"] = e.candidate_count;
-    d["consistent_points"] = e.consistent_points;
-    d["point_spread"] = e.point_spread;
-    d["best_fit"] = e.best_fit;
-    d["tolerance"] = e.tolerance;
-    d["link_rank"] = e.link_rank;
-    d["force_rank"] = e.force_rank;
-    d["force_variation"] = e.force_variation;
-    d["direction_variation_deg"] = e.direction_variation_deg;
-    d["max_significance_ratio"] = e.max_significance_ratio;
-    return d;
-  }
 } // namespace
 
 void bindIsolation(nb::module_ & m)
@@ -85,16 +51,7 @@ void bindIsolation(nb::module_ & m)
       [](PyIsolator * self, const std::string & model_text, const std::vector<Rows3> & points,
          const std::vector<Rows3> & normals, const Vec & significance, double fit_tolerance,
          double relative_tolerance, double friction_coefficient, int cone_edges) {
-        if (points.size() != normals.size())
-          throw reflexarm::ConfigError(
-            "points and normals: one array per joint each; got " + std::to_string(points.size()) + " and "
-            + std::to_string(normals.size()));
-        std::vector<reflexarm::LinkSurfaceData> surfaces(points.size());
-        for (size_t i = 0; i < points.size(); ++i)
-        {
-          surfaces[i].points = rows(points[i]);
-          surfaces[i].normals = rows(normals[i]);
-        }
+        const std::vector<reflexarm::LinkSurfaceData> surfaces = surfacesFrom(points, normals);
         reflexarm::IsolationParams params;
         params.significance = view(significance);
         params.fit_tolerance = fit_tolerance;
@@ -115,7 +72,7 @@ void bindIsolation(nb::module_ & m)
         if (!s.iso.isolate(view(q), view(residual), s.out))
           throw nb::value_error(
             ("q and residual must be finite vectors of size " + std::to_string(s.iso.nv())).c_str());
-        return toDict(s.out);
+        return estimateDict(s.out);
       },
       "q"_a.noconvert(), "residual"_a.noconvert(),
       "Contact from the residual at q (float64 C-contiguous (n,) vectors): a dict of link, point, force, "

@@ -156,6 +156,8 @@ namespace reflexarm
       checkPositive(rvals[k], (std::string("ReactionParams.") + rnames[k]).c_str());
     if (!std::isfinite(rp.position_margin) || rp.position_margin < 0.0)
       throw ConfigError("ReactionParams.position_margin must be a non-negative number of radians");
+    if (!std::isfinite(rp.isolation_delay) || rp.isolation_delay < 0.0)
+      throw ConfigError("ReactionParams.isolation_delay must be a non-negative number of seconds");
     // observer stability at the longest integrated period (the exact form is stable at any gain)
     const double lo = p.period_band_low, hi = p.period_band_high;
     if (!(0.0 < lo && lo <= 1.0 && 1.0 <= hi && hi < kInf))
@@ -370,6 +372,23 @@ namespace reflexarm
     if (kappa_ext == 0 || kappa_ext == 1)
       kappa_ext_ = kappa_ext;
     updateMode();
+  }
+
+  void Controller::setContactGeometry(
+    const std::vector<LinkSurfaceData> & surfaces, double significance_share, const IsolationParams & params)
+  {
+    if (!configured_)
+      throw ConfigError("setContactGeometry: configure() the controller first");
+    if (!has_detector_)
+      throw ConfigError("setContactGeometry: the controller has no detector (threshold) to isolate detections of");
+    checkPositive(significance_share, "significance_share");
+    if (significance_share > 1.0)
+      throw ConfigError("significance_share must be in (0, 1]; got " + std::to_string(significance_share));
+    IsolationParams p = params;
+    p.significance = threshold_ * significance_share;
+    has_isolator_ = false;
+    isolator_.configure(model_, surfaces, p); // throws ConfigError on bad surfaces
+    has_isolator_ = true;
   }
 
   void Controller::initCommand(Command & command) const

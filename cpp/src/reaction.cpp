@@ -19,6 +19,7 @@
 
 #include "pinocchio/algorithm/frames.hpp"
 #include "pinocchio/algorithm/jacobian.hpp"
+#include "pinocchio/algorithm/kinematics.hpp"
 #include "pinocchio/algorithm/rnea.hpp"
 
 #include "reflexarm/controller.hpp"
@@ -108,6 +109,8 @@ namespace reflexarm
     e.contact_class =
       (!kappa_ext_ && e.wrist_force > rp.contact_level) ? ContactClass::Contact : ContactClass::Collision;
     e.reaction = e.contact_class == ContactClass::Contact ? params_.contact_reaction : params_.reaction;
+    if (e.contact_class == ContactClass::Contact || rp.isolation_delay <= 0.0)
+      estimateContact(s, e.residual); // the sensor's measurement; or isolation at once
     e.energy_detect = kineticEnergy();
     e.energy_max = e.energy_detect;
     double peak = 0.0;
@@ -131,8 +134,13 @@ namespace reflexarm
       e.phase = ReactionPhase::Braking;
       break;
     case Reaction::Retract:
-      planRetract(s);
-      e.phase = ReactionPhase::Retracting;
+      if (awaitingIsolation()) // brake until the collision is isolated, then retract from the estimate
+        e.phase = ReactionPhase::Braking;
+      else
+      {
+        planRetract(s);
+        e.phase = ReactionPhase::Retracting;
+      }
       break;
     case Reaction::Compliant:
       for (int i = 0; i < n_; ++i)
@@ -151,12 +159,14 @@ namespace reflexarm
   }
 
   // The retract's joint motion dq_plan and its duration. The point that moves and the direction:
+  //  * an isolated collision with an estimated point and force: that point along that force (retractFromEstimate);
   //  * a contact the wrist sensor measures (class Contact): the sensor frame, along the measured force f (the
   //    environment's force on the arm): d = J_s^T f / |f|, so J_s d = J_s J_s^T f / |f| has a positive component
   //    along f;
-  //  * otherwise: the far end of the most distal link whose joint crossed its threshold (the next joint's
-  //    origin; the sensor frame for the last link), along the residual r = J_c^T f: d = r on the joints up to that
-  //    one (the joints after it carry no torque of a force on its link), J_c d = J_c J_c^T f.
+  //  * otherwise: the far end of the isolated link (without isolation: of the most distal link whose joint crossed
+  //    its threshold): the next joint's origin, the sensor frame for the last link, along the residual
+  //    r = J_c^T f: d = r on the joints up to that one (the joints after it carry no torque of a force on its
+  //    link), J_c d = J_c J_c^T f.
   // Scaled so that the point moves retract_distance; bounded by max_retract_angle per joint and by the joint
   // limits (minus the reaction's margin); the duration keeps the mean speed of the point at retract_speed and the
   // minimum-jerk path's peak joint speed (1.875 x its mean) below velocity_fraction x the velocity limits.
@@ -165,31 +175,36 @@ namespace reflexarm
     const ReactionParams & rp = params_.reaction_params;
     CollisionEvent & e = event_;
     const bool measured = e.contact_class == ContactClass::Contact;
-    const int last = (measured || e.distal_joint < 0) ? n_ - 1 : e.distal_joint;
+    // the isolated link when isolation ran (it may be more distal than the most distal crossing joint)
+    const int isolated = (!measured && e.estimated && e.estimate.link >= 0) ? e.estimate.link : -1;
+    const int last = measured ? n_ - 1 : isolated >= 0 ? isolated : e.distal_joint < 0 ? n_ - 1 : e.distal_joint;
     q_buf_ = s.q;
     J_r_.setZero();
-    if (measured || last + 1 >= n_)
-      pinocchio::computeFrameJacobian(
-        model_, data_r_, q_buf_, static_cast<pinocchio::FrameIndex>(params_.sensor_frame_id),
-        pinocchio::LOCAL_WORLD_ALIGNED, J_r_);
-    else
-    {
-      pinocchio::computeJointJacobians(model_, data_r_, q_buf_);
-      pinocchio::getJointJacobian(
-        model_, data_r_, static_cast<pinocchio::JointIndex>(last + 2), pinocchio::LOCAL_WORLD_ALIGNED, J_r_);
-    }
     dq_plan_.setZero();
-    if (measured)
+    if (!retractFromEstimate()) // no estimated point: the sensor frame or the link's far end
     {
-      // the sensor measures the wrench on the arm beyond it in its own frame: rotate the force to the world
-      const auto & R = data_r_.oMf[params_.sensor_frame_id].rotation();
-      const Eigen::Vector3d f = R * s.wrench.head<3>();
-      for (int i = 0; i < n_; ++i)
-        dq_plan_[i] = J_r_.col(i).head<3>().dot(f);
+      if (measured || last + 1 >= n_)
+        pinocchio::computeFrameJacobian(
+          model_, data_r_, q_buf_, static_cast<pinocchio::FrameIndex>(params_.sensor_frame_id),
+          pinocchio::LOCAL_WORLD_ALIGNED, J_r_);
+      else
+      {
+        pinocchio::computeJointJacobians(model_, data_r_, q_buf_);
+        pinocchio::getJointJacobian(
+          model_, data_r_, static_cast<pinocchio::JointIndex>(last + 2), pinocchio::LOCAL_WORLD_ALIGNED, J_r_);
+      }
+      if (measured)
+      {
+        // the sensor measures the wrench on the arm beyond it in its own frame: rotate the force to the world
+        const auto & R = data_r_.oMf[params_.sensor_frame_id].rotation();
+        const Eigen::Vector3d f = R * s.wrench.head<3>();
+        for (int i = 0; i < n_; ++i)
+          dq_plan_[i] = J_r_.col(i).head<3>().dot(f);
+      }
+      else
+        for (int i = 0; i <= last; ++i)
+          dq_plan_[i] = e.residual[i];
     }
-    else
-      for (int i = 0; i <= last; ++i)
-        dq_plan_[i] = e.residual[i];
     const double norm = dq_plan_.norm();
     if (norm > 0.0)
       dq_plan_ /= norm;
@@ -247,6 +262,69 @@ namespace reflexarm
     if (speed > v_lim_[i])
       tau -= p_[i] / params_.reaction_params.brake_time * (1.0 - v_lim_[i] / speed);
     return tau;
+  }
+
+  // Where and how hard: the wrist sensor's measurement for a measured contact, else the isolation of the residual
+  // at detection (when the controller has the links' geometry).
+  bool Controller::awaitingIsolation() const noexcept
+  {
+    return has_isolator_ && !event_.estimated && event_.contact_class == ContactClass::Collision;
+  }
+
+  void Controller::estimateContact(const State & s, const Eigen::VectorXd & residual) noexcept
+  {
+    CollisionEvent & e = event_;
+    ContactEstimateData & est = e.estimate;
+    if (e.contact_class == ContactClass::Contact)
+    {
+      q_buf_ = s.q;
+      pinocchio::forwardKinematics(model_, data_r_, q_buf_);
+      const auto fid = static_cast<pinocchio::FrameIndex>(params_.sensor_frame_id);
+      pinocchio::updateFramePlacement(model_, data_r_, fid);
+      const auto & M = data_r_.oMf[fid];
+      const Eigen::Vector3d f = s.wrench.head<3>(), m = s.wrench.tail<3>();
+      const double f2 = f.squaredNorm(); // > contact_level^2 > 0 for this class
+      est = ContactEstimateData{};
+      est.link = static_cast<int>(model_.frames[fid].parentJoint) - 1;
+      est.has_point = est.has_force = true;
+      est.point = M.translation() + M.rotation() * (f.cross(m) / f2); // the line of action's point nearest o
+      est.force = M.rotation() * f;
+      est.fit_error = 0.0;
+      est.determined = Determined::PointAndForce;
+      est.cause = IsolationCause::Determined;
+      est.first_candidate = est.link;
+      est.candidate_count = 1;
+      e.estimated = e.from_sensor = true;
+    }
+    else if (has_isolator_)
+    {
+      e.estimated = isolator_.isolate(s.q, residual, est);
+      e.t_estimate = last_t_;
+    }
+  }
+
+  // The retract of an isolated collision: the estimated point along the estimated force, d = J_p^T f / |f|
+  // (J_p J_p^T f has a positive component along f); the translational Jacobian of the point (world-aligned) is
+  // J_v + J_w x (p - o) of its link's joint. False if the estimate gives no point and force.
+  bool Controller::retractFromEstimate() noexcept
+  {
+    const ContactEstimateData & est = event_.estimate;
+    if (!event_.estimated || event_.from_sensor || est.link < 0 || !est.has_point || !est.has_force)
+      return false;
+    const double f_norm = est.force.norm();
+    if (!(f_norm > 0.0))
+      return false;
+    pinocchio::computeJointJacobians(model_, data_r_, q_buf_);
+    const auto jid = static_cast<pinocchio::JointIndex>(est.link + 1);
+    pinocchio::getJointJacobian(model_, data_r_, jid, pinocchio::LOCAL_WORLD_ALIGNED, J_r_);
+    const Eigen::Vector3d arm = est.point - data_r_.oMi[jid].translation();
+    for (int i = 0; i < n_; ++i)
+    {
+      const Eigen::Vector3d v = J_r_.col(i).head<3>() + J_r_.col(i).tail<3>().cross(arm);
+      J_r_.col(i).head<3>() = v;
+      dq_plan_[i] = v.dot(est.force) / f_norm;
+    }
+    return true;
   }
 
   // ---------------------------------------------------------------------------------- the reaction's law
@@ -310,7 +388,7 @@ namespace reflexarm
     CollisionEvent & e = event_;
     const ReactionParams & rp = params_.reaction_params;
     bool hold = false;
-    if (e.phase == ReactionPhase::Braking && t - t_phase_ >= rp.brake_duration)
+    if (e.phase == ReactionPhase::Braking && e.reaction == Reaction::Brake && t - t_phase_ >= rp.brake_duration)
     {
       for (int i = 0; i < n_; ++i) // hold where the brake stopped the arm
         e.q_target[i] = std::min(std::max(s.q[i], q_safe_lo_[i]), q_safe_hi_[i]);
@@ -331,7 +409,20 @@ namespace reflexarm
   {
     CollisionEvent & e = event_;
     const ReactionParams & rp = params_.reaction_params;
-    if (reacted_)
+    if (awaitingIsolation() && t - e.t_detect >= rp.isolation_delay - 1e-12)
+    {
+      // the residual isolation_delay after detection: grown from the threshold towards the contact's J^T f
+      estimateContact(s, detectionResidual());
+      if (reacted_ && e.reaction == Reaction::Retract) // the brake so far; now the retract from the estimate
+      {
+        planRetract(s);
+        e.phase = ReactionPhase::Retracting;
+        t_phase_ = t;
+        q_from_ = s.q;
+        updateMode();
+      }
+    }
+    else if (reacted_)
       advanceReaction(t, s);
     const Eigen::VectorXd & r = detectionResidual();
     double peak = e.peak_residual, moved = e.moved;

@@ -11,6 +11,7 @@
 
 #include <Eigen/Core>
 
+#include "reflexarm/isolation.hpp"
 #include "reflexarm/params.hpp"
 
 namespace reflexarm
@@ -63,6 +64,13 @@ namespace reflexarm
     double t_hold = kNaN;        ///< stamp the reaction started to hold a posture
     Eigen::VectorXd q_target;    ///< posture the reaction holds (brake / compliant) or retracts to [rad]
     double retract_planned = kNaN; ///< retract: how far its plan moves the point it moves [m]
+    /// Where and how hard, at detection: a measured contact from the wrist sensor (its link, the measured force in
+    /// the world frame, the point of its line of action closest to the sensor origin); a collision isolated from the
+    /// residual at detection (ContactIsolator) when the controller has the links' geometry; link -1 otherwise.
+    ContactEstimateData estimate;
+    bool estimated = false;   ///< estimate was computed (false: no geometry given, or not yet)
+    double t_estimate = kNaN; ///< stamp of the residual the isolation used (isolation_delay after detection)
+    bool from_sensor = false; ///< estimate is the wrist sensor's (class Contact)
     int recrossings = 0;         ///< detections again after the residual fell below half of every threshold
     bool below_since = false;    ///< (internal) residual below all thresholds since the last crossing
     bool torque_limited = false; ///< the reaction's torque was saturated on some tick
@@ -101,6 +109,10 @@ namespace reflexarm
       t_hold = kNaN;
       q_target.setZero();
       retract_planned = kNaN;
+      estimate = ContactEstimateData{};
+      estimated = false;
+      t_estimate = kNaN;
+      from_sensor = false;
       recrossings = 0;
       below_since = false;
       torque_limited = false;

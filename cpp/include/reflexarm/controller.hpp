@@ -70,6 +70,14 @@ namespace reflexarm
     FaultCode update(
       double time, double period, const State & state, const Reference & reference, Command & command) noexcept;
 
+    /// Gives the controller the collision surfaces of its links (one per joint, in the joint frame; zero rows: a
+    /// link without geometry): a detected collision the wrist sensor does not measure is then isolated and
+    /// identified at detection, inside update(), with the residual components above significance_share x the
+    /// threshold counting (ContactIsolator). Call after configure() (allocates; throws ConfigError).
+    void setContactGeometry(
+      const std::vector<LinkSurfaceData> & surfaces, double significance_share, const IsolationParams & params);
+    bool hasContactGeometry() const noexcept { return has_isolator_; }
+
     /// Sizes a Command for this controller (call once, outside the loop).
     void initCommand(Command & command) const;
 
@@ -162,6 +170,9 @@ namespace reflexarm
     // the collision pipeline after detection (reaction.cpp)
     void startReaction(double t, const State & s) noexcept;
     void planRetract(const State & s) noexcept;
+    void estimateContact(const State & s, const Eigen::VectorXd & residual) noexcept;
+    bool awaitingIsolation() const noexcept;
+    bool retractFromEstimate() noexcept;
     void followEvent(double t, const State & s, int n_over, int n_sat) noexcept;
     void advanceReaction(double t, const State & s) noexcept;
     void retractReference() noexcept;
@@ -198,6 +209,8 @@ namespace reflexarm
     Eigen::VectorXd dq_f_, p_f_; // low-passed dq and M(q) dq for the guard's kinetic energy
     bool has_filter_ = false;
     Eigen::Matrix<double, 6, Eigen::Dynamic> J_r_;
+    ContactIsolator isolator_;
+    bool has_isolator_ = false;
     double t_phase_ = 0.0, retract_time_ = 0.0, hold_damping_scale_ = 1.0;
     double inv_band_ = 0.0, limit_ = 0.0, period_lo_ = 0.0, period_hi_ = 0.0;
     double g_norm_ = 0.0, g_tol_ = 0.0, force_max_ = 0.0, moment_max_ = 0.0;

@@ -69,6 +69,10 @@ namespace reflexarm
     /// (class Contact, reaction contact_reaction); otherwise an unmeasured collision (class Collision)
     double contact_level = 10.0;
     double position_margin = 0.05; ///< [rad] reaction references stay this far inside the joint limits
+    /// [s] a collision (not measured by the wrist sensor) is isolated from the detection residual this long after
+    /// detection, when the residual has grown from the threshold towards the contact's J^T f (0: at detection);
+    /// a retract brakes until then and is planned from the estimate
+    double isolation_delay = 0.02;
   };
 
   /// Plausibility bounds of the inputs (same fields and defaults as reflexarm.control.InputBounds).

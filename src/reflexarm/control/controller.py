@@ -16,6 +16,7 @@ import numpy.typing as npt
 
 from reflexarm._validation import as_positive_scalar, as_switch, as_vector
 from reflexarm.control._setup import check_period_band, core_params, load_core, resolve_torque_limit
+from reflexarm.control.collision.classify import SIGNIFICANCE_SHARE, contact_geometry_args, controller_geometry
 from reflexarm.control.collision.detect import CollisionDetector
 from reflexarm.control.collision.event import CollisionEvent
 from reflexarm.control.collision.react import REACTIONS, ReactionSettings, check_reaction
@@ -32,6 +33,7 @@ from reflexarm.control.contract import (
 from reflexarm.control.impedance import JointImpedanceController
 from reflexarm.control.momentum_observer import MomentumObserver
 from reflexarm.errors import ConfigError
+from reflexarm.robots.collision_geometry import CollisionGeometry
 from reflexarm.robots.robot_model import RobotModel
 from reflexarm.signals import Command, Measurement, Reference
 
@@ -119,6 +121,12 @@ class Controller:
             kappa_ext = 1 the residual excludes what the sensor measures); ``None``: as ``reaction``.
         reaction_settings: :class:`~reflexarm.control.collision.ReactionSettings` (brake time, retract distance,
             the guard's rest level, the contact level, ...); default: its defaults.
+        contact_geometry: the links' collision surfaces for isolating a detected collision inside the tick
+            (:class:`~reflexarm.robots.CollisionGeometry`); ``"auto"`` (default): sampled from the robot file at
+            :data:`~reflexarm.control.collision.classify.CONTROLLER_SPACING` (once per file; none for a model
+            built in memory, and none without a threshold); ``None``: no isolation (:attr:`event`'s estimate is
+            then the wrist sensor's for measured contacts only).
+        isolation_share: residual components above this share of the threshold count for isolation.
         observer_discretization: ``"euler"`` (the paper's explicit Euler of (4); needs observer_gain * dt *
             period_band[1] < 1) or ``"exact"`` (the first-order filter's exact form over the measured period:
             stable at any gain, e.g. K_o = 500 1/s at 100 Hz).
@@ -156,6 +164,8 @@ class Controller:
         contact_reaction: str | None = None,
         reaction_settings: ReactionSettings | None = None,
         observer_discretization: str = "euler",
+        contact_geometry: CollisionGeometry | str | None = "auto",
+        isolation_share: float = SIGNIFICANCE_SHARE,
         kappa_f: int = 0,
         kappa_eps: int = 0,
         kappa_ext: int = 0,
@@ -229,6 +239,7 @@ class Controller:
             self._core = c = core.Controller(self.robot.pin_model.saveToString(), core_params(self, core))
         except ValueError as e:  # the core's ConfigError: the checks above should have caught it
             raise ConfigError(f"the C++ core refused the controller's parameters: {e}") from e
+        self.contact_geometry = self._set_contact_geometry(contact_geometry, isolation_share)
         views = c.observer_arrays  # live, writable views of the core's observer states
         self.observer = MomentumObserver(n, self.observer.observer_gain, self.dt, _state=views[:3], _euler=euler)
         if self.detection_observer is not None:
@@ -243,6 +254,26 @@ class Controller:
         self._sat_shift = int(core.SAT_SHIFT)
         self._g_norm = float(np.linalg.norm(self.robot.pin_model.gravity.linear))
         self._mode: str = c.mode
+
+    def _set_contact_geometry(self, geometry: CollisionGeometry | str | None, share: float) -> CollisionGeometry | None:
+        """Hand the links' surfaces to the core (isolation in the tick); the geometry used, or None."""
+        if not (isinstance(share, (int, float)) and 0.0 < share <= 1.0):
+            raise ConfigError(f"isolation_share must be in (0, 1]; got {share!r}")
+        self.isolation_share = float(share)
+        if geometry is None or self.detector is None:
+            return None
+        if isinstance(geometry, str):
+            if geometry != "auto":
+                raise ConfigError(f"contact_geometry must be 'auto', None or a CollisionGeometry; got {geometry!r}")
+            geometry = controller_geometry(self.robot)
+            if geometry is None:
+                return None
+        if not isinstance(geometry, CollisionGeometry) or geometry.n != self.n:
+            raise ConfigError(
+                f"contact_geometry must be a CollisionGeometry of this robot's {self.n} links; got {geometry!r}"
+            )
+        self._core.set_contact_geometry(*contact_geometry_args(geometry, share))
+        return geometry
 
     # ------------------------------------------------------------------ run-time switches and facts
     def set_switches(
@@ -282,7 +313,7 @@ class Controller:
     def event(self) -> CollisionEvent | None:
         """The record of the collision detected since the last :meth:`reset` (None before a detection):
         when, which joints, class, reaction and its phase, energies, the guard's report."""
-        return CollisionEvent.from_core(self._core.event)
+        return CollisionEvent.from_core(self._core.event, geometry=self.contact_geometry, robot=self.robot)
 
     @property
     def mode(self) -> str:

@@ -424,11 +424,14 @@ def free_motion_false_alarms(
 
 
 def _contact_estimate(robot: RobotModel, setting: CollisionSetting, trace: Trace) -> dict[str, object] | None:
-    """Isolation and identification of the run's detected collision (JSON-ready), from the controller's event:
-    the residual and posture at detection, on the controller's model; None without a detection."""
+    """Isolation and identification of the run's detected collision (JSON-ready): the controller's own (in the tick,
+    ``collision_event["estimate"]``), else computed here from its event (the residual and posture at detection, on
+    the controller's model); None without a detection."""
     record = trace.meta.get("collision_event")
     if not record or setting.threshold is None:
         return None
+    if record.get("estimate") is not None:
+        return record["estimate"]  # type: ignore[no-any-return]
     event = CollisionEvent.from_dict(record)  # type: ignore[arg-type]
     i = int(np.searchsorted(trace.t, event.t_detect))
     return estimate_contact(robot, event, setting.threshold, wrench=trace.wrench[min(i, trace.t.size - 1)]).as_dict()

@@ -179,6 +179,10 @@ def _run(
         MAX_SPEED,
         tuple(float(g) for g in plant._gravity),
     )
+    if getattr(ctrl, "contact_geometry", None) is not None:  # isolation in the tick, as the Python controller's
+        from reflexarm.control.collision.classify import contact_geometry_args
+
+        loop.set_contact_geometry(*contact_geometry_args(ctrl.contact_geometry, ctrl.isolation_share))
     # MuJoCo's profiling timers read the clock dozens of times per step through the mujoco package's time
     # callback (5-8 % of a step); unless someone installed a callback to read them, they read 0 in the loop
     # (no effect on the state; reflexarm::QuietTimers)
@@ -283,14 +287,14 @@ def _run(
         _hand_over_still(loop, rec, fault_code, still)
     if not np.array_equal(rec.t[: rec.done], times[: rec.done]):
         raise SimulationError("the compiled loop's clock differs from the sampled reference times; not returning it")
-    return rec.trace(meta | {"loop": "compiled", "collision_event": _event(loop.event)})
+    return rec.trace(meta | {"loop": "compiled", "collision_event": _event(loop.event, ctrl)})
 
 
-def _event(record: dict[str, Any]) -> dict[str, Any] | None:
+def _event(record: dict[str, Any], ctrl: Any) -> dict[str, Any] | None:
     """The compiled controller's collision event record, JSON-ready (None: no detection)."""
     from reflexarm.control.collision.event import CollisionEvent
 
-    event = CollisionEvent.from_core(record)
+    event = CollisionEvent.from_core(record, geometry=ctrl.contact_geometry, robot=ctrl.robot)
     return None if event is None else event.to_dict()
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import StrEnum
+from typing import Any
 
 import numpy as np
 
@@ -60,6 +61,23 @@ class ContactEstimate:
     def none(cls, reason: str) -> ContactEstimate:
         """No contact the joints can sense."""
         return cls(-1, "", None, None, float("nan"), Determined.NONE, reason)
+
+    @classmethod
+    def from_dict(cls, record: dict[str, Any]) -> ContactEstimate:
+        """The estimate back from :meth:`as_dict`."""
+        point, force = record["point"], record["force"]
+        return cls(
+            int(record["link"]),
+            str(record["link_name"]),
+            None if point is None else np.asarray(point, dtype=float),
+            None if force is None else np.asarray(force, dtype=float),
+            float("nan") if record["fit_error"] is None else float(record["fit_error"]),
+            Determined(record["determined"]),
+            str(record["reason"]),
+            tuple(int(i) for i in record["candidate_links"]),
+            int(record["consistent_points"]),
+            float("nan") if record["point_spread"] is None else float(record["point_spread"]),
+        )
 
     def as_dict(self) -> dict[str, object]:
         """JSON-ready."""

@@ -13,6 +13,10 @@ from typing import Any
 
 import numpy as np
 
+from reflexarm.control.collision.contact import ContactEstimate
+from reflexarm.robots.collision_geometry import CollisionGeometry
+from reflexarm.robots.robot_model import RobotModel
+
 __all__ = ["CollisionEvent"]
 
 
@@ -47,6 +51,10 @@ class CollisionEvent:
         overspeed: some joint exceeded its velocity limit during the reaction.
         still_moving: the guard found the arm moving ``rest_time`` after detection (see ``text``).
         text: the guard's report, "" if the reaction brought the arm to rest (or it has not run yet).
+        estimate: where and how hard, at detection (:class:`~reflexarm.control.collision.contact.ContactEstimate`):
+            the wrist sensor's measurement for a measured contact, else the isolation of the residual in the tick
+            (when the controller has the links' collision geometry); None without one.
+        t_estimate: stamp of the residual the isolation used (``isolation_delay`` after detection) [s].
     """
 
     t_detect: float
@@ -72,13 +80,21 @@ class CollisionEvent:
     still_moving: bool
     guard_checked: bool
     text: str
+    estimate: ContactEstimate | None = None
+    t_estimate: float = float("nan")
 
     @classmethod
-    def from_core(cls, record: dict[str, Any]) -> CollisionEvent | None:
-        """The event from the core's record (``reflexarm._core.Controller.event``); None before a detection."""
+    def from_core(
+        cls, record: dict[str, Any], *, geometry: CollisionGeometry | None = None, robot: RobotModel | None = None
+    ) -> CollisionEvent | None:
+        """The event from the core's record (``reflexarm._core.Controller.event``); None before a detection.
+        ``geometry`` (the surfaces the core isolates on) and ``robot`` (for the sensor frame's name) give the
+        estimate its names and reason text."""
         if not record["detected"]:
             return None
-        values = {k: v for k, v in record.items() if k != "detected"}
+        values = {k: v for k, v in record.items() if k not in ("detected", "estimate", "estimate_from_sensor")}
+        values["t_estimate"] = float(record.get("t_estimate", float("nan")))
+        values["estimate"] = _estimate(record, geometry, robot)
         values["joints"] = tuple(int(i) for i in np.flatnonzero(np.asarray(record["joints"])))
         for key in ("residual", "q_detect", "q_target"):
             values[key] = np.array(record[key], dtype=float)
@@ -87,7 +103,9 @@ class CollisionEvent:
     @classmethod
     def from_dict(cls, record: dict[str, Any]) -> CollisionEvent:
         """The event back from :meth:`to_dict` (e.g. a trace's ``meta["collision_event"]``)."""
-        values = {f.name: record[f.name] for f in fields(cls)}
+        values: dict[str, Any] = {f.name: record.get(f.name) for f in fields(cls)}
+        if values["estimate"] is not None:
+            values["estimate"] = ContactEstimate.from_dict(values["estimate"])
         values["joints"] = tuple(int(j) for j in record["joints"])
         for key in ("residual", "q_detect", "q_target"):
             values[key] = np.asarray(record[key], dtype=float)
@@ -100,7 +118,9 @@ class CollisionEvent:
         """JSON-ready: arrays as lists, NaN as None, joints 1-based under ``joints_1based`` beside the 0-based."""
         out: dict[str, Any] = {}
         for key, value in asdict(self).items():
-            if isinstance(value, np.ndarray):
+            if key == "estimate":
+                value = None if self.estimate is None else self.estimate.as_dict()
+            elif isinstance(value, np.ndarray):
                 value = value.tolist()
             elif isinstance(value, float) and not math.isfinite(value):
                 value = None
@@ -109,3 +129,27 @@ class CollisionEvent:
             out[key] = value
         out["joints_1based"] = [j + 1 for j in self.joints]
         return out
+
+
+def _estimate(
+    record: dict[str, Any], geometry: CollisionGeometry | None, robot: RobotModel | None
+) -> ContactEstimate | None:
+    out = record.get("estimate")
+    if out is None:
+        return None
+    if record.get("estimate_from_sensor"):
+        from reflexarm.control.collision.classify import sensor_estimate
+
+        name_robot = robot
+        if name_robot is None:
+            return ContactEstimate.from_dict(
+                {"link": out["link"], "link_name": "", "point": out["point"], "force": out["force"], "fit_error": 0.0,
+                 "determined": "point_and_force", "reason": "measured by the wrist sensor", "candidate_links": [],
+                 "consistent_points": 0, "point_spread": None}
+            )  # fmt: skip
+        return sensor_estimate(name_robot, int(out["link"]), out["point"], out["force"])
+    if geometry is None:
+        return None
+    from reflexarm.control.collision.isolate_core import estimate_from_core
+
+    return estimate_from_core(out, geometry)

@@ -21,7 +21,7 @@ from reflexarm.errors import ConfigError
 from reflexarm.robots.collision_geometry import CollisionGeometry
 from reflexarm.robots.robot_model import RobotModel
 
-__all__ = ["CoreContactIsolator"]
+__all__ = ["CoreContactIsolator", "estimate_from_core"]
 
 #: ``determined`` codes of the core (``reflexarm::Determined``), in order.
 _DETERMINED = (Determined.POINT_AND_FORCE, Determined.FORCE_ONLY, Determined.LINK_ONLY, Determined.NONE)
@@ -101,60 +101,66 @@ class CoreContactIsolator(ContactIsolator):
 
     def _estimate(self, out: dict[str, Any]) -> ContactEstimate:
         """The core's result dict as the ContactEstimate (and reason text) of the Python isolator."""
-        cause = int(out["cause"])
-        if cause == _NO_SIGNIFICANT_JOINT:
-            return ContactEstimate.none(
-                "no joint residual above its significance level: no contact the joints can sense "
-                f"(max |r_j| / level_j = {float(out['max_significance_ratio']):.3g})"
-            )
-        link = int(out["link"])
-        first = int(out["first_candidate"])
-        candidates = tuple(range(first, first + int(out["candidate_count"])))
-        surface = self.geometry.links[link]
-        count = int(out["consistent_points"])
-        spread = float(out["point_spread"])
-        tol = float(out["tolerance"])
-        rank_text = f"the link's Jacobian has rank {out['link_rank']} (5 needed for point and force)"
-        along = (
-            f"over the {count} consistent point(s) (up to {spread * 100:.1f} cm apart) the force varies by "
-            f"{float(out['force_variation']) * 100:.1f} % and {float(out['direction_variation_deg']):.1f} deg"
+        return estimate_from_core(out, self.geometry)
+
+
+def estimate_from_core(out: dict[str, Any], geometry: CollisionGeometry) -> ContactEstimate:
+    """A ``reflexarm::ContactEstimateData`` (as the bindings' dict) as the ContactEstimate, with the reason text of
+    the Python isolator (``geometry``: the surfaces the core was given, for the links' names)."""
+    cause = int(out["cause"])
+    if cause == _NO_SIGNIFICANT_JOINT:
+        return ContactEstimate.none(
+            "no joint residual above its significance level: no contact the joints can sense "
+            f"(max |r_j| / level_j = {float(out['max_significance_ratio']):.3g})"
         )
-        determined = _DETERMINED[int(out["determined"])]
-        if cause == _NO_GEOMETRY:
-            reason = (
-                f"point unknown: link {surface.link_name!r} (joint {surface.joint_name!r}) has no collision "
-                "geometry; force undetermined"
-            )
-        elif cause == _FORCE_RANK:
-            reason = (
-                f"point undetermined, force undetermined: J_c^T has rank {out['force_rank']} at the best point (3 "
-                f"needed for the force); {rank_text}"
-            )
-        elif cause == _FORCES_DISAGREE:
-            reason = f"point undetermined, force undetermined: {rank_text}; {along}"
-        elif cause == _NO_SINGLE_CONTACT:
-            reason = (
-                f"no single contact force on links {candidates[0]}..{candidates[-1]} explains the residual (weighted "
-                f"best fit error {float(out['best_fit']):.3g} > tolerance {tol:.3g}): several contacts, an external "
-                "moment or a model error beyond the tolerance; point undetermined, force undetermined"
-            )
-        elif determined is Determined.FORCE_ONLY:
-            reason = f"point undetermined: {rank_text}; {along}"
-        else:
-            reason = (
-                f"{rank_text}; {count} candidate point(s) within {tol:.3g} Nm of the best fit, up to "
-                f"{spread * 100:.1f} cm from it"
-            )
-        point, force = out["point"], out["force"]
-        return ContactEstimate(
-            link,
-            surface.link_name,
-            None if point is None else np.asarray(point),
-            None if force is None else np.asarray(force),
-            float(out["fit_error"]),
-            determined,
-            reason,
-            candidates,
-            count,
-            spread,
+    link = int(out["link"])
+    first = int(out["first_candidate"])
+    candidates = tuple(range(first, first + int(out["candidate_count"])))
+    surface = geometry.links[link]
+    count = int(out["consistent_points"])
+    spread = float(out["point_spread"])
+    tol = float(out["tolerance"])
+    rank_text = f"the link's Jacobian has rank {out['link_rank']} (5 needed for point and force)"
+    along = (
+        f"over the {count} consistent point(s) (up to {spread * 100:.1f} cm apart) the force varies by "
+        f"{float(out['force_variation']) * 100:.1f} % and {float(out['direction_variation_deg']):.1f} deg"
+    )
+    determined = _DETERMINED[int(out["determined"])]
+    if cause == _NO_GEOMETRY:
+        reason = (
+            f"point unknown: link {surface.link_name!r} (joint {surface.joint_name!r}) has no collision "
+            "geometry; force undetermined"
         )
+    elif cause == _FORCE_RANK:
+        reason = (
+            f"point undetermined, force undetermined: J_c^T has rank {out['force_rank']} at the best point (3 "
+            f"needed for the force); {rank_text}"
+        )
+    elif cause == _FORCES_DISAGREE:
+        reason = f"point undetermined, force undetermined: {rank_text}; {along}"
+    elif cause == _NO_SINGLE_CONTACT:
+        reason = (
+            f"no single contact force on links {candidates[0]}..{candidates[-1]} explains the residual (weighted "
+            f"best fit error {float(out['best_fit']):.3g} > tolerance {tol:.3g}): several contacts, an external "
+            "moment or a model error beyond the tolerance; point undetermined, force undetermined"
+        )
+    elif determined is Determined.FORCE_ONLY:
+        reason = f"point undetermined: {rank_text}; {along}"
+    else:
+        reason = (
+            f"{rank_text}; {count} candidate point(s) within {tol:.3g} Nm of the best fit, up to "
+            f"{spread * 100:.1f} cm from it"
+        )
+    point, force = out["point"], out["force"]
+    return ContactEstimate(
+        link,
+        surface.link_name,
+        None if point is None else np.asarray(point),
+        None if force is None else np.asarray(force),
+        float(out["fit_error"]),
+        determined,
+        reason,
+        candidates,
+        count,
+        spread,
+    )

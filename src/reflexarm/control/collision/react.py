@@ -71,6 +71,9 @@ class ReactionSettings:
         contact_level: a detection while the wrist sensor measures more than this force is a measured
             end-effector contact (with kappa_ext = 0) [N].
         position_margin: postures a reaction holds or moves to stay this far inside the joint limits [rad].
+        isolation_delay: a collision is isolated from the detection residual this long after detection [s], when the
+            residual has grown from the threshold towards the contact's J^T f (0: at detection); a retract brakes
+            until then and is planned from the estimate.
     """
 
     brake_time: float = 0.05
@@ -87,15 +90,16 @@ class ReactionSettings:
     energy_filter_time: float = 0.02
     contact_level: float = 10.0
     position_margin: float = 0.05
+    isolation_delay: float = 0.02
 
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
             ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-            if not ok or value < 0 or (value == 0 and f.name != "position_margin"):
+            zero_ok = f.name in ("position_margin", "isolation_delay")
+            if not ok or value < 0 or (value == 0 and not zero_ok):
                 raise ConfigError(
-                    f"ReactionSettings.{f.name} must be a positive number"
-                    f"{' (or 0)' if f.name == 'position_margin' else ''}; got {value!r}"
+                    f"ReactionSettings.{f.name} must be a positive number{' (or 0)' if zero_ok else ''}; got {value!r}"
                 )
 
     def to_core(self, core: Any) -> Any:
