@@ -16,6 +16,8 @@ sys.path.insert(0, str(HERE))
 BENCHES = (
     "bench_controller",
     "bench_cpp_core",
+    "bench_collision_tick",
+    "bench_isolation",
     "bench_realtime_loop",
     "bench_closed_loop",
     "bench_ident",
