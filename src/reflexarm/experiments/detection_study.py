@@ -227,6 +227,7 @@ def plot_tradeoff(study: DetectionStudy, path: str | Path) -> Path:
     axes[0].set(xlabel="detector lag, max over synthetic ramps [ms]", ylabel="false alarms per hour (0 drawn at 0.3)",
                 yscale="log", title="lag / false-alarm trade-off over k_o (labels: k_o [1/s])")  # fmt: skip
     axes[1].axhline(1e3 * TARGET_LAG_S, color="k", ls="--", lw=0.8)
+    axes[1].set_yscale("symlog", linthresh=10.0)  # lags of a few ms beside detections seconds early or late
     axes[1].set(xscale="log", xlabel="detection k_o [1/s]", ylabel="contact lag after true crossing [ms]",
                 title="demo contact and link collision")  # fmt: skip
     axes[0].legend(fontsize=7)
