@@ -82,3 +82,19 @@ def test_measured_contact_is_classified_and_located_by_the_wrist_sensor(iiwa, br
     # the line of action passes within the tool's reach of the sensor (the point is on that line)
     _, p_sensor = iiwa.compute_frame_pose(event.q_detect, iiwa.sensor_frame)
     assert np.linalg.norm(np.asarray(est["point"]) - p_sensor) < 0.3
+
+
+def test_held_stick_is_a_static_obstacle_the_link_runs_into():
+    # the link collision with stick="held": the stick's tip does not move while it stands in the way, the moving
+    # link runs into it and the collision is detected, classified as a collision (the wrist measures nothing)
+    from reflexarm.experiments.collision import LINK_SETTING, run_link_collision
+
+    trace = run_link_collision(setting=LINK_SETTING, stick="held")
+    tip = trace.extras["elbow_stick_tip"]
+    present = np.linalg.norm(tip, axis=1) < 10.0  # parked 50 m away otherwise
+    assert present.sum() > 1000 and np.ptp(tip[present], axis=0).max() < 1e-9  # [m] it stands still
+    event = CollisionEvent.from_dict(trace.meta["collision_event"])
+    assert event.contact_class == "collision" and trace.meta["stick"] == "held"
+    assert np.abs(trace.tau_ext[trace.collision.argmax()]).max() > 11.0  # true contact torque at detection
+    with pytest.raises(Exception, match="unknown stick 'thrown'; choose one of: pushed, held"):
+        run_link_collision(setting=LINK_SETTING, stick="thrown")

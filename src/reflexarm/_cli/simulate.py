@@ -91,6 +91,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "l_larm; other arms the link of joint ceil(n/2))",
     )
     lc.add_argument("--plant-friction", choices=("file", "none"), default="file", help=_FRICTION_HELP)
+    lc.add_argument(
+        "--stick",
+        choices=("pushed", "held"),
+        default="pushed",
+        help="pushed: the paper's stick, pushed into the moving link at 50 mm/s for 1.5 s (it keeps coming after a "
+        "detection); held: it stands still where the pushed one starts, and the link runs into it (default pushed)",
+    )
     add_detection_options(lc)
     lc.set_defaults(func=_link)
     fm = ssub.add_parser("free-motion", help="false-alarm check: the demo trajectory without obstacle")
@@ -336,6 +343,7 @@ def _link(args: argparse.Namespace) -> int:
             robot=robot,
             link=args.link,
             plant_friction=args.plant_friction,
+            stick=args.stick,
         )
     tr.meta["controller_model"] = choice.describe()
     tr.meta["detection"] = detection.describe()

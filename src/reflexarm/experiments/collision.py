@@ -315,6 +315,12 @@ def run_ee_collision(
     return trace
 
 
+#: The link collision's stick (``stick=`` of :func:`run_link_collision`, ``--stick`` of the CLI).
+STICKS = ("pushed", "held")
+#: How long the held stick stands in the link's way [s] (the link closes the standoff gap in ~1 s at 50 mm/s).
+HELD_STICK_S = 3.0
+
+
 def run_link_collision(
     *,
     model_error: float | None = None,
@@ -327,9 +333,14 @@ def run_link_collision(
     robot: RobotModel | None = None,
     link: int | str | None = None,
     plant_friction: str = "file",
+    stick: str = "pushed",
 ) -> Trace:
     """The elbow push of Figs. 9-10 with detection and reaction (13); arguments as :func:`run_ee_collision`
     (``plant_friction`` too).
+
+    ``stick``: ``"pushed"`` (the paper's: the stick is pushed into the moving link at 50 mm/s for 1.5 s, and keeps
+    coming after a detection), or ``"held"``: the stick stands still where the pushed one starts, for
+    :data:`HELD_STICK_S`, and the moving link runs into it (a static obstacle: what a reaction can get away from).
 
     On another ``robot`` than Atlas (or with ``link`` on Atlas) the stick pushes ``link`` (1-based joint
     number whose link is pushed, or a link name; default mid-chain) while the arm swings it
@@ -338,13 +349,16 @@ def run_link_collision(
     robot = load_robot(ROBOT) if robot is None else robot
     ctrl_model, model_info = controller_model(robot, model_error, model_seed, model)
     placement: dict[str, object] = {}
+    if stick not in STICKS:
+        raise ConfigError(f"unknown stick {stick!r}; choose one of: {', '.join(STICKS)}")
+    motion = {"speed": 0.0, "duration": HELD_STICK_S} if stick == "held" else {}
     if is_paper_arm(robot) and link is None:
         traj = link_collision_trajectory()
-        scene = ElbowStick(body="l_larm", t_start=5.0)
+        scene = ElbowStick(body="l_larm", t_start=5.0, **motion)  # type: ignore[arg-type]
     else:
         plan = link_push_plan(robot, link)
         traj = plan.trajectory
-        scene = ElbowStick(body=plan.body, t_start=plan.t_start, standoff=plan.standoff)
+        scene = ElbowStick(body=plan.body, t_start=plan.t_start, standoff=plan.standoff, **motion)  # type: ignore[arg-type]
         placement = dict(plan.info)
     plant = Plant(robot, scene=scene, noise=noise, seed=seed, true_friction=_true_friction(robot, plant_friction))
     plant.reset(traj.sample(0.0).q_d)
@@ -353,6 +367,7 @@ def run_link_collision(
     trace.meta.update(
         {
             "experiment": "link_collision",
+            "stick": stick,
             "pushed_body": scene.body,
             "plant_friction": plant_friction,
             "robot": robot.name,

@@ -62,8 +62,9 @@ STUDY_ARMS = ("atlas_v5_left_arm", "panda", "iiwa14", "ur_like", "iiwa14_frictio
 #: The reactions the study compares (issue 15); "none" (detection reported only) may be added as a baseline.
 STUDY_REACTIONS = ("gravity", "brake", "retract", "compliant")
 
-#: The contact scenarios: the demo's end-effector contact (cinderblock) and the link collision (stick).
-SCENARIOS = ("demo", "link")
+#: The contact scenarios: the demo's end-effector contact (cinderblock), the link collision (the paper's stick,
+#: pushed on after detection) and the link running into a held stick (a static obstacle).
+SCENARIOS = ("demo", "link", "link_held")
 
 
 @dataclass(frozen=True)
@@ -156,6 +157,7 @@ def _run_one(arm: StudyArm, scenario: str, reaction: str, kwargs: dict[str, Any]
             setting=replace(LINK_SETTING, reaction=reaction),
             robot=arm.robot,
             plant_friction=arm.plant_friction,
+            stick="held" if scenario == "link_held" else "pushed",
             **kwargs,
         )
     return collision_outcome(trace, arm.robot, name=f"{arm.name}/{scenario}/{reaction}"), trace
