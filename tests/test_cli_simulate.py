@@ -207,12 +207,13 @@ def test_link_collision_runs_with_the_given_detection_and_reports_the_event(tmp_
         "threshold_source": "command line",
         "observer_gain_per_s": 10.0,
         "detection_observer_gain_per_s": 40.0,
+        "observer_discretization": "exact",  # the default with a detection observer
         "reaction": "compliant",
     }
     tr = Trace.load(next(out.glob("link_collision_*.npz")))
     setting = tr.meta["setting"]
     assert (setting["threshold"], setting["observer_gain"], setting["detection_observer_gain"]) == (9.0, 10.0, 40.0)
-    assert setting["reaction"] == "compliant"
+    assert setting["reaction"] == "compliant" and setting["observer_discretization"] == "exact"
     assert set(tr.mode) >= {"compliant"} and "gravity_compensation" not in set(tr.mode)
     event = row["event"]
     assert event["contact_class"] == "link" and event["detected_s"] == row["detection_s"]

@@ -207,6 +207,14 @@ def add_detection_options(
         help="k_o of a second observer used for detection only [1/s] (default: none, the first one detects)",
     )
     g.add_argument(
+        "--observer-discretization",
+        choices=("euler", "exact"),
+        default=None,
+        help="the observers' discretization: euler (the paper's, needs k_o dt < 1) or exact (the first-order "
+        "filter's exact form, stable at any gain; what 'tune-thresholds --detection-gains' tunes) (default: exact "
+        "with --detection-observer-gain, else euler)",
+    )
+    g.add_argument(
         "--reaction",
         choices=REACTION_CHOICES,
         default=reaction,
@@ -225,6 +233,7 @@ class DetectionChoice:
     reaction: str
     source: str
     tuned_gain: float | None = None  # the detecting k_o a thresholds.json was tuned for
+    observer_discretization: str = "euler"
 
     def label(self) -> str:
         """One line for the console."""
@@ -235,6 +244,8 @@ class DetectionChoice:
         gains = "" if self.observer_gain is None else f", k_o = {self.observer_gain:g} 1/s"
         if self.detection_observer_gain is not None:
             gains += f", detection k_o = {self.detection_observer_gain:g} 1/s"
+        if self.observer_discretization != "euler":
+            gains += f" ({self.observer_discretization} observers)"
         src = "" if self.source == "command line" else f" (from {self.source})"
         return f"zeta = {zeta}{src}{gains}, reaction {self.reaction}"
 
@@ -245,6 +256,7 @@ class DetectionChoice:
             "threshold_source": self.source,
             "observer_gain_per_s": self.observer_gain,
             "detection_observer_gain_per_s": self.detection_observer_gain,
+            "observer_discretization": self.observer_discretization,
             "reaction": self.reaction,
         }
 
@@ -349,7 +361,11 @@ def detection_choice(args: argparse.Namespace, robot: RobotModel) -> DetectionCh
     """
     running = args.detection_observer_gain if args.detection_observer_gain is not None else args.observer_gain
     zeta, source, tuned = read_threshold(args.threshold, robot, running)
+    discretization = getattr(args, "observer_discretization", None)
+    if discretization is None:
+        discretization = "exact" if args.detection_observer_gain is not None else "euler"
     return DetectionChoice(
+        observer_discretization=discretization,
         threshold=zeta,
         observer_gain=_gain(args.observer_gain, "--observer-gain"),
         detection_observer_gain=_gain(args.detection_observer_gain, "--detection-observer-gain"),

@@ -173,6 +173,7 @@ def _detecting(setting: Any, detection: DetectionChoice) -> Any:
         observer_gain=setting.observer_gain if detection.observer_gain is None else detection.observer_gain,
         detection_observer_gain=detection.detection_observer_gain,
         reaction=detection.reaction,
+        observer_discretization=detection.observer_discretization,
     )
 
 

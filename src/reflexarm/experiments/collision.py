@@ -110,7 +110,8 @@ class CollisionSetting:
     """One run of Fig. 8: joint stiffness k_i [Nm/rad], observer gain k_o [1/s], threshold zeta [Nm], one
     level or one per joint (None: detection off), the reaction (a name of ``Controller(reaction=...)``:
     "gravity" = (13), "compliant", "none", ...) and, optionally, the gain of a second observer that detects
-    (``detection_observer_gain`` [1/s], None: the first observer detects)."""
+    (``detection_observer_gain`` [1/s], None: the first observer detects), and the observers' discretization
+    (``"euler"``, the paper's, or ``"exact"``, stable at any gain)."""
 
     name: str
     stiffness: float
@@ -119,6 +120,7 @@ class CollisionSetting:
     reaction: str = "gravity"
     damping_ratio: float = 0.7
     detection_observer_gain: float | None = None
+    observer_discretization: str = "euler"
 
     def controller(self, robot: RobotModel) -> Controller:
         """This setting's controller on the model ``robot`` (the controller's model, not the plant's)."""
@@ -130,6 +132,7 @@ class CollisionSetting:
             detection_observer_gain=self.detection_observer_gain,
             threshold=self.threshold,
             reaction=self.reaction,
+            observer_discretization=self.observer_discretization,
         )
 
 

@@ -36,7 +36,7 @@ import numpy as np
 from reflexarm.control import Controller
 from reflexarm.experiments.collision import CollisionSetting, controller_model, free_motion_trajectory
 from reflexarm.experiments.reaction_study import STUDY_ARMS, StudyArm, study_arm
-from reflexarm.robots import CoulombViscousFriction, RobotModel
+from reflexarm.robots import CoulombViscousFriction
 from reflexarm.sim import PAPER_NOISE, Plant, Trace
 from reflexarm.tuning import DEFAULT_DETECTION_GAINS, ObserverSettings, ResidualReplay, refilter
 
@@ -64,18 +64,6 @@ class DetectionSetting(CollisionSetting):
     ``observer_discretization`` (default "exact", stable at any gain)."""
 
     observer_discretization: str = "exact"
-
-    def controller(self, robot: RobotModel) -> Controller:
-        return Controller(
-            robot,
-            stiffness=self.stiffness,
-            damping_ratio=self.damping_ratio,
-            observer_gain=self.observer_gain,
-            detection_observer_gain=self.detection_observer_gain,
-            threshold=self.threshold,
-            reaction=self.reaction,
-            observer_discretization=self.observer_discretization,
-        )
 
 
 def _plant(arm: StudyArm, seed: int, scene: Any = None) -> Plant:
