@@ -86,7 +86,17 @@ class Oracle:
       every reaction's law (13 included) adds K (clip(q, safe range) - q) and, above a joint's velocity limit,
       -(M dq)_i / brake_time x (1 - v_lim_i / |dq_i|);
     * classification: with kappa_ext = 0, |wrist force| > contact_level at detection is a "contact"
-      (contact_reaction), else a "collision" (reaction).
+      (contact_reaction), else a "collision" (reaction);
+    * isolation (with geometry, of a collision): the plain Python ContactIsolator on the residual and posture of the
+      tick ``isolation_delay`` after detection (the detecting tick for 0), its result applied ``isolation_ticks``
+      accepted ticks later (the estimate's t_estimated), and the retract then planned from it: the real-time tick
+      spreads the fit over the ticks (``ReactionSettings.isolation_points_per_tick``). The rule, from the
+      geometry: the candidate links are the most distal joint with |r_j| > significance_j and every later one;
+      each candidate point is fitted twice (pass 1, the gram J_p W W J_p^T and J_p W W r; pass 2, the constrained
+      fit), one unit each, a candidate link without geometry is one unit (the wrench fit); the tick that begins
+      does no unit, each following tick at most points_per_tick units, so the estimate is in
+      ceil(units / points_per_tick) ticks after the beginning (on that tick if there are no units);
+    * the tick whose isolation comes in does not advance the reaction (brake / retract timing) that tick.
     """
 
     robot: RobotModel
@@ -169,6 +179,8 @@ class Oracle:
         self.eps_w = float(self.kappa_eps)
         self.dq_f: np.ndarray | None = None  # the guard's low-passed dq and M(q) dq
         self.p_f = np.zeros(self.n)
+        self.isolating: tuple[Any, int] | None = None  # (estimate, ticks until it is in) of an isolation under way
+        self.t_estimate = self.t_estimated = math.nan
 
     def set_switches(self, kappa_eps: int) -> None:
         self.kappa_eps = kappa_eps
@@ -412,7 +424,7 @@ class Oracle:
         self.estimate = None
         self.awaiting = self.isolator is not None and not measured
         if self.awaiting and self.settings.isolation_delay <= 0.0:
-            self.estimate, self.awaiting = self.isolator.isolate(q, r), False
+            self.begin_isolation(t, q, r)
         self.event = ev = {
             "detected": True, "t_detect": t, "joints": over.copy(), "distal_joint": int(np.flatnonzero(over)[-1]),
             "contact_class": "contact" if measured else "collision", "reaction": reaction, "phase": "none",
@@ -442,6 +454,33 @@ class Oracle:
             self.eps_before = self.kappa_eps
             self.set_switches(0)
         self.reacted = reaction != "none"
+
+    def isolation_ticks(self, r: np.ndarray) -> int:
+        """Ticks after its beginning on which the isolation of residual r is in (the class docstring's rule)."""
+        significant = np.flatnonzero(np.abs(r) > self.isolation_share * self.threshold)
+        if significant.size == 0:
+            return 0
+        counts = self.geometry.point_counts()[significant[-1] :]  # type: ignore[attr-defined]
+        units = int(np.sum(np.where(counts > 0, 2 * counts, 1)))
+        return -(-units // self.settings.isolation_points_per_tick)
+
+    def begin_isolation(self, t, q, r) -> bool:
+        """Isolate (q, r) of this tick; the estimate is in after isolation_ticks. True if it is in now."""
+        assert self.isolator is not None
+        self.t_estimate = t
+        self.isolating = (self.isolator.isolate(q, r.copy()), self.isolation_ticks(r))
+        return self.step_isolation(t, count=False)
+
+    def step_isolation(self, t, count: bool = True) -> bool:
+        """One tick of the isolation under way; True (and the estimate in) when its ticks ran out."""
+        assert self.isolating is not None
+        estimate, left = self.isolating
+        left -= int(count)
+        if left > 0:
+            self.isolating = (estimate, left)
+            return False
+        self.estimate, self.awaiting, self.isolating, self.t_estimated = estimate, False, None, t
+        return True
 
     def retract_direction(self, q, wrench, measured) -> tuple[np.ndarray, np.ndarray]:
         """(d, J): the joint direction and the translational Jacobian (rows in any frame: only |J d| is used) of
@@ -494,8 +533,12 @@ class Oracle:
         """A tick after the detecting one: phase changes, then the record (peak, motion, re-contacts, guard)."""
         ev, rs, zeta = self.event, self.settings, self.threshold
         assert ev is not None and zeta is not None
-        if self.awaiting and t - ev["t_detect"] >= rs.isolation_delay - 1e-12:
-            self.estimate, self.awaiting = self.isolator.isolate(q, self.r_det().copy()), False
+        isolated = False  # the isolation's estimate is in on this tick
+        if self.isolating is not None:
+            isolated = self.step_isolation(t)
+        elif self.awaiting and t - ev["t_detect"] >= rs.isolation_delay - 1e-12:
+            isolated = self.begin_isolation(t, q, self.r_det())
+        if isolated:
             if self.reacted and ev["reaction"] == "retract":
                 self.plan_retract(q, np.zeros(6), False)
                 ev["phase"], self.t_phase, self.q_from = "retracting", t, q.copy()
@@ -547,7 +590,8 @@ def core_controller(core: Any, robot: RobotModel, o: Oracle, dt: float = DT, **c
     p.observer_discretization = o.discretization
     rp = core.ReactionParams()
     for f in fields(o.settings):
-        setattr(rp, f.name, float(changes.get(f.name, getattr(o.settings, f.name))))
+        value = changes.get(f.name, getattr(o.settings, f.name))
+        setattr(rp, f.name, int(value) if f.name == "isolation_points_per_tick" else float(value))
     p.reaction_params = rp
     p.kappa_f, p.kappa_eps, p.kappa_ext = o.kappa_f, o.kappa_eps, o.kappa_ext
     p.residual_limit, p.switch_time, p.dt = o.residual_limit, o.switch_time, dt

@@ -302,8 +302,9 @@ def panda_contact():
 @pytest.mark.parametrize("reaction", ["retract", "brake"])
 def test_tick_isolation_and_retract_equal_the_plain_isolator(panda_contact, reaction):
     """A static arm at the contact's posture; from tick 100 the contact's J_c^T f appears (tau_m = g - J_c^T f). The
-    Controller isolates it in the tick (C++ ContactIsolator): link, point and force equal the plain Python
-    ContactIsolator on the same residual and geometry (the oracle's), every tick equals the oracle (retract: the
+    Controller isolates it in the ticks (C++ ContactIsolator, begun isolation_delay after detection, spread over
+    the ticks, in on the tick the oracle computes from the point counts): link, point and force equal the plain
+    Python ContactIsolator on the same residual and geometry (the oracle's), every tick equals the oracle (retract: the
     estimated point moved along the estimated force), and the estimate is the truth's: same link, point within
     the candidate spacing, force along the true one (a step through the exact first-order observer scales J_c^T f
     without turning it)."""
@@ -326,8 +327,13 @@ def test_tick_isolation_and_retract_equal_the_plain_isolator(panda_contact, reac
         residuals[args[0]] = ctrl.detection_residual.copy()
     event = ctrl.event
     assert event is not None and event.estimate is not None and event.contact_class == "collision"
-    # isolated from the detection residual isolation_delay (20 ms) after detection
+    # isolated from the detection residual isolation_delay (20 ms) after detection, spread over the ticks: the
+    # estimate in (and the retract planned) on the tick the oracle's rule gives from the candidate point counts
     assert event.t_estimate == pytest.approx(event.t_detect + settings.isolation_delay, abs=0.5 * DT)
+    spread = o.isolation_ticks(residuals[event.t_estimate])
+    assert spread > 1  # the default budget spreads the Panda's distal links over several ticks
+    assert event.t_estimated == pytest.approx(event.t_estimate + spread * DT, abs=0.5 * DT)
+    assert (event.t_estimate, event.t_estimated) == (o.t_estimate, o.t_estimated)
     plain = ContactIsolator(robot, significance=0.25 * 11.0, geometry=geometry).isolate(
         c.q, residuals[event.t_estimate]
     )
@@ -347,3 +353,46 @@ def test_tick_isolation_and_retract_equal_the_plain_isolator(panda_contact, reac
         moved = Jp @ (event.q_target - event.q_detect)
         assert moved @ c.force > 0.8 * np.linalg.norm(moved) * np.linalg.norm(c.force)
         assert abs(np.linalg.norm(moved) - event.retract_planned) < 0.2 * event.retract_planned
+
+
+@pytest.mark.parametrize("points_per_tick", [1, 24, 100000])
+def test_reset_in_the_middle_of_an_isolation_leaves_nothing_behind(panda_contact, points_per_tick):
+    """The contact of the test above, reset() while the isolation is under way (begun, not in), then the same run
+    again: every tick equals a fresh oracle's (the old isolation neither finishes nor shifts the new one), and the
+    budget decides when the estimate comes in (100000: on the tick after it began)."""
+    robot, geometry, c = panda_contact
+    settings = ReactionSettings(brake_duration=0.04, retract_speed=0.5, rest_time=0.1,
+                                isolation_points_per_tick=points_per_tick)  # fmt: skip
+    kw = dict(threshold=11.0, reaction="retract", detection_observer_gain=200.0, discretization="exact",
+              settings=settings, geometry=geometry)  # fmt: skip
+    ctrl = controller_like(robot, Oracle(robot, **kw))
+    g = robot.compute_gravity(c.q)
+    zeros, gravity = np.zeros(robot.n), np.array([0.0, 0.0, -9.81])
+
+    def args(k: int, t0: float) -> tuple:
+        tau_m = g - (c.torque if k >= 100 else 0.0)
+        return (t0 + (k + 1) * DT, c.q, zeros, tau_m, np.zeros(6), gravity, c.q, zeros, zeros)
+
+    for k in range(400):  # up to the tick the isolation began (and no further)
+        a = args(k, 0.0)
+        ctrl.step(Measurement(*a[:6]), Reference(*a[6:]))
+        ev = ctrl.event
+        if ev is not None and ev.t_estimate == a[0]:
+            break
+    assert ev is not None and ev.estimate is None and not np.isnan(ev.t_estimate), "no isolation under way"
+    ctrl.reset()
+    assert ctrl.event is None
+    o = Oracle(robot, **kw)
+    for k in range(400):
+        a = args(k, 1.0)
+        want = o.step(*a)
+        cmd = ctrl.step(Measurement(*a[:6]), Reference(*a[6:]))
+        compare(k, want, cmd, ctrl, o)
+    event = ctrl.event
+    assert event is not None and event.t_estimate == o.t_estimate
+    if points_per_tick == 1:  # thousands of units: still under way after 400 ticks, like the oracle's
+        assert event.estimate is None and np.isnan(event.t_estimated) and np.isnan(o.t_estimated)
+        return
+    assert event.estimate is not None and event.estimate.link == c.link and event.t_estimated == o.t_estimated
+    if points_per_tick == 100000:
+        assert event.t_estimated == pytest.approx(event.t_estimate + DT, abs=0.5 * DT)

@@ -410,3 +410,21 @@ def test_reaction_limits_and_shortened_retract_equal_oracle(atlas, reaction):
     assert ctrl.event["reaction"] == reaction and sum(active) > 50
     if reaction == "retract":  # the 0.1 s floor of the plan (retract_speed 0.5 m/s) became 0.05 s: half the way
         assert np.isfinite(ctrl.event["retract_planned"]) and ctrl.event["retract_planned"] < settings.retract_distance
+
+
+def test_reaction_params_defaults_equal_reaction_settings():
+    """The core's ReactionParams defaults are ReactionSettings' (the C++ user gets the Python user's reactions, the
+    isolation's points per tick included), and to_core carries every field, the integer one as an integer."""
+    from dataclasses import fields
+
+    from reflexarm.errors import ConfigError
+
+    settings, params = ReactionSettings(), core.ReactionParams()
+    assert {f.name: getattr(params, f.name) for f in fields(settings)} == {
+        f.name: getattr(settings, f.name) for f in fields(settings)
+    }
+    changed = ReactionSettings(isolation_points_per_tick=3, isolation_delay=0.01).to_core(core)
+    assert (changed.isolation_points_per_tick, changed.isolation_delay) == (3, 0.01)
+    for bad in (0, 2.5, True):
+        with pytest.raises(ConfigError, match=f"isolation_points_per_tick must be an integer >= 1; got {bad!r}"):
+            ReactionSettings(isolation_points_per_tick=bad)

@@ -218,3 +218,50 @@ def test_bad_configuration(arms):
         core.ContactIsolator(text, pts, nrm, np.r_[sig[:6], 0.0], 0.0, 0.05, 0.5, 8)
     with pytest.raises(ValueError, match=r"friction_coefficient must be a finite number >= 0"):
         core.ContactIsolator(text, pts, nrm, sig, 0.0, 0.05, np.nan, 8)
+
+
+# ------------------------------------------------------------------ the isolation spread over the ticks
+#: Point budgets per step: one point, the real-time default's order, and steps that cross links.
+BUDGETS = (1, 8, 157)
+#: Contacts per arm (each at every budget).
+STEPPED_CONTACTS = 300
+
+
+def _bits(value: object) -> object:
+    """A value of the core's estimate dict in a form that compares bit for bit (NaN and -0.0 included)."""
+    if value is None or isinstance(value, (bool, int, str)):
+        return value
+    return np.asarray(value, dtype=np.float64).tobytes()
+
+
+@pytest.mark.parametrize("name", ARMS)
+def test_isolation_in_steps_equals_one_shot_bitwise(arms, name):
+    """The real-time tick's form of the isolation (begin, step(budget) until done, finish) returns isolate()'s
+    estimate bit for bit, in ceil(work / budget) steps, work = 2 per candidate point (pass 1 and pass 2) + 1 per
+    candidate link without geometry (the candidates: the most distal joint above its significance and every later
+    one), on a few hundred seeded contacts per arm, exact and noisy residuals (Atlas: a link without geometry)."""
+    robot = _arm(arms, name)
+    geometry = link_collision_geometry(robot, spacing=SPACING)
+    truth = link_collision_geometry(robot, spacing=0.004, seed=3)
+    significance = NOISY_SIGNIFICANCE
+    raw = CoreContactIsolator(robot, significance=significance, geometry=geometry, fit_tolerance=NOISY_FIT_TOLERANCE)
+    iso = raw._core  # the bound reflexarm._core.ContactIsolator
+    counts = geometry.point_counts()
+    rng = np.random.default_rng(11)
+    steps_seen = set()
+    for i, c in enumerate(draw_contacts(robot, truth, STEPPED_CONTACTS, seed=31)):
+        q = np.ascontiguousarray(c.q, dtype=np.float64)
+        r = np.ascontiguousarray(c.torque + (rng.normal(0.0, NOISE, robot.n) if i % 2 else 0.0))
+        one = {k: _bits(v) for k, v in iso.isolate(q, r).items()}
+        significant = np.flatnonzero(np.abs(r) > significance)
+        tail = counts[significant[-1] :] if significant.size else counts[:0]
+        work = int(np.sum(np.where(tail > 0, 2 * tail, 1)))
+        for budget in BUDGETS:
+            spread = iso.isolate_in_steps(q, r, budget)
+            assert (spread.pop("work"), spread.pop("steps")) == (work, -(-work // budget)), f"{name} contact {i}"
+            bad = [k for k, v in spread.items() if _bits(v) != one[k]]
+            assert not bad and set(spread) == set(one), f"{name} contact {i}, budget {budget}: {bad} differ"
+            steps_seen.add(-(-work // budget))
+    assert max(steps_seen) > 100  # the comparison covered isolations spread over many steps
+    with pytest.raises(ValueError, match="point_budget must be >= 1; got 0"):
+        iso.isolate_in_steps(q, r, 0)

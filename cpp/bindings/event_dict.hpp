@@ -34,6 +34,7 @@ namespace reflexarm_bindings
     d["estimate"] = e.estimated ? nb::object(estimateDict(e.estimate)) : nb::none();
     d["estimate_from_sensor"] = e.from_sensor;
     d["t_estimate"] = e.t_estimate;
+    d["t_estimated"] = e.t_estimated;
     d["wrist_force"] = e.wrist_force;
     d["peak_residual"] = e.peak_residual;
     d["energy_detect"] = e.energy_detect;

@@ -181,37 +181,31 @@ namespace reflexarm
     return wrench_r_.norm();
   }
 
-  void ContactIsolator::fitLink(int link) noexcept
+  // J_p^T W of the point at d = p - o: row c is (J_v,c + J_w,c x d) w_c
+  void ContactIsolator::pointJacobianT(const Jac & J, const Eigen::Vector3d & d) noexcept
+  {
+    for (int c = 0; c < n_; ++c)
+    {
+      const Eigen::Vector3d jv = J.col(c).head<3>(), jw = J.col(c).tail<3>();
+      jpt_.row(c) = ((jv + jw.cross(d)) * weights_[c]).transpose();
+    }
+  }
+
+  void ContactIsolator::gramRange(int link, Eigen::Index begin, Eigen::Index end) noexcept
   {
     LinkBuffers & L = links_[static_cast<size_t>(link)];
-    const Eigen::Index m = L.points_local.rows();
-    if (m == 0)
-    {
-      L.best = -1;
-      L.best_error = wrenchError(link);
-      return;
-    }
     const Eigen::Matrix3d & R = L.rotation;
     const Eigen::Vector3d & o = L.origin;
     const Jac & J = L.jacobian;
     const Eigen::VectorXd & r = weighted_residual_;
-    const Eigen::VectorXd & w = weights_;
-
-    auto pointJacobianT = [&](const Eigen::Vector3d & d) {
-      for (int c = 0; c < n_; ++c)
-      {
-        const Eigen::Vector3d jv = J.col(c).head<3>(), jw = J.col(c).tail<3>();
-        jpt_.row(c) = ((jv + jw.cross(d)) * w[c]).transpose();
-      }
-    };
 
     // pass 1: A = J_p W W J_p^T and b = J_p W W r per point, and the largest trace (the edges' floor)
-    double max_trace = -kInf;
-    for (Eigen::Index i = 0; i < m; ++i)
+    double max_trace = L.max_trace;
+    for (Eigen::Index i = begin; i < end; ++i)
     {
       const Eigen::Vector3d d = R * L.points_local.row(i).transpose(); // p - o
       L.points.row(i) = (d + o).transpose();
-      pointJacobianT(d);
+      pointJacobianT(J, d);
       auto g = L.gram.row(i);
       for (int a = 0; a < 3; ++a)
       {
@@ -229,13 +223,22 @@ namespace reflexarm
       }
       max_trace = std::max(max_trace, g[0] + g[4] + g[8]);
     }
-    const double floor = kEdgeFloor * std::max(max_trace, kTiny);
+    L.max_trace = max_trace;
+  }
+
+  void ContactIsolator::fitRange(int link, Eigen::Index begin, Eigen::Index end) noexcept
+  {
+    LinkBuffers & L = links_[static_cast<size_t>(link)];
+    const Eigen::Matrix3d & R = L.rotation;
+    const Jac & J = L.jacobian;
+    const Eigen::VectorXd & r = weighted_residual_;
 
     // pass 2: the constrained fit per point (interior, facets, edges, apex), then its error
     const int K = K_;
-    int best = 0;
-    double best_error = kInf;
-    for (Eigen::Index i = 0; i < m; ++i)
+    const double floor = L.floor;
+    int best = L.best;
+    double best_error = L.best_error;
+    for (Eigen::Index i = begin; i < end; ++i)
     {
       const auto g = L.gram.row(i);
       Eigen::Matrix3d A;
@@ -327,7 +330,7 @@ namespace reflexarm
       L.forces.row(i) = f.transpose();
       // error |W (J_p^T f - r)|
       const Eigen::Vector3d d = R * L.points_local.row(i).transpose();
-      pointJacobianT(d);
+      pointJacobianT(J, d);
       double e2 = 0.0;
       for (int c = 0; c < n_; ++c)
       {
@@ -342,7 +345,7 @@ namespace reflexarm
       }
     }
     L.best = best;
-    L.best_error = L.errors[best];
+    L.best_error = best_error;
   }
 
   void ContactIsolator::estimateLink(int link, double tolerance, ContactEstimateData & out) noexcept
@@ -437,11 +440,30 @@ namespace reflexarm
     const Eigen::Ref<const Eigen::VectorXd> & residual,
     ContactEstimateData & out) noexcept
   {
-    out = ContactEstimateData();
-    out.fit_error = kNaN;
-    out.point_spread = kNaN;
+    begin(q, residual);
+    step(std::numeric_limits<int>::max());
+    return finish(out);
+  }
+
+  void ContactIsolator::cancel() noexcept
+  {
+    active_ = valid_ = false;
+    first_ = -1;
+    ratio_ = 0.0;
+    work_total_ = work_done_ = 0;
+    cur_link_ = 0;
+    cur_pass_ = 1;
+    cur_point_ = 0;
+  }
+
+  bool ContactIsolator::begin(
+    const Eigen::Ref<const Eigen::VectorXd> & q, const Eigen::Ref<const Eigen::VectorXd> & residual) noexcept
+  {
+    cancel();
+    active_ = true;
     if (n_ == 0 || q.size() != n_ || residual.size() != n_ || !q.allFinite() || !residual.allFinite())
       return false;
+    valid_ = true;
     residual_ = residual;
     int last = -1;
     double ratio = 0.0;
@@ -452,15 +474,10 @@ namespace reflexarm
         last = j;
       ratio = std::max(ratio, a / significance_[j]);
     }
-    out.max_significance_ratio = ratio;
+    ratio_ = ratio;
+    first_ = last;
     if (last < 0)
-    {
-      out.determined = Determined::None;
-      out.cause = IsolationCause::NoSignificantJoint;
       return true;
-    }
-    out.first_candidate = last;
-    out.candidate_count = n_ - last;
     weighted_residual_ = weights_.cwiseProduct(residual);
 
     pinocchio::computeJointJacobians(model_, data_, q);
@@ -472,8 +489,82 @@ namespace reflexarm
       L.origin = data_.oMi[jid].translation();
       L.jacobian.setZero();
       pinocchio::getJointJacobian(model_, data_, jid, pinocchio::LOCAL_WORLD_ALIGNED, L.jacobian);
-      fitLink(link);
+      L.max_trace = -kInf;
+      L.floor = 0.0;
+      L.best = 0;
+      L.best_error = kInf;
+      const Eigen::Index m = L.points_local.rows();
+      work_total_ += m > 0 ? static_cast<int>(2 * m) : 1;
     }
+    cur_link_ = last;
+    return true;
+  }
+
+  bool ContactIsolator::step(int point_budget) noexcept
+  {
+    long budget = std::max(point_budget, 1);
+    while (work_done_ < work_total_ && budget > 0)
+    {
+      const int link = cur_link_;
+      LinkBuffers & L = links_[static_cast<size_t>(link)];
+      const Eigen::Index m = L.points_local.rows();
+      if (m == 0) // no geometry: the best wrench at the link origin (one unit)
+      {
+        L.best = -1;
+        L.best_error = wrenchError(link);
+        ++work_done_;
+        --budget;
+        ++cur_link_;
+        continue;
+      }
+      const Eigen::Index end = std::min<Eigen::Index>(m, cur_point_ + budget);
+      if (cur_pass_ == 1)
+        gramRange(link, cur_point_, end);
+      else
+        fitRange(link, cur_point_, end);
+      work_done_ += static_cast<int>(end - cur_point_);
+      budget -= end - cur_point_;
+      cur_point_ = end;
+      if (cur_point_ < m)
+        continue;
+      cur_point_ = 0;
+      if (cur_pass_ == 1) // the edges' floor from the largest trace of the link's points
+      {
+        L.floor = kEdgeFloor * std::max(L.max_trace, kTiny);
+        cur_pass_ = 2;
+      }
+      else
+      {
+        L.best_error = L.errors[L.best];
+        cur_pass_ = 1;
+        ++cur_link_;
+      }
+    }
+    return work_done_ >= work_total_;
+  }
+
+  bool ContactIsolator::finish(ContactEstimateData & out) noexcept
+  {
+    out = ContactEstimateData();
+    out.fit_error = kNaN;
+    out.point_spread = kNaN;
+    if (!valid_)
+    {
+      cancel();
+      return false;
+    }
+    step(std::numeric_limits<int>::max()); // the work left, if any
+    active_ = false;
+    out.max_significance_ratio = ratio_;
+    const int last = first_;
+    if (last < 0)
+    {
+      out.determined = Determined::None;
+      out.cause = IsolationCause::NoSignificantJoint;
+      return true;
+    }
+    out.first_candidate = last;
+    out.candidate_count = n_ - last;
     const double tol = params_.fit_tolerance + params_.relative_tolerance * weighted_residual_.norm();
     double best = kInf;
     for (int link = last; link < n_; ++link)

@@ -109,8 +109,10 @@ namespace reflexarm
     e.contact_class =
       (!kappa_ext_ && e.wrist_force > rp.contact_level) ? ContactClass::Contact : ContactClass::Collision;
     e.reaction = e.contact_class == ContactClass::Contact ? params_.contact_reaction : params_.reaction;
-    if (e.contact_class == ContactClass::Contact || rp.isolation_delay <= 0.0)
-      estimateContact(s, e.residual); // the sensor's measurement; or isolation at once
+    if (e.contact_class == ContactClass::Contact)
+      estimateContact(s); // the sensor's measurement
+    else if (has_isolator_ && rp.isolation_delay <= 0.0)
+      beginIsolation(t, s, e.residual); // the isolation begins at once (done at once only if it has no work)
     e.energy_detect = kineticEnergy();
     e.energy_max = e.energy_detect;
     double peak = 0.0;
@@ -265,17 +267,49 @@ namespace reflexarm
   }
 
   // Where and how hard: the wrist sensor's measurement for a measured contact, else the isolation of the residual
-  // at detection (when the controller has the links' geometry).
+  // isolation_delay after detection (when the controller has the links' geometry), spread over the ticks.
   bool Controller::awaitingIsolation() const noexcept
   {
     return has_isolator_ && !event_.estimated && event_.contact_class == ContactClass::Collision;
   }
 
-  void Controller::estimateContact(const State & s, const Eigen::VectorXd & residual) noexcept
+  // The isolation of a collision, spread over the ticks (ContactIsolator::begin / step / finish, the same result
+  // bit for bit as one isolate()): begun on this tick from its residual and posture (kinematics and candidate
+  // links only), then isolation_points_per_tick candidate points per following accepted tick (stepIsolation), the
+  // estimate in on the tick the work runs out. True if it is in already (no work: nothing significant).
+  bool Controller::beginIsolation(double t, const State & s, const Eigen::VectorXd & residual) noexcept
+  {
+    CollisionEvent & e = event_;
+    isolator_.begin(s.q, residual);
+    e.isolating = true;
+    e.t_estimate = t; // the residual it uses
+    if (isolator_.workLeft() > 0)
+      return false;
+    finishIsolation(t);
+    return true;
+  }
+
+  bool Controller::stepIsolation(double t) noexcept
+  {
+    if (!isolator_.step(std::max(1, params_.reaction_params.isolation_points_per_tick)))
+      return false;
+    finishIsolation(t);
+    return true;
+  }
+
+  void Controller::finishIsolation(double t) noexcept
+  {
+    CollisionEvent & e = event_;
+    e.estimated = isolator_.finish(e.estimate);
+    e.isolating = false;
+    e.t_estimated = t;
+  }
+
+  void Controller::estimateContact(const State & s) noexcept
   {
     CollisionEvent & e = event_;
     ContactEstimateData & est = e.estimate;
-    if (e.contact_class == ContactClass::Contact)
+    if (e.contact_class == ContactClass::Contact) // always: the caller's condition
     {
       q_buf_ = s.q;
       pinocchio::forwardKinematics(model_, data_r_, q_buf_);
@@ -295,11 +329,6 @@ namespace reflexarm
       est.first_candidate = est.link;
       est.candidate_count = 1;
       e.estimated = e.from_sensor = true;
-    }
-    else if (has_isolator_)
-    {
-      e.estimated = isolator_.isolate(s.q, residual, est);
-      e.t_estimate = last_t_;
     }
   }
 
@@ -409,10 +438,14 @@ namespace reflexarm
   {
     CollisionEvent & e = event_;
     const ReactionParams & rp = params_.reaction_params;
-    if (awaitingIsolation() && t - e.t_detect >= rp.isolation_delay - 1e-12)
-    {
+    bool isolated = false; // the isolation's estimate came in on this tick
+    if (e.isolating)
+      isolated = stepIsolation(t);
+    else if (awaitingIsolation() && t - e.t_detect >= rp.isolation_delay - 1e-12)
       // the residual isolation_delay after detection: grown from the threshold towards the contact's J^T f
-      estimateContact(s, detectionResidual());
+      isolated = beginIsolation(t, s, detectionResidual());
+    if (isolated)
+    {
       if (reacted_ && e.reaction == Reaction::Retract) // the brake so far; now the retract from the estimate
       {
         planRetract(s);

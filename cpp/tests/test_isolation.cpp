@@ -1,4 +1,5 @@
-// C++ tests of reflexarm::ContactIsolator: no heap allocation inside isolate(), a contact at a candidate point of
+// C++ tests of reflexarm::ContactIsolator: no heap allocation inside isolate() nor begin/step/finish, the stepped
+// isolation bitwise equal to isolate() for any budget, a contact at a candidate point of
 // a distal link recovered exactly (link, point, force), bad input refused (isolate returns false, configure throws
 // ConfigError). The agreement with the Python ContactIsolator is tests/test_isolation_core.py.
 // Exit code 0 when every check passes; prints "N passed, M failed".
@@ -6,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <new>
 #include <random>
 #include <string>
@@ -168,6 +170,109 @@ namespace
     CHECK(exact >= trials - 2, "%ld of %ld exact contacts recovered (link, point, force)", exact, trials);
   }
 
+  bool sameBits(double a, double b)
+  {
+    return std::memcmp(&a, &b, sizeof a) == 0;
+  }
+
+  bool sameBits(const Eigen::Vector3d & a, const Eigen::Vector3d & b)
+  {
+    return sameBits(a[0], b[0]) && sameBits(a[1], b[1]) && sameBits(a[2], b[2]);
+  }
+
+  /// Every field of two estimates equal bit for bit (NaN of the same bits included).
+  bool sameEstimate(const reflexarm::ContactEstimateData & a, const reflexarm::ContactEstimateData & b)
+  {
+    return a.link == b.link && a.has_point == b.has_point && a.has_force == b.has_force && sameBits(a.point, b.point)
+           && sameBits(a.force, b.force) && sameBits(a.fit_error, b.fit_error) && a.determined == b.determined
+           && a.cause == b.cause && a.first_candidate == b.first_candidate && a.candidate_count == b.candidate_count
+           && a.consistent_points == b.consistent_points && sameBits(a.point_spread, b.point_spread)
+           && sameBits(a.best_fit, b.best_fit) && sameBits(a.tolerance, b.tolerance) && a.link_rank == b.link_rank
+           && a.force_rank == b.force_rank && sameBits(a.force_variation, b.force_variation)
+           && sameBits(a.direction_variation_deg, b.direction_variation_deg)
+           && sameBits(a.max_significance_ratio, b.max_significance_ratio);
+  }
+
+  /// begin / step(budget)... / finish: bit for bit isolate()'s result, in ceil(work / budget) steps of at most
+  /// budget units each, without a heap allocation; links without geometry (one unit) among the candidates; a
+  /// cancel() or a new begin() in the middle leaves nothing behind.
+  void testSteppedEqualsOneShot()
+  {
+    pinocchio::Model model;
+    pinocchio::buildModels::manipulator(model);
+    const int n = static_cast<int>(model.nv);
+    auto surfaces = spheres(n, 97);
+    surfaces[static_cast<size_t>(n - 2)].points.resize(0, 3); // a link without geometry among the candidates
+    surfaces[static_cast<size_t>(n - 2)].normals.resize(0, 3);
+    auto p = params();
+    p.significance = Eigen::VectorXd::Constant(1, 0.5);
+    reflexarm::ContactIsolator iso, stepped;
+    iso.configure(model, surfaces, p);
+    stepped.configure(model, surfaces, p);
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> u(-1.5, 1.5), f(-30.0, 30.0);
+    Eigen::VectorXd q(n), r(n), q2(n), r2(n);
+    reflexarm::ContactEstimateData one, spread;
+    long allocations = 0, equal = 0, trials = 0, steps_right = 0, bounded = 0;
+    const int budgets[] = {1, 7, 16, 32, 97, 194, 1000};
+    for (int k = 0; k < 60; ++k)
+    {
+      for (int j = 0; j < n; ++j)
+      {
+        q[j] = u(rng);
+        r[j] = f(rng) / (1 + (k % 4) * j); // some contacts with few significant joints, some with many
+        q2[j] = u(rng);
+        r2[j] = f(rng);
+      }
+      iso.isolate(q, r, one);
+      for (const int budget : budgets)
+      {
+        g_counting = true;
+        if (k % 5 == 0) // an isolation dropped half-way first: nothing of it stays
+        {
+          stepped.begin(q2, r2);
+          stepped.step(budget);
+          stepped.cancel();
+        }
+        else if (k % 5 == 1) // ... or replaced by a new begin()
+        {
+          stepped.begin(q2, r2);
+          stepped.step(budget);
+        }
+        stepped.begin(q, r);
+        const int total = stepped.workTotal();
+        int steps = 0;
+        bool within = true;
+        for (bool done = total == 0; !done;)
+        {
+          const int before = stepped.workLeft();
+          done = stepped.step(budget);
+          within = within && before - stepped.workLeft() <= budget && before - stepped.workLeft() > 0;
+          ++steps;
+        }
+        const bool ok = stepped.finish(spread);
+        g_counting = false;
+        allocations += g_allocations.exchange(0);
+        ++trials;
+        equal += ok && sameEstimate(one, spread);
+        steps_right += steps == (total + budget - 1) / budget;
+        bounded += within && !stepped.active();
+      }
+    }
+    CHECK(allocations == 0, "%ld heap allocations inside begin / step / finish / cancel", allocations);
+    CHECK(equal == trials, "%ld of %ld stepped isolations bitwise equal to isolate()", equal, trials);
+    CHECK(steps_right == trials, "%ld of %ld took ceil(work / budget) steps", steps_right, trials);
+    CHECK(bounded == trials, "%ld of %ld did at most the budget per step", bounded, trials);
+    // no step at all: finish() does the work; an invalid begin: finish() refuses like isolate()
+    stepped.begin(q, r);
+    CHECK(stepped.finish(spread) && sameEstimate(one, spread), "finish without steps equals isolate()");
+    Eigen::VectorXd bad = r;
+    bad[1] = std::nan("");
+    CHECK(!stepped.begin(q, bad) && !stepped.finish(spread) && spread.determined == reflexarm::Determined::None,
+          "a NaN residual refused by begin and finish");
+    CHECK(!stepped.finish(spread), "finish without begin refuses");
+  }
+
   void testBadInput()
   {
     pinocchio::Model model;
@@ -215,6 +320,7 @@ int main()
   g_counting = false;
   CHECK(g_allocations.exchange(0) > 0, "the allocation counter counted nothing");
   testExactContactAndNoAllocation();
+  testSteppedEqualsOneShot();
   testBadInput();
   std::printf("%d passed, %d failed\n", g_passed, g_failed);
   return g_failed == 0 ? 0 : 1;

@@ -64,12 +64,15 @@ namespace reflexarm
     double t_hold = kNaN;        ///< stamp the reaction started to hold a posture
     Eigen::VectorXd q_target;    ///< posture the reaction holds (brake / compliant) or retracts to [rad]
     double retract_planned = kNaN; ///< retract: how far its plan moves the point it moves [m]
-    /// Where and how hard, at detection: a measured contact from the wrist sensor (its link, the measured force in
-    /// the world frame, the point of its line of action closest to the sensor origin); a collision isolated from the
-    /// residual at detection (ContactIsolator) when the controller has the links' geometry; link -1 otherwise.
+    /// Where and how hard: a measured contact from the wrist sensor at detection (its link, the measured force in the
+    /// world frame, the point of its line of action closest to the sensor origin); a collision isolated from the
+    /// residual isolation_delay after detection (ContactIsolator, spread over the ticks: t_estimate, t_estimated)
+    /// when the controller has the links' geometry; link -1 otherwise.
     ContactEstimateData estimate;
     bool estimated = false;   ///< estimate was computed (false: no geometry given, or not yet)
     double t_estimate = kNaN; ///< stamp of the residual the isolation used (isolation_delay after detection)
+    double t_estimated = kNaN; ///< stamp of the tick the isolation finished (its estimate applied from then on)
+    bool isolating = false;    ///< (internal) an isolation is under way (begun, not finished)
     bool from_sensor = false; ///< estimate is the wrist sensor's (class Contact)
     int recrossings = 0;         ///< detections again after the residual fell below half of every threshold
     bool below_since = false;    ///< (internal) residual below all thresholds since the last crossing
@@ -112,6 +115,8 @@ namespace reflexarm
       estimate = ContactEstimateData{};
       estimated = false;
       t_estimate = kNaN;
+      t_estimated = kNaN;
+      isolating = false;
       from_sensor = false;
       recrossings = 0;
       below_since = false;

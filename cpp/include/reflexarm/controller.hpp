@@ -72,8 +72,9 @@ namespace reflexarm
 
     /// Gives the controller the collision surfaces of its links (one per joint, in the joint frame; zero rows: a
     /// link without geometry): a detected collision the wrist sensor does not measure is then isolated and
-    /// identified at detection, inside update(), with the residual components above significance_share x the
-    /// threshold counting (ContactIsolator). Call after configure() (allocates; throws ConfigError).
+    /// identified inside update(), with the residual components above significance_share x the
+    /// threshold counting (ContactIsolator), spread over the ticks from isolation_delay after detection on
+    /// (ReactionParams::isolation_points_per_tick). Call after configure() (allocates; throws ConfigError).
     void setContactGeometry(
       const std::vector<LinkSurfaceData> & surfaces, double significance_share, const IsolationParams & params);
     bool hasContactGeometry() const noexcept { return has_isolator_; }
@@ -170,7 +171,10 @@ namespace reflexarm
     // the collision pipeline after detection (reaction.cpp)
     void startReaction(double t, const State & s) noexcept;
     void planRetract(const State & s) noexcept;
-    void estimateContact(const State & s, const Eigen::VectorXd & residual) noexcept;
+    void estimateContact(const State & s) noexcept;
+    bool beginIsolation(double t, const State & s, const Eigen::VectorXd & residual) noexcept;
+    bool stepIsolation(double t) noexcept;
+    void finishIsolation(double t) noexcept;
     bool awaitingIsolation() const noexcept;
     bool retractFromEstimate() noexcept;
     void followEvent(double t, const State & s, int n_over, int n_sat) noexcept;

@@ -5,7 +5,8 @@
 // point of every candidate link is scored by the friction-pyramid constrained least squares
 // min |W (J_p^T f - r)| (interior 3x3, facets 2x2, edges, apex); the most proximal link within the tolerance of
 // the best fit is chosen; what the residual determines follows from the ranks and the consistent set.
-// configure() sizes every buffer once; isolate() allocates nothing and throws nothing.
+// configure() sizes every buffer once; isolate() allocates nothing and throws nothing. begin/step/finish spread the
+// same computation over calls (bounded work per call), with the same result bit for bit.
 #pragma once
 
 #include <vector>
@@ -100,6 +101,40 @@ namespace reflexarm
       const Eigen::Ref<const Eigen::VectorXd> & residual,
       ContactEstimateData & out) noexcept;
 
+    /// The same isolation spread over calls, bounded work per call (the real-time tick's form):
+    ///   begin(q, residual)  the candidate links and their kinematics (one computeJointJacobians), no fit;
+    ///   step(point_budget)  at most point_budget units of the fit, true when none is left;
+    ///   finish(out)         the choice of the link and its estimate (runs any work still left first).
+    /// The work is, per candidate link from the most proximal on, pass 1 (the 3x3 gram J_p W W J_p^T and
+    /// J_p W W r of each point: one unit per point) then pass 2 (the constrained fit of each point and its
+    /// error: one unit per point); a link without geometry is one unit (the wrench fit). A step may go on
+    /// from one link to the next; pass 1's largest trace (the floor of the edges) is kept per link until its
+    /// pass 2, the best point per link across the steps. So work_total() = sum over candidate links of 2 m
+    /// (m >= 1 points) or 1 (no geometry), and the work is done after ceil(work_total() / point_budget) steps.
+    /// begin + step... + finish gives bitwise the result of isolate(), which is begin + step(all) + finish.
+    /// begin() returns false (and finish() writes what isolate() writes for it) on a q or residual of the
+    /// wrong size or a non-finite value. Allocation-free, never throw.
+    bool begin(
+      const Eigen::Ref<const Eigen::VectorXd> & q, const Eigen::Ref<const Eigen::VectorXd> & residual) noexcept;
+    bool step(int point_budget) noexcept;
+    bool finish(ContactEstimateData & out) noexcept;
+    /// Drops an isolation under way (finish() then writes what it writes before any begin()).
+    void cancel() noexcept;
+    /// begin() was called and finish() not yet.
+    bool active() const noexcept
+    {
+      return active_;
+    }
+    /// Units of work of the isolation begun (0: nothing to fit) and units left.
+    int workTotal() const noexcept
+    {
+      return work_total_;
+    }
+    int workLeft() const noexcept
+    {
+      return work_total_ - work_done_;
+    }
+
     int nv() const noexcept
     {
       return n_;
@@ -127,9 +162,15 @@ namespace reflexarm
       Eigen::Vector3d origin;
       int best = -1;
       double best_error = 0.0;
+      double max_trace = 0.0; ///< pass 1's largest trace so far
+      double floor = 0.0;     ///< the edges' floor, from pass 1, for pass 2
     };
 
-    void fitLink(int link) noexcept;
+    void pointJacobianT(const Jac & J, const Eigen::Vector3d & d) noexcept;
+    /// pass 1 over points [begin, end) of a link: world points, gram rows, the largest trace
+    void gramRange(int link, Eigen::Index begin, Eigen::Index end) noexcept;
+    /// pass 2 over points [begin, end): the constrained fit, the errors, the best point so far
+    void fitRange(int link, Eigen::Index begin, Eigen::Index end) noexcept;
     void estimateLink(int link, double tolerance, ContactEstimateData & out) noexcept;
     int linkRank(int link) noexcept;
     double wrenchError(int link) noexcept;
@@ -147,6 +188,13 @@ namespace reflexarm
     Eigen::JacobiSVD<Eigen::MatrixXd> wrench_svd_;
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> link_eig_;
     std::vector<LinkBuffers> links_;
+    // the isolation under way (begin / step / finish)
+    bool active_ = false, valid_ = false;
+    int first_ = -1;          ///< most distal significant joint (-1: none)
+    double ratio_ = 0.0;      ///< max_j |r_j| / significance_j
+    int work_total_ = 0, work_done_ = 0;
+    int cur_link_ = 0, cur_pass_ = 1; ///< where the next step goes on: link, pass (1 or 2), point
+    Eigen::Index cur_point_ = 0;
   };
 
 } // namespace reflexarm

@@ -73,6 +73,12 @@ namespace reflexarm
     /// detection, when the residual has grown from the threshold towards the contact's J^T f (0: at detection);
     /// a retract brakes until then and is planned from the estimate
     double isolation_delay = 0.02;
+    /// The isolation is spread over the ticks: it begins on the tick isolation_delay after detection (the
+    /// residual and posture of that tick; kinematics only) and fits at most this many candidate points per
+    /// following tick (ContactIsolator::step: each point once in pass 1, once in pass 2); the estimate is
+    /// applied on the tick its work runs out (values below 1 count as 1). 8: ~150 ns a point on the bench machine,
+    /// ~0.2 x a plain tick (bench/bench_collision_tick.py); a 2 cm geometry's ~2000 units then take ~0.25 s
+    int isolation_points_per_tick = 8;
   };
 
   /// Plausibility bounds of the inputs (same fields and defaults as reflexarm.control.InputBounds).

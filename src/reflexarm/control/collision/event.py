@@ -55,6 +55,9 @@ class CollisionEvent:
             the wrist sensor's measurement for a measured contact, else the isolation of the residual in the tick
             (when the controller has the links' collision geometry); None without one.
         t_estimate: stamp of the residual the isolation used (``isolation_delay`` after detection) [s].
+        t_estimated: stamp of the tick the isolation finished, its estimate in use from then on (it is spread over
+            the ticks: ``ReactionSettings.isolation_points_per_tick``; = t_estimate if it had no work; NaN, as
+            t_estimate, for the wrist sensor's estimate) [s].
     """
 
     t_detect: float
@@ -82,6 +85,7 @@ class CollisionEvent:
     text: str
     estimate: ContactEstimate | None = None
     t_estimate: float = float("nan")
+    t_estimated: float = float("nan")
 
     @classmethod
     def from_core(
@@ -94,6 +98,7 @@ class CollisionEvent:
             return None
         values = {k: v for k, v in record.items() if k not in ("detected", "estimate", "estimate_from_sensor")}
         values["t_estimate"] = float(record.get("t_estimate", float("nan")))
+        values["t_estimated"] = float(record.get("t_estimated", float("nan")))
         values["estimate"] = _estimate(record, geometry, robot)
         values["joints"] = tuple(int(i) for i in np.flatnonzero(np.asarray(record["joints"])))
         for key in ("residual", "q_detect", "q_target"):

@@ -74,6 +74,14 @@ class ReactionSettings:
         isolation_delay: a collision is isolated from the detection residual this long after detection [s], when the
             residual has grown from the threshold towards the contact's J^T f (0: at detection); a retract brakes
             until then and is planned from the estimate.
+        isolation_points_per_tick: the isolation is spread over the ticks: it begins on the tick
+            ``isolation_delay`` after detection (that tick's residual and posture) and fits at most this many
+            candidate points per following tick (each point twice: the gram of pass 1, the constrained fit of
+            pass 2; a link without geometry counts one), so a link collision is isolated
+            ceil(2 x candidate points / this) ticks after it began (``CollisionEvent.t_estimated``); an integer
+            >= 1. The default keeps a tick's extra work within ~0.2 x a plain tick (~150 ns a unit, 6.6 us a plain
+            tick: bench/bench_collision_tick.py); the 2 cm controller geometry's 1300-2300 units then take
+            ~80-300 ms (Atlas, Panda, iiwa14); a larger budget trades tick time for latency.
     """
 
     brake_time: float = 0.05
@@ -91,10 +99,15 @@ class ReactionSettings:
     contact_level: float = 10.0
     position_margin: float = 0.05
     isolation_delay: float = 0.02
+    isolation_points_per_tick: int = 8
 
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
+            if f.name == "isolation_points_per_tick":
+                if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                    raise ConfigError(f"ReactionSettings.{f.name} must be an integer >= 1; got {value!r}")
+                continue
             ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
             zero_ok = f.name in ("position_margin", "isolation_delay")
             if not ok or value < 0 or (value == 0 and not zero_ok):
@@ -106,5 +119,6 @@ class ReactionSettings:
         """The C++ core's ReactionParams with these values."""
         p = core.ReactionParams()
         for f in fields(self):
-            setattr(p, f.name, float(getattr(self, f.name)))
+            value = getattr(self, f.name)
+            setattr(p, f.name, value if f.name == "isolation_points_per_tick" else float(value))
         return p
