@@ -76,9 +76,11 @@ namespace reflexarm
     /// The isolation is spread over the ticks: it begins on the tick isolation_delay after detection (the
     /// residual and posture of that tick; kinematics only) and fits at most this many candidate points per
     /// following tick (ContactIsolator::step: each point once in pass 1, once in pass 2); the estimate is
-    /// applied on the tick its work runs out (values below 1 count as 1). 8: ~150 ns a point on the bench machine,
-    /// ~0.2 x a plain tick (bench/bench_collision_tick.py); a 2 cm geometry's ~2000 units then take ~0.25 s
-    int isolation_points_per_tick = 8;
+    /// applied on the tick its work runs out (values below 1 count as 1). 32: ~150 ns a unit on the bench machine,
+    /// a step tick ~2 x a plain one (bench/bench_collision_tick.py: 8 units ~1.3 x); a 2 cm geometry's 1300-2300
+    /// units then take 12-74 ms (Atlas, Panda, iiwa14; 48-295 ms at 8), so that a retract waiting for the estimate
+    /// ends within the guard's 0.5 s
+    int isolation_points_per_tick = 32;
   };
 
   /// Plausibility bounds of the inputs (same fields and defaults as reflexarm.control.InputBounds).

@@ -79,9 +79,10 @@ class ReactionSettings:
             candidate points per following tick (each point twice: the gram of pass 1, the constrained fit of
             pass 2; a link without geometry counts one), so a link collision is isolated
             ceil(2 x candidate points / this) ticks after it began (``CollisionEvent.t_estimated``); an integer
-            >= 1. The default keeps a tick's extra work within ~0.2 x a plain tick (~150 ns a unit, 6.6 us a plain
-            tick: bench/bench_collision_tick.py); the 2 cm controller geometry's 1300-2300 units then take
-            ~80-300 ms (Atlas, Panda, iiwa14); a larger budget trades tick time for latency.
+            >= 1. The default, 32, makes a step tick ~2 x a plain one (~150 ns a unit, ~7-9 us a plain tick:
+            bench/bench_collision_tick.py) and the 2 cm controller geometry's 1300-2300 units take 12-74 ms (Atlas,
+            Panda, iiwa14), so that a retract waiting for the estimate ends within the guard's 0.5 s; 8 keeps a
+            step tick at ~1.3 x but takes 48-295 ms.
     """
 
     brake_time: float = 0.05
@@ -99,7 +100,7 @@ class ReactionSettings:
     contact_level: float = 10.0
     position_margin: float = 0.05
     isolation_delay: float = 0.02
-    isolation_points_per_tick: int = 8
+    isolation_points_per_tick: int = 32
 
     def __post_init__(self) -> None:
         for f in fields(self):
