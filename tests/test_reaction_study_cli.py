@@ -99,3 +99,13 @@ def test_the_figure_has_a_bar_per_reaction_and_the_issue_lines():
     heights = sorted(p.get_height() for p in bottom_demo.patches)
     np.testing.assert_allclose(heights, [1.0, 1.0, 2.0, 2.0])  # peak / at detection, per arm and reaction
     np.testing.assert_allclose(sorted(p.get_height() for p in top_link.patches), [0.001, 0.001, 0.002, 0.002])
+
+
+def test_the_cli_defaults_are_the_study_s():
+    # the parser carries copies of the study's names so that building it imports no experiment
+    from reflexarm._cli import reaction_study as cli
+    from reflexarm.experiments import reaction_study as study
+
+    assert (cli.STUDY_ARMS, cli.STUDY_REACTIONS, cli.SCENARIOS) == (
+        study.STUDY_ARMS, study.STUDY_REACTIONS, study.SCENARIOS
+    )  # fmt: skip

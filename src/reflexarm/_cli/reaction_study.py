@@ -28,10 +28,15 @@ COLUMNS = (
 GUARD_WIDTH = 60
 
 
+#: The defaults of reflexarm.experiments.reaction_study (STUDY_ARMS, STUDY_REACTIONS, SCENARIOS), written here so
+#: that building the parser imports no experiment (tests/test_reaction_study_cli.py checks they agree).
+STUDY_ARMS = ("atlas_v5_left_arm", "panda", "iiwa14", "ur_like", "iiwa14_frictionless")
+STUDY_REACTIONS = ("gravity", "brake", "retract", "compliant")
+SCENARIOS = ("demo", "link", "link_held")
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``reaction-study`` to the top-level parser."""
-    from reflexarm.experiments.reaction_study import SCENARIOS, STUDY_ARMS, STUDY_REACTIONS
-
     p = sub.add_parser(
         "reaction-study",
         help="each reaction to a detected collision on several arms: energy, force, motion, re-contact, guard",
@@ -54,7 +59,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--scenarios",
         default=",".join(SCENARIOS),
         metavar="LIST",
-        help="comma-separated scenarios: demo (end-effector contact), link (link push) "
+        help="comma-separated scenarios: demo (end-effector contact), link (the paper's link push: the stick keeps "
+        "coming), link_held (the link runs into a held stick) "
         f"(default {','.join(SCENARIOS)})",
     )
     p.add_argument(
