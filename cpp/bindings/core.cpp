@@ -307,12 +307,9 @@ NB_MODULE(_core, m)
       [](PyController & c, const std::vector<reflexarm_bindings::Rows3> & points,
          const std::vector<reflexarm_bindings::Rows3> & normals, double significance_share, double fit_tolerance,
          double relative_tolerance, double friction_coefficient, int cone_edges) {
-        reflexarm::IsolationParams p;
-        p.fit_tolerance = fit_tolerance;
-        p.relative_tolerance = relative_tolerance;
-        p.friction_coefficient = friction_coefficient;
-        p.cone_edges = cone_edges;
-        c.ctrl.setContactGeometry(reflexarm_bindings::surfacesFrom(points, normals), significance_share, p);
+        c.ctrl.setContactGeometry(
+          reflexarm_bindings::surfacesFrom(points, normals), significance_share,
+          reflexarm_bindings::isolationParams(fit_tolerance, relative_tolerance, friction_coefficient, cone_edges));
       },
       "points"_a, "normals"_a, "significance_share"_a, "fit_tolerance"_a, "relative_tolerance"_a,
       "friction_coefficient"_a, "cone_edges"_a,

@@ -43,6 +43,18 @@ namespace reflexarm_bindings
     return surfaces;
   }
 
+  /// IsolationParams from the Python ContactIsolator's keyword arguments (the significance is set by the caller).
+  inline reflexarm::IsolationParams
+  isolationParams(double fit_tolerance, double relative_tolerance, double friction_coefficient, int cone_edges)
+  {
+    reflexarm::IsolationParams p;
+    p.fit_tolerance = fit_tolerance;
+    p.relative_tolerance = relative_tolerance;
+    p.friction_coefficient = friction_coefficient;
+    p.cone_edges = cone_edges;
+    return p;
+  }
+
   /// The estimate as the dict reflexarm.control.collision.isolate_core reads.
   inline nb::dict estimateDict(const reflexarm::ContactEstimateData & e)
   {

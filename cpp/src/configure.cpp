@@ -158,6 +158,10 @@ namespace reflexarm
       throw ConfigError("ReactionParams.position_margin must be a non-negative number of radians");
     if (!std::isfinite(rp.isolation_delay) || rp.isolation_delay < 0.0)
       throw ConfigError("ReactionParams.isolation_delay must be a non-negative number of seconds");
+    if (rp.isolation_points_per_tick < 1)
+      throw ConfigError(
+        "ReactionParams.isolation_points_per_tick must be a positive integer; got "
+        + std::to_string(rp.isolation_points_per_tick));
     // observer stability at the longest integrated period (the exact form is stable at any gain)
     const double lo = p.period_band_low, hi = p.period_band_high;
     if (!(0.0 < lo && lo <= 1.0 && 1.0 <= hi && hi < kInf))
