@@ -364,3 +364,38 @@ def test_compliant_reaction_drops_compensation_and_reset_restores_it(atlas):
     assert cmds[-1].collision and cmds[-1].mode == "compliant" and ctrl.kappa_eps == 0
     ctrl.reset()
     assert ctrl.kappa_eps == 1 and ctrl.mode == "precise_stiff" and not ctrl.reacted
+
+
+@pytest.mark.parametrize("how", ["copy", "deepcopy"])
+def test_a_copied_controller_has_its_own_state(atlas, how):
+    # issue 20 item 8: copy.copy(controller) shared the C++ core with the original (stepping one stepped both).
+    # A copy is now a controller of its own in the same state: the same commands for the same inputs, and stepping
+    # it leaves the original untouched (fails with the default shallow copy, which shares _core)
+    import copy
+
+    rng = np.random.default_rng(3)
+    ctrl = Controller(atlas, threshold=11.0, reaction="brake", detection_observer_gain=30.0, kappa_eps=1)
+    ref = Reference.hold(atlas.home)
+
+    def measure(k: int) -> Measurement:
+        tau = atlas.compute_gravity(atlas.home) + rng.uniform(-1, 1, atlas.n) + (25.0 if k > 60 else 0.0)
+        return Measurement((k + 1) * 1e-3, atlas.home, rng.uniform(-0.05, 0.05, atlas.n), tau, np.zeros(6),
+                           np.array([0.0, 0.0, -9.81]))  # fmt: skip
+
+    for k in range(100):
+        ctrl.step(measure(k), ref)
+    twin = copy.copy(ctrl) if how == "copy" else copy.deepcopy(ctrl)
+    assert twin._core is not ctrl._core and ctrl.event is not None and twin.event is not None
+    assert twin.event.to_dict() == ctrl.event.to_dict()
+    before = ctrl.observer_state
+    inputs = [measure(k) for k in range(100, 150)]
+    for m in inputs:
+        twin.step(m, ref)
+    np.testing.assert_array_equal(ctrl.observer_state, before)  # the original did not move
+    for m in inputs:
+        ctrl.step(m, ref)
+    last = measure(150)  # both at tick 150 now: the same command from the same state and input
+    a, b = ctrl.step(last, ref), twin.step(last, ref)
+    np.testing.assert_array_equal(a.tau, b.tau)
+    np.testing.assert_array_equal(a.residual, b.residual)
+    assert (a.mode, a.collision) == (b.mode, b.collision) and ctrl.event.to_dict() == twin.event.to_dict()

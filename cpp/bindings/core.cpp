@@ -303,6 +303,15 @@ NB_MODULE(_core, m)
       c.cmd.fault_text[0] = '\0';
     })
     .def(
+      "copy_state_from",
+      [](PyController & self, const PyController & other) {
+        if (other.ctrl.nv() != self.ctrl.nv())
+          throw reflexarm::ConfigError("copy_state_from: the controllers have different numbers of joints");
+        self.ctrl = other.ctrl; // every buffer keeps its size: the numpy views into self stay valid
+        self.cmd = other.cmd;
+      },
+      "other"_a, "Make this controller's whole state (model, parameters, observers, event, command) a copy of other's.")
+    .def(
       "set_contact_geometry",
       [](PyController & c, const std::vector<reflexarm_bindings::Rows3> & points,
          const std::vector<reflexarm_bindings::Rows3> & normals, double significance_share, double fit_tolerance,

@@ -9,6 +9,7 @@ builds the :class:`~reflexarm.signals.Command`.
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -178,6 +179,8 @@ class Controller:
         input_bounds: InputBounds | None = None,
         period_band: tuple[float, float] = (0.5, 2.0),
     ) -> None:
+        # the construction arguments, for copies (copy.copy / deepcopy build a controller of their own)
+        self._init_kwargs = {k: v for k, v in locals().items() if k not in ("self", "robot")}
         self.dt = as_positive_scalar(dt, "dt")
         self.impedance = JointImpedanceController(
             robot,
@@ -274,6 +277,23 @@ class Controller:
             )
         self._core.set_contact_geometry(*contact_geometry_args(geometry, share))
         return geometry
+
+    # ------------------------------------------------------------------ copies
+    def __copy__(self) -> Controller:
+        """An independent controller in the same state: the same settings, the C++ core's whole state copied (a
+        shallow copy would share the core, so that stepping one would step both)."""
+        twin = Controller(self.robot, **self._init_kwargs)
+        twin._core.copy_state_from(self._core)
+        twin.detector = copy.deepcopy(self.detector)
+        if twin.detector is not None:
+            twin.detector.threshold = twin.detector.threshold.copy()
+        twin.impedance.kappa_f = twin.kappa_f
+        twin._mode = self._mode
+        return twin
+
+    def __deepcopy__(self, memo: dict[int, object]) -> Controller:
+        """As :meth:`__copy__` (the copy owns everything: its model, core and detector)."""
+        return self.__copy__()
 
     # ------------------------------------------------------------------ run-time switches and facts
     def set_switches(
