@@ -398,3 +398,55 @@ def test_an_observer_that_needs_every_tick_takes_the_python_loop(robot):
     assert tr.meta["loop"] == "python" and made == [1] and ticks == list(range(10))
     with observing_runs(lambda plant: StillCapture()):
         assert run_fast(Plant(robot), Controller(robot), _GlitchyHold(robot.home), 0.01).meta["loop"] == "compiled"
+
+
+class _HoldMoveHold:
+    """Holds q0, moves to q1 and back between 0.5 s and 2.5 s, and holds q0 again with one and the same Reference
+    object before and after: the compiled loop took it for a hold because the first and the last tick's samples
+    were that object (issue 20 item 4)."""
+
+    def __init__(self, q0, q1):
+        from reflexarm.signals import Reference
+        from reflexarm.sim import JointTrajectory
+
+        self.hold, self.move = Reference.hold(q0), JointTrajectory([q0, q1, q0], [1.0, 1.0], t0=0.5)
+
+    def sample(self, t):
+        return self.hold if t < 0.5 or t >= 2.5 else self.move.sample(t)
+
+
+def test_a_trajectory_that_moves_between_two_holds_is_sampled_each_tick(atlas):
+    from reflexarm.control import Controller
+    from reflexarm.sim import Plant
+    from reflexarm.sim.compiled_loop import run_compiled
+
+    q0 = atlas.home.copy()
+    q1 = q0 + np.r_[0.3, np.zeros(atlas.n - 1)]
+    plant = Plant(atlas)
+    plant.reset(q0)
+    trace = run_compiled(plant, Controller(atlas, threshold=None), _HoldMoveHold(q0, q1), 3.0)
+    k = int(np.searchsorted(trace.t, 1.5))
+    np.testing.assert_allclose(trace.q_d[k], q1, atol=1e-6)  # the turning point (flat to 2nd order: a tick off is ~1e-9)
+    assert trace.q[:, 0].max() - q0[0] > 0.2  # [rad] the arm followed the 0.3 rad excursion, not a hold of q0
+
+
+@pytest.mark.parametrize("size", [1, "short"])
+def test_a_reference_of_the_wrong_size_is_refused_naming_it(atlas, size):
+    from reflexarm.control import Controller
+    from reflexarm.errors import SignalError
+    from reflexarm.signals import Reference
+    from reflexarm.sim import Plant
+    from reflexarm.sim.compiled_loop import run_compiled
+
+    n = 1 if size == 1 else atlas.n - 1
+    ref = Reference.hold(np.full(n, 0.3))
+
+    class Bad:
+        def sample(self, t):
+            return ref
+
+    plant = Plant(atlas)
+    plant.reset(atlas.home)
+    with pytest.raises(SignalError) as e:
+        run_compiled(plant, Controller(atlas, threshold=None), Bad(), 0.1)
+    assert str(e.value) == f"reference q_d must be shape ({atlas.n},); got shape ({n},) (sampled at t = 0 s)"

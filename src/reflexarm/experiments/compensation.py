@@ -184,6 +184,9 @@ class CompensationSetup:
 class HoldReference:
     """A constant joint reference (quasi-static: the paper's "quasi-static movement")."""
 
+    #: the same Reference at every t: the compiled loop takes it once for the whole run
+    is_constant = True
+
     def __init__(self, q: np.ndarray) -> None:
         self.reference = Reference.hold(np.asarray(q, dtype=float))
 

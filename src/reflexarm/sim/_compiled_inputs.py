@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from reflexarm.errors import SignalError
 from reflexarm.sim._plant_sensors import _NOISE_BLOCK
 from reflexarm.sim.plant import Plant
 from reflexarm.sim.runner import TrajectoryLike
@@ -43,10 +44,13 @@ def _sample_reference(
 ) -> None:
     """``trajectory.sample`` at every tick time into the (N, n) arrays.
 
-    Two shapes are evaluated as whole arrays (the per-call cost of ``sample`` is ~5 us, a quarter of a
+    Two kinds are evaluated as whole arrays (the per-call cost of ``sample`` is ~5 us, a quarter of a
     tick's physics): a :class:`JointTrajectory`, with the operations of its sampling kernel in the same
-    order (so the same numbers to the bit), and a trajectory whose ``sample`` returns one and the same
-    Reference object at the first and last tick (a hold). Anything else is sampled tick by tick.
+    order (so the same numbers to the bit), and a trajectory that says it is constant (``is_constant =
+    True``, e.g. ``experiments.compensation.HoldReference``: one Reference for every t). Anything else is sampled
+    tick by tick (a trajectory returning the same object at the first and last tick may still move between).
+    Every sample's q_d, dq_d, ddq_d must have shape (n,) as in the Python loop (a SignalError names the signal and
+    the time otherwise; a (1,) reference is not broadcast to every joint).
     """
     if type(trajectory) is JointTrajectory:
         tr: Any = trajectory
@@ -66,14 +70,26 @@ def _sample_reference(
         dq_d[:] = ds[:, None] * d
         ddq_d[:] = dds[:, None] * d
         return
-    first = trajectory.sample(float(times[0]))
-    if trajectory.sample(float(times[-1])) is first:
-        q_d[:], dq_d[:], ddq_d[:] = first.q_d, first.dq_d, first.ddq_d
+    n = q_d.shape[1]
+    if getattr(trajectory, "is_constant", False) is True:
+        first = _checked(trajectory.sample(float(times[0])), n, float(times[0]))
+        q_d[:], dq_d[:], ddq_d[:] = first
         return
     sample = trajectory.sample
     for k in range(times.size):
-        r = sample(float(times[k]))
-        q_d[k], dq_d[k], ddq_d[k] = r.q_d, r.dq_d, r.ddq_d
+        q_d[k], dq_d[k], ddq_d[k] = _checked(sample(float(times[k])), n, float(times[k]))
+
+
+def _checked(r: Any, n: int, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(q_d, dq_d, ddq_d) of a sampled Reference as (n,) arrays, or a SignalError naming the signal and time."""
+    try:
+        parts = (np.asarray(r[0]), np.asarray(r[1]), np.asarray(r[2]))
+    except (TypeError, IndexError, KeyError) as e:
+        raise SignalError("reference", type(r).__name__, "a Reference (q_d, dq_d, ddq_d)", f"at t = {t:g} s") from e
+    for name, v in zip(("q_d", "dq_d", "ddq_d"), parts, strict=True):
+        if v.shape != (n,):
+            raise SignalError(f"reference {name}", f"shape {v.shape}", f"shape ({n},)", f"sampled at t = {t:g} s")
+    return parts
 
 
 def _draw_noise(plant: Plant, N: int) -> np.ndarray | None:
