@@ -426,7 +426,7 @@ def test_a_trajectory_that_moves_between_two_holds_is_sampled_each_tick(atlas):
     plant.reset(q0)
     trace = run_compiled(plant, Controller(atlas, threshold=None), _HoldMoveHold(q0, q1), 3.0)
     k = int(np.searchsorted(trace.t, 1.5))
-    np.testing.assert_allclose(trace.q_d[k], q1, atol=1e-6)  # the turning point (flat to 2nd order: a tick off is ~1e-9)
+    np.testing.assert_allclose(trace.q_d[k], q1, atol=1e-6)  # the turning point (flat: a tick off is ~1e-9)
     assert trace.q[:, 0].max() - q0[0] > 0.2  # [rad] the arm followed the 0.3 rad excursion, not a hold of q0
 
 
