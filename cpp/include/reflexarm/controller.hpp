@@ -57,7 +57,8 @@ namespace reflexarm
 
     /// Clears the observers, the latched collision, reaction and observer fault, the clock and its
     /// statistics; the next update() re-initialises. After a "compliant" reaction the kappa_eps active
-    /// before it is restored. Keeps the last command (the rate limit goes on) and the damping matrix.
+    /// before it is restored. Keeps the last command (the rate limit goes on); everything else is as after
+    /// configure(), so a run after reset() equals a fresh controller's bitwise (without a torque rate limit).
     void reset() noexcept;
 
     /// One control tick. `time` is the measurement's time stamp [s] (strictly increasing over accepted ticks).

@@ -380,7 +380,9 @@ class Controller:
         """Clear observer states, the latched collision, reaction and observer fault, the clock and its
         statistics; the next step re-initialises.
 
-        After a ``"compliant"`` reaction the kappa_eps active before it is restored.
+        After a ``"compliant"`` reaction the kappa_eps active before it is restored. The last command is kept (a
+        torque rate limit goes on from it); everything else is as after construction: without a rate limit a run
+        after ``reset()`` equals a fresh controller's bitwise.
         """
         self._core.reset()
         if self.detector is not None:
