@@ -210,6 +210,55 @@ namespace
     }
   }
 
+  // A sphere of m points (radius 5 cm, 10 cm along z of the joint frame) on every link.
+  std::vector<reflexarm::LinkSurfaceData> sphereSurfaces(int n, int m)
+  {
+    std::vector<reflexarm::LinkSurfaceData> out(static_cast<size_t>(n));
+    for (auto & s : out)
+    {
+      s.points.resize(m, 3);
+      s.normals.resize(m, 3);
+      for (int i = 0; i < m; ++i)
+      {
+        const double z = 1.0 - 2.0 * (i + 0.5) / m, r = std::sqrt(1.0 - z * z), phi = 2.399963229728653 * i;
+        const Eigen::Vector3d u(r * std::cos(phi), r * std::sin(phi), z);
+        s.normals.row(i) = u.transpose();
+        s.points.row(i) = (Eigen::Vector3d(0.0, 0.0, 0.1) + 0.05 * u).transpose();
+      }
+    }
+    return out;
+  }
+
+  // The collision pipeline inside update(): each reaction with the links' geometry (isolation spread over the
+  // ticks), Euler and exact observers, a measured contact (kappa_ext = 0 and a wrist force) and a collision.
+  void testNoAllocationInThePipeline()
+  {
+    const pinocchio::Model model = makeArm();
+    const reflexarm::Reaction reactions[] = {reflexarm::Reaction::Brake, reflexarm::Reaction::Retract,
+                                             reflexarm::Reaction::Compliant, reflexarm::Reaction::Gravity};
+    for (int variant = 0; variant < 8; ++variant)
+    {
+      reflexarm::ControllerParams p;
+      p.sensor_frame_id = model.frames.size() - 1;
+      p.kappa_ext = 1; // the wrist noise never classifies: collisions, isolated
+      p.reaction = p.contact_reaction = reactions[variant % 4];
+      p.observer_discretization =
+        variant < 4 ? reflexarm::ObserverDiscretization::Euler : reflexarm::ObserverDiscretization::Exact;
+      p.detection_observer_gain = Eigen::VectorXd::Constant(1, variant < 4 ? 50.0 : 300.0);
+      p.reaction_params.isolation_points_per_tick = 16;
+      reflexarm::Controller ctrl;
+      ctrl.configure(model, p);
+      ctrl.setContactGeometry(sphereSurfaces(model.nv, 120), 0.25, reflexarm::IsolationParams{});
+      const Run run = runTicks(ctrl, 1500, 80.0);
+      const reflexarm::CollisionEvent & e = ctrl.event();
+      CHECK(run.allocations == 0, "pipeline variant %d: %ld allocations in update()", variant, run.allocations);
+      CHECK(run.detected && e.detected, "pipeline variant %d: the 80 Nm push was not detected", variant);
+      CHECK(e.estimated, "pipeline variant %d: the collision was not isolated in the run", variant);
+      CHECK(run.non_finite == 0 && run.beyond_limit == 0, "pipeline variant %d: %ld non-finite, %ld beyond the limit",
+            variant, run.non_finite, run.beyond_limit);
+    }
+  }
+
   void testFaultKeepsState()
   {
     const pinocchio::Model model = makeArm();
@@ -365,6 +414,7 @@ int main()
   testCounterCounts();
   g_trace = std::getenv("TRACE_ALLOC") != nullptr;
   testNoAllocation();
+  testNoAllocationInThePipeline();
   testFaultKeepsState();
   testModalDamping();
   testModalDampingInParts();
