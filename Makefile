@@ -18,7 +18,7 @@ CHECK_TOOLCHAIN = command -v cmake >/dev/null 2>&1 || { \
 
 # The C++ sources of the module reflexarm._core (cpp/tests and the C++ example are not part of it): a change
 # re-runs the install, which recompiles what changed in build/ (scikit-build-core, no build isolation).
-CORE_SOURCES := cpp/CMakeLists.txt $(wildcard cpp/cmake/* cpp/include/reflexarm/*.hpp cpp/src/*.cpp cpp/bindings/*.cpp cpp/bindings/*.hpp)
+CORE_SOURCES := cpp/CMakeLists.txt $(wildcard cpp/cmake/* cpp/include/reflexarm/*.hpp cpp/src/*.cpp cpp/src/*.hpp cpp/bindings/*.cpp cpp/bindings/*.hpp)
 
 # 1) the virtual environment and the build requirements ([build-system].requires of pyproject.toml, pinned to
 #    the runtime wheels); 2) the package itself, editable, with the C++ core compiled into build/.

@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <cstring>
 
+#include "reflexarm/collision_event.hpp"
 #include "reflexarm/params.hpp"
 #include "reflexarm/signals.hpp"
 
@@ -27,6 +28,38 @@ namespace reflexarm
       return "brake";
     case Reaction::Retract:
       return "retract";
+    }
+    return "?";
+  }
+
+  const char * contactClassName(ContactClass c) noexcept
+  {
+    switch (c)
+    {
+    case ContactClass::None:
+      return "none";
+    case ContactClass::Contact:
+      return "contact";
+    case ContactClass::Collision:
+      return "collision";
+    }
+    return "?";
+  }
+
+  const char * reactionPhaseName(ReactionPhase p) noexcept
+  {
+    switch (p)
+    {
+    case ReactionPhase::None:
+      return "none";
+    case ReactionPhase::Gravity:
+      return "gravity";
+    case ReactionPhase::Braking:
+      return "braking";
+    case ReactionPhase::Retracting:
+      return "retracting";
+    case ReactionPhase::Holding:
+      return "holding";
     }
     return "?";
   }
