@@ -49,6 +49,31 @@ _BLOCK_HELP = (
 )
 
 
+def _add_link_collision(ssub: argparse._SubParsersAction) -> None:
+    """``simulate link-collision``."""
+    lc = ssub.add_parser("link-collision", help="a stick pushes the elbow during a joint motion (Figs. 9-10)")
+    add_common(lc, default_out="results/link-collision")
+    add_model_options(lc)
+    add_robot_options(lc)
+    add_output_options(lc)
+    lc.add_argument(
+        "--link",
+        default=None,
+        help="the link the stick pushes: a joint number, 1-based (its link), or a link name (default: Atlas' elbow "
+        "l_larm; other arms the link of joint ceil(n/2))",
+    )
+    lc.add_argument("--plant-friction", choices=("file", "none"), default="file", help=_FRICTION_HELP)
+    lc.add_argument(
+        "--stick",
+        choices=("pushed", "held"),
+        default="pushed",
+        help="pushed: the paper's stick, pushed into the moving link at 50 mm/s for 1.5 s (it keeps coming after a "
+        "detection); held: it stands still where the pushed one starts, and the link runs into it (default pushed)",
+    )
+    add_detection_options(lc)
+    lc.set_defaults(func=_link)
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``demo`` and ``simulate`` to the top-level parser."""
     p = sub.add_parser(
@@ -79,27 +104,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     e.add_argument("--plant-friction", choices=("file", "none"), default="file", help=_FRICTION_HELP)
     add_detection_options(e, note="the Coll.Det run; Stiff and Compliant run without detection")
     e.set_defaults(func=_demo)
-    lc = ssub.add_parser("link-collision", help="a stick pushes the elbow during a joint motion (Figs. 9-10)")
-    add_common(lc, default_out="results/link-collision")
-    add_model_options(lc)
-    add_robot_options(lc)
-    add_output_options(lc)
-    lc.add_argument(
-        "--link",
-        default=None,
-        help="the link the stick pushes: a joint number, 1-based (its link), or a link name (default: Atlas' elbow "
-        "l_larm; other arms the link of joint ceil(n/2))",
-    )
-    lc.add_argument("--plant-friction", choices=("file", "none"), default="file", help=_FRICTION_HELP)
-    lc.add_argument(
-        "--stick",
-        choices=("pushed", "held"),
-        default="pushed",
-        help="pushed: the paper's stick, pushed into the moving link at 50 mm/s for 1.5 s (it keeps coming after a "
-        "detection); held: it stands still where the pushed one starts, and the link runs into it (default pushed)",
-    )
-    add_detection_options(lc)
-    lc.set_defaults(func=_link)
+    _add_link_collision(ssub)
     fm = ssub.add_parser("free-motion", help="false-alarm check: the demo trajectory without obstacle")
     add_common(fm, default_out="results/free-motion")
     add_model_options(fm)

@@ -73,6 +73,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     t.add_argument(
         "--allow-extrapolation", action="store_true", help="warn instead of refusing when the logs are too short"
     )
+    _add_pair_options(p)
+    p.add_argument(
+        "--recorded-residual",
+        action="store_true",
+        help="reflexarm traces: tune on the residual their controller computed online (with the measured noise) "
+        "instead of replaying it (a trace holds true velocities); right when that controller is the one you run",
+    )
+    p.add_argument("--out", type=Path, default=Path("results/thresholds"), help="output folder")
+    p.add_argument("--no-figure", action="store_true", help="skip the figures")
+    p.set_defaults(func=_tune)
+
+
+def _add_pair_options(p: argparse.ArgumentParser) -> None:
+    """The (k_o, zeta) pair options of ``tune-thresholds --detection-gains``."""
     d = p.add_argument_group("(k_o, zeta) pairs (exact discretization)")
     d.add_argument(
         "--detection-gains", default=None, metavar="K1,K2,...",
@@ -92,15 +106,6 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--step-size", type=float, default=2.0, metavar="X",
         help="step of external torque whose lag is reported, in multiples of zeta (default 2)",
     )  # fmt: skip
-    p.add_argument(
-        "--recorded-residual",
-        action="store_true",
-        help="reflexarm traces: tune on the residual their controller computed online (with the measured noise) "
-        "instead of replaying it (a trace holds true velocities); right when that controller is the one you run",
-    )
-    p.add_argument("--out", type=Path, default=Path("results/thresholds"), help="output folder")
-    p.add_argument("--no-figure", action="store_true", help="skip the figures")
-    p.set_defaults(func=_tune)
 
 
 def _load(args: argparse.Namespace, path: str, robot: Any) -> Any:

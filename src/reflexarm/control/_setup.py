@@ -43,6 +43,13 @@ def check_period_band(
     return lo, hi
 
 
+def check_discretization(name: object, choices: Sequence[str]) -> str:
+    """``name`` if it is one of the observer discretizations ``choices``, else a ConfigError naming them."""
+    if name not in choices:
+        raise ConfigError(f"unknown observer_discretization {name!r}; choose one of: {', '.join(choices)}")
+    return str(name)
+
+
 def resolve_torque_limit(robot: RobotModel, torque_limit: npt.ArrayLike | str | None) -> np.ndarray:
     """The saturation per joint [Nm] (inf: none) from ``"model"``, ``None`` or a positive value."""
     n = robot.n

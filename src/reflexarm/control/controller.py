@@ -16,11 +16,17 @@ import numpy as np
 import numpy.typing as npt
 
 from reflexarm._validation import as_positive_scalar, as_switch, as_vector
-from reflexarm.control._setup import check_period_band, core_params, load_core, resolve_torque_limit
+from reflexarm.control._setup import (
+    check_discretization,
+    check_period_band,
+    core_params,
+    load_core,
+    resolve_torque_limit,
+)
 from reflexarm.control.collision.classify import SIGNIFICANCE_SHARE, contact_geometry_args, controller_geometry
 from reflexarm.control.collision.detect import CollisionDetector
 from reflexarm.control.collision.event import CollisionEvent
-from reflexarm.control.collision.react import REACTIONS, ReactionSettings, check_reaction
+from reflexarm.control.collision.react import REACTIONS, ReactionSettings, check_reactions
 from reflexarm.control.contract import (
     BAD_SHAPE,
     InputBounds,
@@ -193,12 +199,7 @@ class Controller:
         n = self.robot.n
         self.n = n
         # the observers validate their gains here; below they are rebuilt on the core's state
-        if observer_discretization not in OBSERVER_DISCRETIZATIONS:
-            raise ConfigError(
-                f"unknown observer_discretization {observer_discretization!r}; choose one of: "
-                f"{', '.join(OBSERVER_DISCRETIZATIONS)}"
-            )
-        euler = observer_discretization == "euler"
+        euler = check_discretization(observer_discretization, OBSERVER_DISCRETIZATIONS) == "euler"
         self.observer = MomentumObserver(n, observer_gain, self.dt, _euler=euler)
         self.detection_observer = (
             None
@@ -206,15 +207,9 @@ class Controller:
             else MomentumObserver(n, detection_observer_gain, self.dt, _euler=euler)
         )
         self.detector = None if threshold is None else CollisionDetector(n, threshold)
-        self.reaction = check_reaction(reaction)
-        self.contact_reaction = self.reaction if contact_reaction is None else check_reaction(
-            contact_reaction, "contact_reaction"
+        self.reaction, self.contact_reaction, self.reaction_settings = check_reactions(
+            reaction, contact_reaction, reaction_settings
         )
-        self.reaction_settings = ReactionSettings() if reaction_settings is None else reaction_settings
-        if not isinstance(self.reaction_settings, ReactionSettings):
-            raise ConfigError(
-                f"reaction_settings must be a ReactionSettings; got {type(reaction_settings).__name__}"
-            )
         self.observer_discretization = observer_discretization
         self._kappa_init = (
             as_switch(kappa_f, "kappa_f"),

@@ -17,7 +17,6 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from reflexarm.control import Controller
-from reflexarm.control.collision import CollisionEvent, estimate_contact
 from reflexarm.errors import ConfigError
 from reflexarm.experiments.any_arm import (
     ee_swing_plan,
@@ -314,7 +313,7 @@ def run_ee_collision(
             "block_displacement": scene.displacement(plant).tolist(),
         }
     )
-    trace.meta["contact_estimate"] = _contact_estimate(ctrl_model, setting, trace)
+    trace.meta["contact_estimate"] = _contact_estimate(trace)
     return trace
 
 
@@ -380,7 +379,7 @@ def run_link_collision(
             "seed": seed,
         }
     )
-    trace.meta["contact_estimate"] = _contact_estimate(ctrl_model, setting, trace)
+    trace.meta["contact_estimate"] = _contact_estimate(trace)
     return trace
 
 
@@ -441,15 +440,8 @@ def free_motion_false_alarms(
     }
 
 
-def _contact_estimate(robot: RobotModel, setting: CollisionSetting, trace: Trace) -> dict[str, object] | None:
-    """Isolation and identification of the run's detected collision (JSON-ready): the controller's own (in the tick,
-    ``collision_event["estimate"]``), else computed here from its event (the residual and posture at detection, on
-    the controller's model); None without a detection."""
+def _contact_estimate(trace: Trace) -> dict[str, object] | None:
+    """Where and how hard the controller found the run's detected contact, in the tick (JSON-ready; the event's
+    ``estimate``): None without a detection, without collision geometry, or if the run ended before it was in."""
     record = trace.meta.get("collision_event")
-    if not record or setting.threshold is None:
-        return None
-    if record.get("estimate") is not None:
-        return record["estimate"]  # type: ignore[no-any-return]
-    event = CollisionEvent.from_dict(record)  # type: ignore[arg-type]
-    i = int(np.searchsorted(trace.t, event.t_detect))
-    return estimate_contact(robot, event, setting.threshold, wrench=trace.wrench[min(i, trace.t.size - 1)]).as_dict()
+    return None if not record else record.get("estimate")  # type: ignore[no-any-return]

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from reflexarm.control.collision.contact import ContactEstimate
+from reflexarm.control.collision.contact import ContactEstimate, Determined
 from reflexarm.robots.collision_geometry import CollisionGeometry
 from reflexarm.robots.robot_model import RobotModel
 
@@ -143,16 +143,13 @@ def _estimate(
     if out is None:
         return None
     if record.get("estimate_from_sensor"):
+        if robot is None:  # no names to give: the sensor frame unnamed
+            point, force = np.asarray(out["point"], dtype=float), np.asarray(out["force"], dtype=float)
+            return ContactEstimate(int(out["link"]), "", point, force, 0.0, Determined.POINT_AND_FORCE,
+                                   "measured by the wrist sensor")  # fmt: skip
         from reflexarm.control.collision.classify import sensor_estimate
 
-        name_robot = robot
-        if name_robot is None:
-            return ContactEstimate.from_dict(
-                {"link": out["link"], "link_name": "", "point": out["point"], "force": out["force"], "fit_error": 0.0,
-                 "determined": "point_and_force", "reason": "measured by the wrist sensor", "candidate_links": [],
-                 "consistent_points": 0, "point_spread": None}
-            )  # fmt: skip
-        return sensor_estimate(name_robot, int(out["link"]), out["point"], out["force"])
+        return sensor_estimate(robot, int(out["link"]), out["point"], out["force"])
     if geometry is None:
         return None
     from reflexarm.control.collision.isolate_core import estimate_from_core

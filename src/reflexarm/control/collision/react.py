@@ -34,7 +34,7 @@ from typing import Any
 
 from reflexarm.errors import ConfigError
 
-__all__ = ["REACTIONS", "ReactionSettings", "check_reaction"]
+__all__ = ["REACTIONS", "ReactionSettings", "check_reaction", "check_reactions"]
 
 #: Reactions to a detected collision (see the module's docstring).
 REACTIONS = ("gravity", "brake", "retract", "compliant", "none")
@@ -45,6 +45,19 @@ def check_reaction(name: object, what: str = "reaction") -> str:
     if not isinstance(name, str) or name not in REACTIONS:
         raise ConfigError(f"unknown {what} {name!r}; choose one of: {', '.join(REACTIONS)}")
     return name
+
+
+def check_reactions(
+    reaction: object, contact_reaction: object, settings: object
+) -> tuple[str, str, ReactionSettings]:
+    """(reaction, contact reaction, settings) of a Controller, checked: ``contact_reaction`` None is ``reaction``,
+    ``settings`` None the defaults."""
+    chosen = check_reaction(reaction)
+    contact = chosen if contact_reaction is None else check_reaction(contact_reaction, "contact_reaction")
+    settings = ReactionSettings() if settings is None else settings
+    if not isinstance(settings, ReactionSettings):
+        raise ConfigError(f"reaction_settings must be a ReactionSettings; got {type(settings).__name__}")
+    return chosen, contact, settings
 
 
 @dataclass(frozen=True)
