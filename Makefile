@@ -30,7 +30,11 @@ $(DEPS_STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -r $(VENV)/build-requirements.txt
 	touch $(DEPS_STAMP)
 
-$(STAMP): $(DEPS_STAMP) $(CORE_SOURCES)
+# The editable install maps each module to its file when it is installed: a module added, moved or renamed
+# (a folder's time stamp changes) re-runs it too (about 4 s when the C++ core is unchanged).
+PACKAGE_DIRS := $(shell find src/reflexarm -type d -not -name __pycache__ 2>/dev/null)
+
+$(STAMP): $(DEPS_STAMP) $(CORE_SOURCES) $(PACKAGE_DIRS)
 	@$(CHECK_TOOLCHAIN)
 	rm -f src/reflexarm/_core*.so # a module copied there by an old cpp/build.sh: the installed one is the only one
 	$(BIN)/python -m pip install --quiet --no-build-isolation -e ".[dev,video]"

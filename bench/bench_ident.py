@@ -38,7 +38,7 @@ from reflexarm.ident import (
     identify_dynamics,
     preprocess_log,
 )
-from reflexarm.ident.excitation import FourierTrajectory
+from reflexarm.ident.excitation.design import FourierTrajectory
 
 N_SAMPLES = 100_000
 #: Repetitions of each busy-core timing (the median is printed).

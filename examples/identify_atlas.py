@@ -29,7 +29,7 @@ from reflexarm.experiments.identification import (
     run_identification_study,
 )
 from reflexarm.ident import load_identified_model, optimize_excitation
-from reflexarm.ident.model_file import save_identified_model
+from reflexarm.ident.export.model_file import save_identified_model
 from reflexarm.ident.plots import plot_friction, plot_torque_validation
 from reflexarm.robots import load_robot
 

@@ -31,7 +31,7 @@ from reflexarm.ident import (
     save_log,
     validate_model,
 )
-from reflexarm.ident.model_file import save_identified_model
+from reflexarm.ident.export.model_file import save_identified_model
 from reflexarm.ident.plots import plot_torque_validation
 from reflexarm.robots import load_robot
 

@@ -18,7 +18,7 @@ from reflexarm._cli.common import (
 from reflexarm.cli import build_parser, main
 from reflexarm.errors import ConfigError
 from reflexarm.ident import BatchRegressor, FrictionParameters, RobotLog, identify_dynamics, save_identified_model
-from reflexarm.ident.excitation import FourierTrajectory
+from reflexarm.ident.excitation.design import FourierTrajectory
 from reflexarm.sim import Trace
 
 COMMANDS = (

@@ -42,7 +42,7 @@ def test_a_command_still_finds_what_it_imports_on_first_use():
 
 def test_time_unit_choices_are_the_log_readers_units():
     from reflexarm._cli.log_options import TIME_UNIT_CHOICES
-    from reflexarm.ident.logs import TIME_UNITS
+    from reflexarm.logs import TIME_UNITS
 
     assert TIME_UNIT_CHOICES == tuple(TIME_UNITS)
 

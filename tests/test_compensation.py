@@ -372,7 +372,7 @@ def test_an_identified_model_file_is_the_controllers_model(atlas, tmp_path):
     # result) become the controller's model, exactly; a level on top of it is refused
     from reflexarm.experiments.compensation import controller_model
     from reflexarm.ident import compute_base_parameters, save_identified_model
-    from reflexarm.ident.estimation import DynamicsIdentification, FrictionParameters
+    from reflexarm.ident.estimation.identify import DynamicsIdentification, FrictionParameters
     from reflexarm.robots import perturb_model
 
     pert = perturb_model(atlas, 0.2, seed=5)

@@ -13,7 +13,7 @@ import pytest
 from reflexarm._cli.common import read_threshold
 from reflexarm.control import Controller
 from reflexarm.experiments.collision import EE_START
-from reflexarm.ident.robot_log import RobotLog
+from reflexarm.logs.robot_log import RobotLog
 from reflexarm.signals import Measurement, Reference
 from reflexarm.tuning import (
     ObserverSettings,

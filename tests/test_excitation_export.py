@@ -14,8 +14,8 @@ from ident_arms import SIX_DOF_TOOL, write_six_dof_urdf
 from reflexarm import load_robot
 from reflexarm.cli import main
 from reflexarm.errors import ConfigError
-from reflexarm.ident.excitation import FourierTrajectory, optimize_excitation
-from reflexarm.ident.excitation_export import (
+from reflexarm.ident.excitation.design import FourierTrajectory, optimize_excitation
+from reflexarm.ident.excitation.export import (
     ExcitationLimitError,
     ExcitationMarginWarning,
     sample_excitation,

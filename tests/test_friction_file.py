@@ -29,8 +29,8 @@ from reflexarm.ident import (
     plan_friction_experiment,
     save_log,
 )
-from reflexarm.ident.consistency import project_physically_consistent
-from reflexarm.ident.excitation import FourierTrajectory
+from reflexarm.ident.estimation.consistency import project_physically_consistent
+from reflexarm.ident.excitation.design import FourierTrajectory
 from reflexarm.robots.robot_model import RobotModel
 
 #: Noise-free data with the exact ddq: the estimates differ from the file's values by round-off of the
@@ -223,7 +223,7 @@ def test_run_takes_one_joint_per_log_and_each_joint_once(six_dof: RobotModel, tm
 def test_a_loaded_excitation_keeps_its_optimizer_start(six_dof: RobotModel, tmp_path: Path) -> None:
     """identify dynamics --excitation FILE: the study's condition_initial is the start's, not the optimum's."""
     from reflexarm._cli.identify_dynamics import _load_excitation
-    from reflexarm.ident.excitation import regressor_condition
+    from reflexarm.ident.excitation.design import regressor_condition
 
     rng = np.random.default_rng(1)
     start, best = (

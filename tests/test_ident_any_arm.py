@@ -15,13 +15,13 @@ from reflexarm import load_robot
 from reflexarm.cli import main
 from reflexarm.experiments.identification import hydraulic_joints, run_friction_experiments
 from reflexarm.ident import BatchRegressor, FrictionParameters, RobotLog, identify_dynamics
-from reflexarm.ident.excitation import FourierTrajectory
-from reflexarm.ident.friction_parameters import (
+from reflexarm.ident.excitation.design import FourierTrajectory
+from reflexarm.ident.friction.joint_friction import FrictionPoint, fit_friction
+from reflexarm.ident.friction.parameters import (
     ImplausibleFrictionWarning,
     check_friction_against_robot,
     check_friction_plausibility,
 )
-from reflexarm.ident.joint_friction import FrictionPoint, fit_friction
 from reflexarm.robots.robot_model import RobotModel
 
 

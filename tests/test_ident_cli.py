@@ -9,7 +9,7 @@ import pytest
 
 from reflexarm.cli import main
 from reflexarm.ident import BatchRegressor, FrictionParameters, RobotLog, plan_friction_experiment, save_log
-from reflexarm.ident.excitation import FourierTrajectory
+from reflexarm.ident.excitation.design import FourierTrajectory
 
 
 def _exact_log(robot, trajectory, duration):

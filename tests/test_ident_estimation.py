@@ -26,7 +26,7 @@ from reflexarm.ident import (
     project_physically_consistent,
     save_identified_model,
 )
-from reflexarm.ident.consistency import pseudo_inertia
+from reflexarm.ident.estimation.consistency import pseudo_inertia
 from reflexarm.sim import PAPER_NOISE
 
 #: RMS of the paper's torque noise, uniform on +-7.3e-2 Nm.

@@ -7,7 +7,7 @@ import pytest
 
 from reflexarm.errors import ConfigError
 from reflexarm.ident import FourierTrajectory, compute_base_parameters, optimize_excitation
-from reflexarm.ident.excitation import regressor_condition
+from reflexarm.ident.excitation.design import regressor_condition
 from reflexarm.robots import load_robot
 
 

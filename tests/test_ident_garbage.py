@@ -24,7 +24,7 @@ from reflexarm.ident import (
     project_physically_consistent,
     save_log,
 )
-from reflexarm.ident.excitation import FourierTrajectory
+from reflexarm.ident.excitation.design import FourierTrajectory
 
 #: the bad cell: row and joint (0-based) of the corrupted torque
 BAD_ROW, BAD_JOINT = 500, 2

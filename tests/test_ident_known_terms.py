@@ -18,8 +18,8 @@ from reflexarm.ident import (
     estimation,
     identify_dynamics,
 )
-from reflexarm.ident.base_parameters import random_samples
-from reflexarm.ident.known_terms import KnownJointTerms
+from reflexarm.ident.estimation.base_parameters import random_samples
+from reflexarm.ident.estimation.known_terms import KnownJointTerms
 from reflexarm.robots import load_robot
 
 # A four-joint spatial arm with the Menagerie Panda's kind of rotor armature (0.1 kg m^2 on the first

@@ -24,7 +24,7 @@ from reflexarm.ident import (
     save_identified_model,
     save_log,
 )
-from reflexarm.ident.excitation import FourierTrajectory
+from reflexarm.ident.excitation.design import FourierTrajectory
 from reflexarm.robots.robot_model import RobotModel
 
 #: Agreement of two loads of the same stored parameters (JSON keeps doubles exactly; the URDF copy 12

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from reflexarm.ident import FourierTrajectory, FrictionPoint, TorqueValidation, fit_friction
-from reflexarm.ident.excitation import ExcitationDesign
+from reflexarm.ident.excitation.design import ExcitationDesign
 from reflexarm.ident.plots import excitation_figure, friction_figure, plot_friction, torque_validation_figure
 
 

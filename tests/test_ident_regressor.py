@@ -7,7 +7,7 @@ import pinocchio as pin
 import pytest
 
 from reflexarm.ident import BatchRegressor, compute_base_parameters, compute_friction_regressor
-from reflexarm.ident.base_parameters import random_samples
+from reflexarm.ident.estimation.base_parameters import random_samples
 from reflexarm.robots import CoulombViscousFriction, RobotModel, load_robot
 
 ROBOTS = ["atlas_v5_left_arm", "panda"]

@@ -9,7 +9,7 @@ from threadpoolctl import threadpool_info, threadpool_limits
 from reflexarm.errors import ConfigError
 from reflexarm.ident import BatchRegressor, RobotLog, identify_dynamics
 from reflexarm.ident._blas_threads import blas_threads
-from reflexarm.ident.excitation import FourierTrajectory
+from reflexarm.ident.excitation.design import FourierTrajectory
 
 
 def _blas_threads_now() -> list[int]:
@@ -36,7 +36,7 @@ def test_a_bad_thread_count_is_refused_with_the_value(bad: object) -> None:
 
 def test_identify_dynamics_uses_one_thread_by_default(atlas, monkeypatch) -> None:  # type: ignore[no-untyped-def]
     """The Gram accumulation sees one BLAS thread (default) or the configured ones (threads=None)."""
-    from reflexarm.ident import _weighted_least_squares as wls
+    from reflexarm.ident.estimation import _weighted_least_squares as wls
 
     seen: list[list[int]] = []
     original = wls._GramAccumulator.add

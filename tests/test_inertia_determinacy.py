@@ -1,4 +1,6 @@
-"""How well the identification data determine M(q) (issue 9, finding F8): reflexarm.ident.inertia_determinacy.
+"""How well the identification data determine M(q) (issue 9, finding F8).
+
+Module under test: reflexarm.ident.estimation.inertia_determinacy.
 
 The logs are built here from seeded, unoptimized Fourier excitations of the UR-like arm (``optimize_excitation``
 with ``maxiter=0``: the same trajectory on every machine): the exact rigid-body torque (the batch regressor with
@@ -19,15 +21,15 @@ import pytest
 
 from reflexarm.errors import PoorlyDeterminedInertiaWarning
 from reflexarm.ident import RobotLog, compute_base_parameters, identify_dynamics, preprocess_log
-from reflexarm.ident.base_parameters import BaseParameters, random_samples
-from reflexarm.ident.excitation import optimize_excitation
-from reflexarm.ident.identification_result import DynamicsIdentification
-from reflexarm.ident.inertia_determinacy import (
+from reflexarm.ident.estimation.base_parameters import BaseParameters, random_samples
+from reflexarm.ident.estimation.inertia_determinacy import (
     DEFAULT_MAX_RELATIVE_STD,
     assess_inertia_determinacy,
     mass_matrix_regressor,
 )
-from reflexarm.ident.regressor import BatchRegressor
+from reflexarm.ident.estimation.regressor import BatchRegressor
+from reflexarm.ident.estimation.result import DynamicsIdentification
+from reflexarm.ident.excitation.design import optimize_excitation
 from reflexarm.robots import load_robot, write_ur_like_arm
 from reflexarm.robots.robot_model import RobotModel
 

@@ -9,7 +9,7 @@ import pytest
 
 from reflexarm.cli import main
 from reflexarm.ident import BatchRegressor, FrictionParameters, RobotLog, save_log
-from reflexarm.ident.excitation import FourierTrajectory
+from reflexarm.ident.excitation.design import FourierTrajectory
 
 
 def test_no_model_file_is_written_when_validation_fails_on_the_logs(tmp_path, capsys, atlas):

@@ -13,7 +13,7 @@ from log_exports import write_joint_state_csv
 from reflexarm.cli import main
 from reflexarm.errors import ConfigError, DataError
 from reflexarm.ident import RobotLog, load_log, plan_friction_experiment
-from reflexarm.ident.logs import parse_column_mapping
+from reflexarm.logs import parse_column_mapping
 
 NAMES = ["shoulder_pan", "shoulder_lift", "elbow"]
 

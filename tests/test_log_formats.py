@@ -12,8 +12,8 @@ import pytest
 from log_exports import EPOCH_NS, write_bag, write_named_csv
 from reflexarm.cli import main
 from reflexarm.ident import BatchRegressor, FrictionParameters, RobotLog, load_log, save_log
-from reflexarm.ident.excitation import FourierTrajectory
-from reflexarm.ident.model_file import read_identified_model
+from reflexarm.ident.excitation.design import FourierTrajectory
+from reflexarm.ident.export.model_file import read_identified_model
 
 #: Seconds of log: the shortest that identifies Atlas's 43 base parameters well enough to validate
 #: (a consistent model after projection), to keep the four CLI runs short.

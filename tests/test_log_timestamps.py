@@ -11,8 +11,8 @@ import pytest
 
 from reflexarm.errors import DataError
 from reflexarm.ident import RobotLog, load_log, preprocess_log, save_log
-from reflexarm.ident._timestamps import relative_seconds
-from reflexarm.ident.logs import TimeUnitWarning
+from reflexarm.logs import TimeUnitWarning
+from reflexarm.logs.timestamps import relative_seconds
 
 N = 400
 #: Relative times from integer stamps are exact integers times the unit's scale: within a few ulp of

@@ -16,7 +16,7 @@ import pytest
 
 from reflexarm.control import Controller
 from reflexarm.errors import ModelError
-from reflexarm.ident.regressor import BatchRegressor
+from reflexarm.ident.estimation.regressor import BatchRegressor
 from reflexarm.robots import RobotFileWarning, RobotModel, load_robot
 from reflexarm.signals import Reference
 from reflexarm.sim import PAPER_NOISE, Plant, SensorNoise, run_closed_loop

@@ -13,8 +13,8 @@ import pytest
 from reflexarm.cli import main
 from reflexarm.errors import ConfigError, DataError
 from reflexarm.experiments.collision import EE_START
-from reflexarm.ident.logs import save_log
-from reflexarm.ident.robot_log import RobotLog
+from reflexarm.logs import save_log
+from reflexarm.logs.robot_log import RobotLog
 from reflexarm.sim import Trace
 from reflexarm.tuning import (
     LogTooShortError,

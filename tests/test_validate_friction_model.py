@@ -17,9 +17,9 @@ import pytest
 
 from reflexarm.cli import main
 from reflexarm.ident import BatchRegressor, RobotLog, identify_dynamics, save_log
-from reflexarm.ident.excitation import FourierTrajectory
-from reflexarm.ident.model_file import save_identified_model
-from reflexarm.ident.validation import EXACT_SIGN, validate_model
+from reflexarm.ident.estimation.validation import EXACT_SIGN, validate_model
+from reflexarm.ident.excitation.design import FourierTrajectory
+from reflexarm.ident.export.model_file import save_identified_model
 from reflexarm.robots import load_robot, write_ur_like_arm
 from reflexarm.robots.robot_model import RobotModel
 

@@ -20,9 +20,9 @@ from ident_arms import SIX_DOF_TOOL, write_six_dof_mjcf, write_six_dof_urdf
 from reflexarm import load_robot
 from reflexarm.errors import ModelError
 from reflexarm.ident import BatchRegressor, FrictionParameters, RobotLog, identify_dynamics
-from reflexarm.ident._robot_xml import read_xml, relocate_paths
-from reflexarm.ident.excitation import FourierTrajectory
-from reflexarm.ident.write_back import with_consistent_links, write_identified_robot
+from reflexarm.ident.excitation.design import FourierTrajectory
+from reflexarm.ident.export._robot_xml import read_xml, relocate_paths
+from reflexarm.ident.export.write_back import with_consistent_links, write_identified_robot
 from reflexarm.robots.perturbation import perturb_model
 from reflexarm.robots.robot_model import RobotModel
 from reflexarm.sim import Plant, SensorNoise

@@ -34,8 +34,8 @@ from reflexarm.errors import ReflexArmError
 from reflexarm.experiments.collision import free_motion_trajectory
 from reflexarm.experiments.collision_summary import CONTACT_FORCE_N
 from reflexarm.ident import load_identified_model
-from reflexarm.ident.excitation import FourierTrajectory
-from reflexarm.ident.log_files import load_log
+from reflexarm.ident.excitation.design import FourierTrajectory
+from reflexarm.logs.files import load_log
 from reflexarm.robots import load_robot
 from reflexarm.robots.example_arms import UR_LIKE_TIP, write_ur_like_arm
 

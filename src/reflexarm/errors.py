@@ -84,9 +84,10 @@ class NonFiniteEstimateError(IdentificationError):
 
 
 class PoorlyDeterminedInertiaWarning(UserWarning):
-    """The identification data determine M(q) poorly (:mod:`reflexarm.ident.inertia_determinacy`): disturbance
-    compensation with the model is risky. Attributes: ``median`` and ``max`` of the 1-sigma relative
-    uncertainty u(q) over the postures, ``worst_posture`` (0-based joint order), ``threshold``."""
+    """The identification data determine M(q) poorly
+    (:mod:`reflexarm.ident.estimation.inertia_determinacy`): disturbance compensation with the model is risky.
+    Attributes: ``median`` and ``max`` of the 1-sigma relative uncertainty u(q) over the postures,
+    ``worst_posture`` (0-based joint order), ``threshold``."""
 
     def __init__(self, message: str, *, median: float, max: float, worst_posture: object, threshold: float) -> None:
         super().__init__(message)

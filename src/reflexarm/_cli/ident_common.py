@@ -84,7 +84,7 @@ def friction_file(robot: Any, friction: Any, rows: list[dict[str, object]], why_
 
     ``why_missing`` says why the joints without a fit have none (e.g. "not run (--joints 1)").
     """
-    from reflexarm.ident.friction_parameters import format_joints
+    from reflexarm.ident.friction.parameters import format_joints
 
     doc: dict[str, object] = {
         "robot": robot.name,
@@ -114,7 +114,7 @@ def load_friction(path: str | None, robot: Any) -> Any:
     if path is None:
         return None
     from reflexarm.ident import FrictionParameters
-    from reflexarm.ident.friction_parameters import format_joints
+    from reflexarm.ident.friction.parameters import format_joints
 
     name = Path(path).name
     try:
@@ -164,7 +164,7 @@ def for_controller(result: Any, robot: Any, nominal: Any, args: argparse.Namespa
     consistent, else the projection onto consistent parameters (said so; it moves beta_b). With
     ``--no-projection`` the least-squares estimate as it is.
     """
-    from reflexarm.ident.write_back import with_consistent_links
+    from reflexarm.ident.export.write_back import with_consistent_links
 
     if getattr(args, "no_projection", False):
         return result
@@ -182,7 +182,7 @@ def write_robot_copy(result: Any, robot: Any, out: Path, args: argparse.Namespac
     robot without a file, links the file cannot hold, ``--no-projection``: the file needs consistent links).
     """
     from reflexarm.errors import ModelError
-    from reflexarm.ident.write_back import write_identified_robot
+    from reflexarm.ident.export.write_back import write_identified_robot
 
     if getattr(args, "no_projection", False):
         why = "no robot file copy with --no-projection (a robot file needs physically consistent links)"
@@ -205,7 +205,7 @@ def write_robot_copy(result: Any, robot: Any, out: Path, args: argparse.Namespac
 def export_excitation_csv(args: argparse.Namespace, robot: Any, design: Any) -> Path:
     """``excite --csv OUT --rate HZ``: the excitation (``--periods`` periods) sampled and checked, as CSV."""
     from reflexarm._cli.common import format_table
-    from reflexarm.ident.excitation_export import sample_excitation, write_excitation_csv
+    from reflexarm.ident.excitation.export import sample_excitation, write_excitation_csv
 
     trajectory = design.trajectory.with_periods(args.periods)
     amax = design.bounds.get("max_acceleration", args.max_acceleration)

@@ -5,7 +5,7 @@ and ``validate`` are in :mod:`reflexarm._cli.identify_dynamics`.
 
 Each works on the built-in Atlas arm (simulated experiments on the MuJoCo plant with the impedance
 controller) or on a user's robot file and logs (``--robot``, ``--log``; log schema in
-:mod:`reflexarm.ident.logs`). Results go to ``--out``: JSON/CSV tables and PNG figures.
+:mod:`reflexarm.logs`). Results go to ``--out``: JSON/CSV tables and PNG figures.
 """
 
 from __future__ import annotations
@@ -195,7 +195,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 # ---------------------------------------------------------------------------------------------- excite
 def _excite(args: argparse.Namespace) -> int:
     from reflexarm.ident import compute_base_parameters
-    from reflexarm.ident.excitation import optimize_excitation
+    from reflexarm.ident.excitation.design import optimize_excitation
     from reflexarm.ident.plots import plot_excitation
 
     out = out_dir(args)
@@ -269,7 +269,7 @@ def _record(args: argparse.Namespace, robot: object, trajectory: object) -> Path
 
 # ---------------------------------------------------------------------------------------------- friction
 def _identify_friction(args: argparse.Namespace) -> int:
-    from reflexarm.ident.joint_friction import (
+    from reflexarm.ident.friction.joint_friction import (
         FrictionFit,
         fit_friction,
         friction_from_fits,

@@ -77,7 +77,7 @@ def _identify_from_logs(args: argparse.Namespace) -> int:
         preprocess_log,
         validate_model,
     )
-    from reflexarm.ident.model_file import save_identified_model
+    from reflexarm.ident.export.model_file import save_identified_model
     from reflexarm.ident.plots import plot_torque_validation
 
     out = out_dir(args)
@@ -180,7 +180,7 @@ def _identify_from_logs(args: argparse.Namespace) -> int:
 
 def _partial_friction_line(path: str, friction: Any, robot: Any, n_base: int) -> str:
     """What the sequential method does with a friction file that lacks some joints (they are estimated)."""
-    from reflexarm.ident.friction_parameters import format_joints
+    from reflexarm.ident.friction.parameters import format_joints
 
     missing, known = friction.missing, friction.known
     line = (
@@ -199,7 +199,7 @@ def _partial_friction_line(path: str, friction: Any, robot: Any, n_base: int) ->
 
 def _load_excitation(robot: Any, path: str) -> Any:
     """An ExcitationDesign from an excitation.json of 'reflexarm excite' (no optimization)."""
-    from reflexarm.ident.excitation import ExcitationDesign, FourierTrajectory, regressor_condition
+    from reflexarm.ident.excitation.design import ExcitationDesign, FourierTrajectory, regressor_condition
 
     try:
         d = json.loads(Path(path).read_text())
@@ -233,7 +233,7 @@ def dynamics_study_command(args: argparse.Namespace) -> int:
         run_identification_study,
     )
     from reflexarm.ident import save_log
-    from reflexarm.ident.model_file import save_identified_model
+    from reflexarm.ident.export.model_file import save_identified_model
     from reflexarm.ident.plots import plot_excitation, plot_friction, plot_torque_validation
 
     out = out_dir(args)
@@ -351,7 +351,7 @@ def validate_command(args: argparse.Namespace) -> int:
     """Score a saved model on ``--log``; ``--closed-loop``: tracking on the plant against the nominal model."""
     from reflexarm._cli.robot_options import DEFAULT_ROBOT
     from reflexarm.ident import preprocess_log, validate_model
-    from reflexarm.ident.model_file import load_identified_model, load_model_robot, read_identified_model
+    from reflexarm.ident.export.model_file import load_identified_model, load_model_robot, read_identified_model
     from reflexarm.ident.plots import plot_torque_validation
 
     out = out_dir(args)
@@ -392,7 +392,7 @@ def validate_command(args: argparse.Namespace) -> int:
         plot_torque_validation({result.method: v}, out / "fig6_torques.png", joint_names=robot.joint_names)
     if args.closed_loop:
         from reflexarm.experiments.identification import NOMINAL_ERROR_LEVEL, compare_tracking
-        from reflexarm.ident.excitation import optimize_excitation
+        from reflexarm.ident.excitation.design import optimize_excitation
         from reflexarm.robots import perturb_model
 
         nominal = perturb_model(robot, NOMINAL_ERROR_LEVEL, seed=args.seed)

@@ -8,7 +8,7 @@ import argparse
 import warnings
 from typing import Any
 
-#: The units of ``--time-unit``: the keys of :data:`reflexarm.ident.logs.TIME_UNITS`, spelled out here so
+#: The units of ``--time-unit``: the keys of :data:`reflexarm.logs.TIME_UNITS`, spelled out here so
 #: that registering the option does not import the identification package (tests/test_cli_startup.py
 #: checks that the two agree).
 TIME_UNIT_CHOICES = ("s", "ms", "us", "ns")
@@ -46,7 +46,7 @@ def add_log_options(p: argparse.ArgumentParser) -> None:
 def load_log_from_args(args: argparse.Namespace, path: str, robot: Any) -> Any:
     """The :class:`~reflexarm.ident.RobotLog` at ``path`` for ``robot`` (joints mapped by its joint names),
     read with the log options of ``args``; the reader's notes are printed (repairs as warnings)."""
-    from reflexarm.ident.logs import load_log, parse_column_mapping
+    from reflexarm.logs import load_log, parse_column_mapping
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

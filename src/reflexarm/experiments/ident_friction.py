@@ -21,7 +21,7 @@ from reflexarm.ident import (
     identify_joint_friction,
     plan_friction_experiment,
 )
-from reflexarm.ident.joint_friction import DEFAULT_SETTLE_TIME
+from reflexarm.ident.friction.joint_friction import DEFAULT_SETTLE_TIME
 from reflexarm.robots.friction import CoulombViscousFriction
 from reflexarm.robots.robot_model import RobotModel
 from reflexarm.sim import PAPER_NOISE, SensorNoise
@@ -145,7 +145,7 @@ def run_friction_experiments(
         robot: the true arm (plant).
         joints: 0-based joints to run (default: the hydraulic joints on the Atlas arm, every joint on
             other arms; see :func:`~reflexarm.experiments.ident_runs.hydraulic_joints`).
-        speeds: speeds [rad/s] (default: :data:`~reflexarm.ident.joint_friction.DEFAULT_SPEEDS`).
+        speeds: speeds [rad/s] (default: :data:`~reflexarm.ident.friction.joint_friction.DEFAULT_SPEEDS`).
         travel: travel of each move [rad].
         model: the controller's model, also used to remove the rigid-body torque (default: ``robot``).
         offset: fit an offset too; it absorbs the mean rigid-body model error over the travel (the same

@@ -51,7 +51,7 @@ from reflexarm.ident import (
     validate_model,
 )
 from reflexarm.ident._blas_threads import DEFAULT_BLAS_THREADS, blas_threads
-from reflexarm.ident.write_back import with_consistent_links
+from reflexarm.ident.export.write_back import with_consistent_links
 from reflexarm.robots.perturbation import perturb_model
 from reflexarm.robots.robot_model import RobotModel, load_robot
 from reflexarm.sim import PAPER_NOISE, SensorNoise
@@ -233,10 +233,11 @@ def validation_trajectory(robot: RobotModel, seed: int, base_frequency: float) -
 
 
 def consistent_result(result: DynamicsIdentification, robot: RobotModel, nominal: RobotModel) -> DynamicsIdentification:
-    """``result`` with physically consistent link parameters (:func:`~reflexarm.ident.write_back.with_consistent_links`
-    with ``nominal``'s file inertias): those nearest to ``nominal``'s if every link of them is consistent (same
-    beta_b, hence M(q) positive definite), else the projection onto consistent parameters. What the model file
-    and the robot copy hold; ``robot`` is unused (kept for callers)."""
+    """``result`` with physically consistent link parameters
+    (:func:`~reflexarm.ident.export.write_back.with_consistent_links` with ``nominal``'s file inertias): those
+    nearest to ``nominal``'s if every link of them is consistent (same beta_b, hence M(q) positive definite),
+    else the projection onto consistent parameters. What the model file and the robot copy hold; ``robot`` is
+    unused (kept for callers)."""
     del robot
     return with_consistent_links(result, nominal, threads=None)[0]  # the caller sets the threads
 

@@ -8,9 +8,9 @@ Never imports :mod:`reflexarm.control`; the experiments that run the plant with 
 :mod:`reflexarm.experiments.identification`. Figures are in :mod:`reflexarm.ident.plots`.
 """
 
-from reflexarm.ident.base_parameters import BaseParameters, IllConditionedWarning, compute_base_parameters
-from reflexarm.ident.consistency import project_physically_consistent
-from reflexarm.ident.estimation import (
+from reflexarm.ident.estimation.base_parameters import BaseParameters, IllConditionedWarning, compute_base_parameters
+from reflexarm.ident.estimation.consistency import project_physically_consistent
+from reflexarm.ident.estimation.identify import (
     METHODS,
     DynamicsIdentification,
     FrictionParameters,
@@ -20,20 +20,24 @@ from reflexarm.ident.estimation import (
     mass_matrix_margin,
     validate_model,
 )
-from reflexarm.ident.excitation import ExcitationDesign, FourierTrajectory, optimize_excitation
-from reflexarm.ident.excitation_export import (
+from reflexarm.ident.estimation.known_terms import KnownJointTerms
+from reflexarm.ident.estimation.regressor import BatchRegressor, compute_friction_regressor
+from reflexarm.ident.excitation.design import ExcitationDesign, FourierTrajectory, optimize_excitation
+from reflexarm.ident.excitation.export import (
     ExcitationLimitError,
     ExcitationMarginWarning,
     SampledExcitation,
     sample_excitation,
     write_excitation_csv,
 )
-from reflexarm.ident.friction_parameters import (
-    ImplausibleFrictionWarning,
-    MissingFrictionError,
-    check_friction_plausibility,
+from reflexarm.ident.export.model_file import (
+    load_identified_model,
+    load_model_robot,
+    read_identified_model,
+    save_identified_model,
 )
-from reflexarm.ident.joint_friction import (
+from reflexarm.ident.export.write_back import with_consistent_links, write_identified_robot
+from reflexarm.ident.friction.joint_friction import (
     ConstantVelocityTrajectory,
     FrictionFit,
     FrictionPoint,
@@ -44,16 +48,12 @@ from reflexarm.ident.joint_friction import (
     plan_friction_experiment,
     segment_constant_velocity,
 )
-from reflexarm.ident.known_terms import KnownJointTerms
-from reflexarm.ident.logs import DEFAULT_CUTOFF_HZ, LogRepairWarning, RobotLog, load_log, preprocess_log, save_log
-from reflexarm.ident.model_file import (
-    load_identified_model,
-    load_model_robot,
-    read_identified_model,
-    save_identified_model,
+from reflexarm.ident.friction.parameters import (
+    ImplausibleFrictionWarning,
+    MissingFrictionError,
+    check_friction_plausibility,
 )
-from reflexarm.ident.regressor import BatchRegressor, compute_friction_regressor
-from reflexarm.ident.write_back import with_consistent_links, write_identified_robot
+from reflexarm.logs import DEFAULT_CUTOFF_HZ, LogRepairWarning, RobotLog, load_log, preprocess_log, save_log
 
 __all__ = [
     "DEFAULT_CUTOFF_HZ",

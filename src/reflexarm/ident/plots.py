@@ -14,9 +14,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from reflexarm.ident.estimation import TorqueValidation  # noqa: E402
-from reflexarm.ident.excitation import ExcitationDesign  # noqa: E402
-from reflexarm.ident.joint_friction import FrictionFit  # noqa: E402
+from reflexarm.ident.estimation.identify import TorqueValidation  # noqa: E402
+from reflexarm.ident.excitation.design import ExcitationDesign  # noqa: E402
+from reflexarm.ident.friction.joint_friction import FrictionFit  # noqa: E402
 
 __all__ = [
     "excitation_figure",

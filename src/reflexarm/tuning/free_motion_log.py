@@ -3,7 +3,7 @@
 The free-motion run of :func:`reflexarm.experiments.collision.free_motion_false_alarms` (the paper's
 sensor noise, the controller's model with +-10 % errors, no obstacle) with every *measurement* the
 controller received recorded (t, q, dq, tau_m, wrist wrench, all with their noise): the log a robot
-would write, in the schema of :mod:`reflexarm.ident.log_files`. The same run counts its false alarms
+would write, in the schema of :mod:`reflexarm.logs.files`. The same run counts its false alarms
 online at a given threshold, so a proposal can be checked on a held-out run.
 """
 
@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from reflexarm.ident.robot_log import RobotLog
+from reflexarm.logs.robot_log import RobotLog
 from reflexarm.robots.robot_model import RobotModel
 from reflexarm.signals import Command, Measurement
 

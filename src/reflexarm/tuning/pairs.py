@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from reflexarm.errors import ConfigError
-from reflexarm.ident.robot_log import RobotLog
+from reflexarm.logs.robot_log import RobotLog
 from reflexarm.robots.robot_model import RobotModel
 from reflexarm.tuning.defaults import DEFAULT_CONTACT_RATE, DEFAULT_METHOD, DEFAULT_RATE
 from reflexarm.tuning.delays import ramp_lag

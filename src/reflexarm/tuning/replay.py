@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from reflexarm.errors import ConfigError, DataError
-from reflexarm.ident.robot_log import RobotLog
+from reflexarm.logs.robot_log import RobotLog
 from reflexarm.robots.robot_model import RobotModel
 from reflexarm.signals import Measurement, Reference
 
@@ -183,7 +183,7 @@ _TRACE_FIELDS = ("q_meas", "dq", "tau_m", "wrench")
 
 
 def load_free_motion_log(path: str | os.PathLike[str], robot: RobotModel) -> RobotLog:
-    """A free-motion log from a file: a robot log in the schema of :mod:`reflexarm.ident.log_files`
+    """A free-motion log from a file: a robot log in the schema of :mod:`reflexarm.logs.files`
     (``.csv``, ``.parquet``, ``.npz``), or a reflexarm trace (``.parquet`` written by a closed-loop run).
 
     A trace holds the measured positions (``q_meas``) and torques but the plant's *true* velocities: the
@@ -191,7 +191,7 @@ def load_free_motion_log(path: str | os.PathLike[str], robot: RobotModel) -> Rob
     unfiltered), so its thresholds come out low; a :class:`ThresholdWarning` says so. Logs written by
     :func:`reflexarm.tuning.record_free_motion_log` hold exactly what the controller measured.
     """
-    from reflexarm.ident.logs import load_log
+    from reflexarm.logs import load_log
 
     p = Path(path)
     if is_trace_file(p):

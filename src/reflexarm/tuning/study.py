@@ -41,7 +41,7 @@ import numpy as np
 from scipy.stats import poisson
 
 from reflexarm.errors import ConfigError, DataError
-from reflexarm.ident.robot_log import RobotLog
+from reflexarm.logs.robot_log import RobotLog
 from reflexarm.robots.robot_model import RobotModel
 from reflexarm.tuning._log_check import count_crossings, lowest_level_crossed_at_most
 from reflexarm.tuning.defaults import DEFAULT_CONTACT_RATE, DEFAULT_METHOD, DEFAULT_RATE

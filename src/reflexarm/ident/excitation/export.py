@@ -1,0 +1,211 @@
+"""The excitation as a trajectory a robot can play: sampled positions, velocities and accelerations (CSV).
+
+:func:`sample_excitation` evaluates a :class:`~reflexarm.ident.FourierTrajectory` at a chosen rate and
+checks every sample against the robot's position limits, its velocity limits and an acceleration bound
+(robot files carry none; the excitation's own bound by default). :func:`write_excitation_csv` writes it:
+
+    t, position_<joint>, ..., velocity_<joint>, ..., acceleration_<joint>, ...
+
+in s, rad (m for prismatic joints), rad/s, rad/s^2, one row per sample from t = 0 to the end of the last
+period inclusive (the trajectory starts and ends at rest in the same pose). The column names are those of
+a ROS ``sensor_msgs/JointState`` export, so the file reads back with :func:`reflexarm.ident.load_log`'s
+column mapping.
+
+A sample beyond a limit is refused (:class:`ExcitationLimitError`, naming the joint 1-based, the quantity,
+the value, the limit and by how much it is exceeded); a position or velocity sample within
+``1 - WARN_FRACTION`` of a robot limit warns (:class:`ExcitationMarginWarning`). Sampling below
+:data:`MIN_SAMPLES_PER_PERIOD` samples per period of the highest harmonic is refused: a controller
+interpolating between such samples would not follow the designed motion.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from reflexarm.errors import ConfigError
+from reflexarm.ident.excitation.design import DEFAULT_MAX_ACCELERATION
+from reflexarm.ident.excitation.fourier_trajectory import FourierTrajectory
+from reflexarm.robots.robot_model import RobotModel
+
+__all__ = [
+    "MIN_SAMPLES_PER_PERIOD",
+    "WARN_FRACTION",
+    "ExcitationLimitError",
+    "ExcitationMarginWarning",
+    "SampledExcitation",
+    "sample_excitation",
+    "write_excitation_csv",
+]
+
+#: Samples per period of the highest harmonic below which the export is refused (20: the sampled sine
+#: deviates from a linear interpolation by at most 1 - cos(pi / 20) = 1.2 % of its amplitude).
+MIN_SAMPLES_PER_PERIOD = 20
+#: A position or velocity sample closer to the robot's limit than (1 - this) of the half range (position)
+#: or of the limit (velocity) warns. 0.98: within 2 %, i.e. 0.058 rad of a +-2.9 rad joint, closer than
+#: the excitation's default margin of 0.1 rad. (The acceleration bound is the excitation's own design
+#: bound, which an optimized trajectory touches by design: it is only enforced.)
+WARN_FRACTION = 0.98
+
+_UNITS = {"position": "rad", "velocity": "rad/s", "acceleration": "rad/s^2"}
+
+
+class ExcitationLimitError(ConfigError):
+    """A sample of the exported excitation is beyond a limit.
+
+    Attributes:
+        joint: 0-based joint index (1-based with its name in the message).
+        quantity: ``"position"``, ``"velocity"`` or ``"acceleration"``.
+        value: the worst sample's value; time: its time [s].
+        limit: the limit it exceeds (the bound on the side it exceeds).
+        excess: by how much it exceeds it (positive).
+    """
+
+    def __init__(
+        self, message: str, *, joint: int, quantity: str, value: float, time: float, limit: float, excess: float
+    ) -> None:
+        super().__init__(message)
+        self.joint = joint
+        self.quantity = quantity
+        self.value = value
+        self.time = time
+        self.limit = limit
+        self.excess = excess
+
+
+class ExcitationMarginWarning(UserWarning):
+    """A sample of the exported excitation comes within ``1 - WARN_FRACTION`` of a limit."""
+
+
+@dataclass(frozen=True)
+class SampledExcitation:
+    """The sampled excitation and its margins to the limits.
+
+    Attributes:
+        t: times (N,) [s]; q, dq, ddq: (N, n) [rad, rad/s, rad/s^2].
+        joint_names: the robot's joints.
+        rate: sampling rate [Hz].
+        margins: per quantity, the smallest distance to the limit per joint (n,) (in the quantity's unit;
+            negative: beyond).
+        limits: per quantity, the (lower, upper) limits used per joint, each (n,).
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    dq: np.ndarray
+    ddq: np.ndarray
+    joint_names: tuple[str, ...]
+    rate: float
+    margins: dict[str, np.ndarray]
+    limits: dict[str, tuple[np.ndarray, np.ndarray]]
+
+    def margin_rows(self) -> list[dict[str, object]]:
+        """Per joint (1-based), the smallest margin to each limit (for a printed table)."""
+        rows: list[dict[str, object]] = []
+        for j, name in enumerate(self.joint_names):
+            row: dict[str, object] = {"joint": f"{j + 1} ({name})"}
+            for quantity, m in self.margins.items():
+                row[f"{quantity}_margin"] = float(m[j])
+            rows.append(row)
+        return rows
+
+
+def sample_excitation(
+    trajectory: FourierTrajectory,
+    robot: RobotModel,
+    *,
+    rate: float,
+    max_acceleration: npt.ArrayLike = DEFAULT_MAX_ACCELERATION,
+) -> SampledExcitation:
+    """Sample ``trajectory`` at ``rate`` [Hz] over its whole duration and check it against the limits.
+
+    Args:
+        trajectory: the excitation (its ``periods`` set the duration).
+        robot: its position and velocity limits (infinite ones are not checked).
+        rate: samples per second [Hz].
+        max_acceleration: |ddq| bound per joint [rad/s^2] (robot files carry no acceleration limits;
+            pass the excitation's own bound).
+
+    Raises:
+        ConfigError: a rate that is not positive or too low for the highest harmonic, or a trajectory of
+            another number of joints.
+        ExcitationLimitError: a sample beyond a limit (the worst one is named).
+
+    Warns:
+        ExcitationMarginWarning: a position or velocity sample within ``1 - WARN_FRACTION`` of a limit.
+    """
+    n = robot.n
+    if trajectory.n != n:
+        raise ConfigError(f"the excitation moves {trajectory.n} joints; robot {robot.name!r} has {n}")
+    top_hz = trajectory.n_harmonics * trajectory.base_frequency_hz
+    if not (np.isfinite(rate) and rate > 0):
+        raise ConfigError(f"--rate must be a positive number of samples per second [Hz]; got {rate!r}")
+    if rate < MIN_SAMPLES_PER_PERIOD * top_hz:
+        raise ConfigError(
+            f"rate {rate:g} Hz is too low for the excitation's highest harmonic at {top_hz:.4g} Hz: use at least "
+            f"{MIN_SAMPLES_PER_PERIOD * top_hz:.4g} Hz ({MIN_SAMPLES_PER_PERIOD} samples per period of it)"
+        )
+    steps = int(np.floor(trajectory.duration * rate + 1e-9))
+    t = np.arange(steps + 1) / rate
+    q, dq, ddq = trajectory.evaluate(t)
+    amax = np.broadcast_to(np.asarray(max_acceleration, dtype=float), (n,))
+    vmax = robot.velocity_limit
+    limits = {
+        "position": (robot.lower_limit, robot.upper_limit),
+        "velocity": (-vmax, vmax),
+        "acceleration": (-amax, amax),
+    }
+    signals = {"position": q, "velocity": dq, "acceleration": ddq}
+    margins: dict[str, np.ndarray] = {}
+    names = tuple(robot.joint_names)
+    for quantity, x in signals.items():
+        lo, hi = (np.asarray(b, dtype=float) for b in limits[quantity])
+        below, above = x - lo, hi - x  # distances inside the limits, (N, n)
+        dist = np.minimum(below, above)
+        margins[quantity] = np.where(np.isfinite(lo) & np.isfinite(hi), dist.min(axis=0), np.inf)
+        finite = np.isfinite(lo) & np.isfinite(hi) & (hi < 1e6)
+        for j in np.flatnonzero(finite & (margins[quantity] < 0)):
+            k = int(np.argmin(dist[:, j]))
+            upper = above[k, j] < below[k, j]
+            limit = float(hi[j] if upper else lo[j])
+            raise ExcitationLimitError(
+                f"joint {j + 1} ({names[j]}) {quantity} {x[k, j]:.4g} {_UNITS[quantity]} at t = {t[k]:.4g} s is beyond "
+                f"its {'upper' if upper else 'lower'} limit {limit:.4g} {_UNITS[quantity]} by {-dist[k, j]:.4g}; "
+                "re-run 'reflexarm excite' with a larger --margin or lower --max-velocity/--max-acceleration",
+                joint=int(j),
+                quantity=quantity,
+                value=float(x[k, j]),
+                time=float(t[k]),
+                limit=limit,
+                excess=float(-dist[k, j]),
+            )
+        half = 0.5 * (hi - lo)
+        close = finite & (margins[quantity] < (1.0 - WARN_FRACTION) * half) & (quantity != "acceleration")
+        for j in np.flatnonzero(close):
+            warnings.warn(
+                f"joint {j + 1} ({names[j]}) {quantity} comes within {margins[quantity][j]:.4g} {_UNITS[quantity]} "
+                f"of its limit (less than {100 * (1 - WARN_FRACTION):g} % of the half range {half[j]:.4g})",
+                ExcitationMarginWarning,
+                stacklevel=2,
+            )
+    return SampledExcitation(t, q, dq, ddq, names, float(rate), margins, limits)
+
+
+def write_excitation_csv(sampled: SampledExcitation, path: str | os.PathLike[str]) -> Path:
+    """Write ``t, position_<joint>..., velocity_<joint>..., acceleration_<joint>...`` (see the module docstring)."""
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    names = sampled.joint_names
+    header = ["t"] + [f"{kind}_{name}" for kind in ("position", "velocity", "acceleration") for name in names]
+    data = np.column_stack([sampled.t, sampled.q, sampled.dq, sampled.ddq])
+    with p.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(header)
+        w.writerows([f"{v:.10g}" for v in row] for row in data)
+    return p
