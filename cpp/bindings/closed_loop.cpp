@@ -66,8 +66,11 @@ namespace
   };
 } // namespace
 
+void bindRunStatistics(nb::module_ & m); // run_statistics.cpp: reflexarm::RunStatistics
+
 NB_MODULE(_closed_loop, m)
 {
+  bindRunStatistics(m);
   m.doc() = "reflexarm's compiled closed loop: MuJoCo plant, sensors, the C++ controller, recording";
   using reflexarm::StepStatus;
   m.attr("STEP_OK") = static_cast<int>(StepStatus::Ok);

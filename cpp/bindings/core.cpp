@@ -21,6 +21,7 @@
 #include "reflexarm/model_io.hpp"
 #include "reflexarm/reflexarm.hpp"
 #include "event_dict.hpp"
+#include "replay.hpp"
 #include "tick_io.hpp"
 
 namespace nb = nanobind;
@@ -302,6 +303,19 @@ NB_MODULE(_core, m)
       c.cmd.fault_code = reflexarm::FaultCode::None; // the last command's fault text is cleared as well
       c.cmd.fault_text[0] = '\0';
     })
+    .def(
+      "replay",
+      [](PyController & c, const reflexarm_bindings::ReplayCol & t, const reflexarm_bindings::ReplayRows & q,
+         const reflexarm_bindings::ReplayRows & dq, const reflexarm_bindings::ReplayRows & tau_m, nb::handle wrench,
+         const reflexarm_bindings::ReplayCol & gravity, nb::handle residual, nb::handle tau, nb::handle over,
+         nb::handle collision, nb::handle mode, nb::handle status, size_t max_faults) {
+        return reflexarm_bindings::replay(c.ctrl, c.cmd, t, q, dq, tau_m, wrench, gravity, residual, tau, over,
+                                          collision, mode, status, max_faults);
+      },
+      "t"_a, "q"_a, "dq"_a, "tau_m"_a, "wrench"_a.none(), "gravity"_a, "residual"_a, "tau"_a.none(), "over"_a.none(),
+      "collision"_a.none(), "mode"_a.none(), "status"_a.none(), "max_faults"_a = 16,
+      "A whole log through update() (reflexarm::replayLog; reference: a hold at the measured q) into the given "
+      "output arrays; returns (rejected rows, [(row, fault text)] of the first max_faults).")
     .def(
       "copy_state_from",
       [](PyController & self, const PyController & other) {

@@ -5,6 +5,7 @@ from reflexarm.control.collision import CollisionDetector, CollisionEvent, React
 from reflexarm.control.contract import FAULT_CODES, InputBounds, TimingStats
 from reflexarm.control.controller import MODES, OBSERVER_DISCRETIZATIONS, REACTIONS, Controller
 from reflexarm.control.impedance import ImpedanceGains, JointImpedanceController, modal_damping
+from reflexarm.control.log_replay import ReplayEvent, ReplayResult, replay
 from reflexarm.control.modes import CONTROL_MODES, ControlMode, ModeSchedule, ModeSupervisor, ModeTransition
 from reflexarm.control.momentum_observer import MomentumObserver
 from reflexarm.control.observer import DisturbanceObserver
@@ -27,7 +28,10 @@ __all__ = [
     "ModeSupervisor",
     "ModeTransition",
     "ReactionSettings",
+    "ReplayEvent",
+    "ReplayResult",
     "MomentumObserver",
     "TimingStats",
     "modal_damping",
+    "replay",
 ]

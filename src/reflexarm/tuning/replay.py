@@ -1,11 +1,11 @@
 """Replay the product's observer offline on a recorded log: the residual the controller would have seen.
 
-No second observer is written here: every sample of the log goes through
-:meth:`reflexarm.control.Controller.step` (eqs. (4)-(6) in the compiled tick, the same input contract),
-with the user's model and observer settings. The residual depends on the measurements only (q, dq,
-tau_m, the wrist wrench with EFC, the model's gravity), not on the commanded torque, so the reference
-handed to the controller is a hold at the measured position and kappa_eps (which changes only the command)
-does not change it.
+No second observer is written here: every sample of the log goes through the controller's compiled tick
+(eqs. (4)-(6), the same input contract) in one call, :func:`reflexarm.control.replay`, which equals
+:meth:`reflexarm.control.Controller.step` sample by sample, with the user's model and observer settings.
+The residual depends on the measurements only (q, dq, tau_m, the wrist wrench with EFC, the model's
+gravity), not on the commanded torque, so the reference handed to the controller is a hold at the measured
+position and kappa_eps (which changes only the command) does not change it.
 """
 
 from __future__ import annotations
@@ -21,7 +21,6 @@ import numpy as np
 from reflexarm.errors import ConfigError, DataError
 from reflexarm.logs.robot_log import RobotLog
 from reflexarm.robots.robot_model import RobotModel
-from reflexarm.signals import Measurement, Reference
 
 __all__ = [
     "RECORDED_RESIDUAL",
@@ -149,25 +148,12 @@ def replay_residual(log: RobotLog, robot: RobotModel, settings: ObserverSettings
         dt=dt,
         torque_limit=None,
     )
-    N, n = log.q.shape
-    t = np.ascontiguousarray(log.t, dtype=float)
-    q, dq = np.ascontiguousarray(log.q, dtype=float), np.ascontiguousarray(log.dq, dtype=float)
-    tau_m = np.ascontiguousarray(log.measured_torque, dtype=float)
-    wrench = np.zeros((N, 6)) if log.wrench is None else np.ascontiguousarray(log.wrench, dtype=float)
-    gravity = np.asarray(robot.gravity, dtype=float).copy()
-    zeros = np.zeros(n)
-    out = np.empty((N, n))
-    faults: list[str] = []
-    n_fault = 0
-    step = ctrl.step
-    for k in range(N):
-        qk = q[k]
-        cmd = step(Measurement(float(t[k]), qk, dq[k], tau_m[k], wrench[k], gravity), Reference(qk, zeros, zeros))
-        out[k] = cmd.residual
-        if cmd.fault:
-            n_fault += 1
-            if len(faults) < 5:
-                faults.append(f"t = {t[k]:.4f} s: {cmd.fault}")
+    # the whole log in one call of the C++ core: Controller.step on every sample, bit for bit
+    from reflexarm.control import replay
+
+    rep = replay(ctrl, log.t, log.q, log.dq, log.measured_torque, log.wrench, gravity=robot.gravity)
+    t, out, n_fault, N = rep.t, rep.residual, rep.fault_ticks, rep.t.size
+    faults = [f"t = {tk:.4f} s: {text}" for tk, text in rep.faults[:5]]
     if n_fault:
         warnings.warn(
             f"{log.source}: the controller rejected {n_fault} of {N} samples (their residual holds the last "
