@@ -18,8 +18,8 @@ from reflexarm.sim.trajectory import JointTrajectory
 
 def _core_params(controller: Any, core: ModuleType) -> Any:
     """The core's ControllerParams of a (reset) Python Controller: those the Controller configures its own core
-    with (``control._setup.core_params``), with the switches it has now."""
-    from reflexarm.control._setup import core_params
+    with (``control.controller.core_params``), with the switches it has now."""
+    from reflexarm.control.controller import core_params
 
     p = core_params(controller, core)
     p.kappa_f, p.kappa_eps, p.kappa_ext = (

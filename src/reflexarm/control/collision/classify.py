@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from reflexarm.control.collision.contact import ContactEstimate, Determined
+from reflexarm.control.collision.contact import ContactEstimate, sensor_estimate
 from reflexarm.control.collision.event import CollisionEvent
 from reflexarm.control.collision.isolate import RELATIVE_TOLERANCE, ContactIsolator
 from reflexarm.errors import ConfigError
@@ -90,7 +90,7 @@ def _measured_contact(robot: RobotModel, q: np.ndarray, wrench: npt.ArrayLike) -
         return ContactEstimate.none("the wrist sensor measures no force")
     offset = np.cross(f_s, m_s) / f2  # the point of the line of action closest to the sensor origin
     link = robot.pin_model.frames[robot.sensor_frame_id].parentJoint - 1
-    return sensor_estimate(robot, link, position + rotation @ offset, rotation @ f_s)
+    return sensor_estimate(robot.sensor_frame, link, position + rotation @ offset, rotation @ f_s)
 
 
 _GEOMETRY_CACHE: dict[tuple[object, ...], CollisionGeometry] = {}
@@ -112,22 +112,6 @@ def controller_geometry(robot: RobotModel, spacing: float = CONTROLLER_SPACING) 
     if geometry is None:
         geometry = _GEOMETRY_CACHE[key] = link_collision_geometry(robot, spacing=spacing)
     return geometry
-
-
-def sensor_estimate(robot: RobotModel, link: int, point: np.ndarray, force: np.ndarray) -> ContactEstimate:
-    """The ContactEstimate of a contact the wrist sensor measured (the measured force, a point of its line of
-    action)."""
-    return ContactEstimate(
-        link,
-        robot.sensor_frame,
-        np.asarray(point, dtype=float),
-        np.asarray(force, dtype=float),
-        0.0,
-        Determined.POINT_AND_FORCE,
-        f"measured by the wrist sensor {robot.sensor_frame!r}: force and its line of action; the point is the one "
-        "of that line closest to the sensor origin",
-        (link,),
-    )
 
 
 def contact_geometry_args(geometry: CollisionGeometry, share: float) -> tuple[object, ...]:

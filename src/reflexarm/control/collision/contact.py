@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["ContactEstimate", "Determined"]
+__all__ = ["ContactEstimate", "Determined", "sensor_estimate"]
 
 
 class Determined(StrEnum):
@@ -93,3 +93,20 @@ class ContactEstimate:
             "consistent_points": self.consistent_points,
             "point_spread": self.point_spread,
         }
+
+
+def sensor_estimate(sensor_frame: str, link: int, point: object, force: object) -> ContactEstimate:
+    """The ContactEstimate of a contact the wrist sensor measured (the measured force, a point of its line of
+    action); ``sensor_frame`` "" when the sensor has no name to give."""
+    where = f" {sensor_frame!r}" if sensor_frame else ""
+    return ContactEstimate(
+        link,
+        sensor_frame,
+        np.asarray(point, dtype=float),
+        np.asarray(force, dtype=float),
+        0.0,
+        Determined.POINT_AND_FORCE,
+        f"measured by the wrist sensor{where}: force and its line of action; the point is the one of that line "
+        "closest to the sensor origin",
+        (link,),
+    )

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from reflexarm.control.collision.contact import ContactEstimate, Determined
+from reflexarm.control.collision.contact import ContactEstimate, sensor_estimate
 from reflexarm.robots.collision_geometry import CollisionGeometry
 from reflexarm.robots.robot_model import RobotModel
 
@@ -142,14 +142,9 @@ def _estimate(
     out = record.get("estimate")
     if out is None:
         return None
-    if record.get("estimate_from_sensor"):
-        if robot is None:  # no names to give: the sensor frame unnamed
-            point, force = np.asarray(out["point"], dtype=float), np.asarray(out["force"], dtype=float)
-            return ContactEstimate(int(out["link"]), "", point, force, 0.0, Determined.POINT_AND_FORCE,
-                                   "measured by the wrist sensor")  # fmt: skip
-        from reflexarm.control.collision.classify import sensor_estimate
-
-        return sensor_estimate(robot, int(out["link"]), out["point"], out["force"])
+    if record.get("estimate_from_sensor"):  # the sensor frame unnamed when there is no robot to name it
+        frame = "" if robot is None else robot.sensor_frame
+        return sensor_estimate(frame, int(out["link"]), out["point"], out["force"])
     if geometry is None:
         return None
     from reflexarm.control.collision.isolate_core import estimate_from_core
