@@ -1,0 +1,147 @@
+"""The outputs of ``reflexarm pfl``: the runs (CSV/JSON), the side-by-side table of permissible speeds, a figure
+per region (peak force vs speed with both limits and the analytic line) and a one-page HTML report."""
+
+from __future__ import annotations
+
+import csv
+import html
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+from reflexarm.experiments.pfl import QS_WINDOW_S
+from reflexarm.experiments.pfl_study import PflStudy, safe_speeds
+
+__all__ = ["speed_table", "write_pfl_outputs"]
+
+
+def _ok(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    return [r for r in rows if r.get("error") is None and r.get("peak_force_N") is not None]
+
+
+def speed_table(study: PflStudy) -> list[dict[str, Any]]:
+    """One row per (arm, region): the permissible speed from the standard's mass and from the posture-dependent
+    mass (at the contact posture), and the simulated safe speed with detection off and with each reaction [m/s];
+    beside them, clamped: the largest force after ``QS_WINDOW_S`` past detection per reaction [N]."""
+    out = []
+    reactions = study.conditions.get("reactions", [])
+    pairs = dict.fromkeys((r["arm"], r["region"]) for r in study.rows)
+    for arm, region in pairs:
+        off = _ok(study.select(arm=arm, region=region, mode="transient", detection=False))
+        row: dict[str, Any] = {"arm": arm, "region": region}
+        first = off[0] if off else None
+        row["F_T_N"] = first["F_T_N"] if first else None
+        row["F_QS_N"] = first["F_QS_N"] if first else None
+        row["standard_mass_kg"] = first["standard_mass_kg"] if first else None
+        row["effective_mass_kg"] = first["effective_mass_kg"] if first else None
+        row["v_standard_m_s"] = first["standard_permissible_speed_m_s"] if first else None
+        row["v_posture_m_s"] = first["permissible_speed_m_s"] if first else None
+        row["v_sim_detection_off_m_s"] = safe_speeds(off)["simulated_safe_speed_m_s"]
+        for reaction in reactions:
+            rr = study.select(arm=arm, region=region, mode="transient", detection=True, reaction=reaction)
+            row[f"v_sim_{reaction}_m_s"] = safe_speeds(rr)["simulated_safe_speed_m_s"]
+        for reaction in reactions:
+            c = _ok(study.select(arm=arm, region=region, mode="clamped", reaction=reaction))
+            row[f"clamped_{reaction}_after_{QS_WINDOW_S:g}s_N"] = c[0]["max_force_after_window_N"] if c else None
+        errors = sorted({r["error"] for r in study.select(arm=arm, region=region) if r.get("error")})
+        row["errors"] = "; ".join(errors)
+        out.append(row)
+    return out
+
+
+def _write_csv(rows: list[dict[str, Any]], path: Path) -> Path:
+    keys: list[str] = list(dict.fromkeys(k for r in rows for k in r))
+    with path.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=keys)
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: ("" if r.get(k) is None else r.get(k)) for k in keys})
+    return path
+
+
+def _region_figure(study: PflStudy, region: str, path: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = _ok(study.select(region=region, mode="transient"))
+    fig, ax = plt.subplots(figsize=(7.0, 4.5))
+    arms = list(dict.fromkeys(r["arm"] for r in rows))
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for i, arm in enumerate(arms):
+        c = colors[i % len(colors)]
+        off = sorted((r for r in rows if r["arm"] == arm and not r["detection"]), key=lambda r: r["approach_speed_m_s"])
+        v = [r["approach_speed_m_s"] for r in off]
+        ax.plot(v, [r["peak_force_N"] for r in off], "o", color=c, label=f"{arm}: simulated, detection off")
+        ax.plot(v, [r["analytic_force_N"] for r in off], "-", color=c, label=f"{arm}: v sqrt(mu k), m_R(q, u)")
+        ax.plot(v, [r["analytic_standard_force_N"] for r in off], ":", color=c, label=f"{arm}: m_R = M/2")
+        det = [r for r in rows if r["arm"] == arm and r["detection"]]
+        ax.plot([r["approach_speed_m_s"] for r in det], [r["peak_force_N"] for r in det], "x", color=c, alpha=0.6)
+    if rows:
+        ax.axhline(rows[0]["F_T_N"], color="k", lw=1.5, label=f"F_T = {rows[0]['F_T_N']:g} N")
+        ax.axhline(rows[0]["F_QS_N"], color="k", ls="--", lw=1.0, label=f"F_QS = {rows[0]['F_QS_N']:g} N")
+    ax.set_xlabel("approach speed [m/s]")
+    ax.set_ylabel("peak contact force [N]")
+    ax.set_title(f"{region}: transient contact (x: with detection and each reaction)")
+    ax.legend(fontsize=6, ncol=2)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _fmt(v: Any) -> str:
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return "-"
+    return f"{v:.3g}" if isinstance(v, float) else html.escape(str(v))
+
+
+def _html(study: PflStudy, table: list[dict[str, Any]], figures: list[Path]) -> str:
+    keys = [k for k in table[0] if k != "errors"] if table else []
+    head = "".join(f"<th>{html.escape(k)}</th>" for k in keys)
+    body = "".join("<tr>" + "".join(f"<td>{_fmt(r[k])}</td>" for k in keys) + "</tr>" for r in table)
+    errors = sorted({r["error"] for r in study.rows if r.get("error")})
+    err = "".join(f"<li>{html.escape(e)}</li>" for e in errors) or "<li>none</li>"
+    figs = "".join(f'<img src="{f.name}" width="48%">' for f in figures)
+    cond = html.escape(json.dumps(study.conditions, default=str))
+    return f"""<!doctype html><html><head><meta charset="utf-8"><title>reflexarm pfl</title>
+<style>body{{font-family:sans-serif;font-size:11px;margin:12px}}table{{border-collapse:collapse}}
+td,th{{border:1px solid #bbb;padding:2px 4px;text-align:right}}</style></head><body>
+<h2>Human contact limits (ISO/TS 15066 Annex A): permissible speeds and simulated contacts</h2>
+<p>Transient contact: two masses and the region's spring, F = v sqrt(mu k), v_max = F_T / sqrt(mu k),
+mu = (1/m_H + 1/m_R)^-1; m_R = M/2 (standard, no payload) or m_R(q, u) = 1/(u^T J M^-1 J^T u) at the end effector
+in its direction of travel at contact. Simulated: the demo swing of each arm into the region (MuJoCo plant, the
+region's spring k and mass m_H; clamped: a wall behind the spring), the arm's own controller, detection and
+reaction. Speeds [m/s], forces [N], masses [kg]. Skull and face: Table A.2 gives no transient limit; F_QS stands
+in (this package's choice). "v_sim" is the speed at which the simulated peak reaches F_T (proportional
+scaling of the tested runs); clamped columns: the largest force from {QS_WINDOW_S:g} s after detection.</p>
+<table><tr>{head}</tr>{body}</table>
+<h3>Runs that could not be made</h3><ul>{err}</ul>
+<h3>Per region: peak force vs speed</h3>{figs}
+<p>Conditions: {cond}</p></body></html>"""
+
+
+def write_pfl_outputs(study: PflStudy, folder: str | Path) -> dict[str, Path]:
+    """Write ``pfl_runs.csv``, ``pfl_table.csv``, ``pfl.json``, ``pfl_<region>.png`` and ``pfl_report.html``."""
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    table = speed_table(study)
+    paths = {
+        "runs_csv": _write_csv(study.rows, out / "pfl_runs.csv"),
+        "table_csv": _write_csv(table, out / "pfl_table.csv") if table else out / "pfl_table.csv",
+        "json": out / "pfl.json",
+    }
+    paths["json"].write_text(
+        json.dumps({"conditions": study.conditions, "table": table, "runs": study.rows}, indent=1, default=str)
+    )
+    figures = [
+        _region_figure(study, reg, out / f"pfl_{reg}.png") for reg in dict.fromkeys(r["region"] for r in study.rows)
+    ]
+    for f in figures:
+        paths[f.stem] = f
+    paths["html"] = out / "pfl_report.html"
+    paths["html"].write_text(_html(study, table, figures))
+    return paths
