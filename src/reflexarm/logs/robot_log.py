@@ -14,15 +14,12 @@ instead of rejected, unless ``repair=False``:
 
 * **exact repeats**: a row whose every value except the time equals the previous row is the same robot
   sample read twice by the host; it is dropped.
-* **jittery host time stamps**: when the steps are not (close to) multiples of one period, the samples
-  are re-timed on a grid of the nominal period T (the median step). The log itself says how many periods
-  lie between two samples where that is unambiguous: the measured displacement over the mean measured
-  velocity, ``dt = (dq_mean . delta_q) / |dq_mean|^2``, when it lands within 0.2 T of a whole number
-  of periods. Those step counts are aligned with the host clock (which is right on average but jitters
-  locally) by a Viterbi search over each sample's tick (``_align_ticks``), so the result neither
-  drifts from the host clock nor follows its jitter. The warning reports the largest shift and how much
-  better delta_q and dq dt agree afterwards; if no alignment stays within :data:`MAX_RETIME_SHIFT`
-  periods of the host clock, the host time is kept.
+* **jittery host time stamps**: when the steps are not (close to) whole multiples of the period T (always
+  the median step), the samples are put on the nearest tick of a grid fitted to the stamps, but only if
+  no sample moves by more than half a period, no two samples share a tick, no gap is created from jitter
+  and positions and velocities agree no worse; otherwise the log's own stamps are kept (irregular
+  sampling is valid; repeated stamps are spread evenly up to the next one). The warning or note says
+  which, and why (:mod:`reflexarm.logs._retime`).
 """
 
 from __future__ import annotations
@@ -34,7 +31,7 @@ import numpy as np
 import numpy.typing as npt
 
 from reflexarm.errors import DataError
-from reflexarm.logs._retime import _TICK_TOLERANCE, _estimate_period, _retime
+from reflexarm.logs._retime import irregular_steps, retime
 from reflexarm.logs.plausibility import check_absolute_bounds
 
 __all__ = ["WRENCH_COLUMNS", "LogRepairWarning", "RobotLog"]
@@ -334,27 +331,26 @@ def _finish(
         notes_out.append(msg)
         t = data["t"]
     steps = np.diff(t)
-    if np.any(steps <= 0):
-        if not repair:
-            r = int(np.argmax(steps <= 0)) + 1
-            raise DataError(f"{where}: time does not increase at row {r}: t = {t[r]:.9g} s twice")
     if period is not None:
         T = float(period)
     elif np.any(steps > 0):
-        T = _estimate_period(t, data["q"], data["dq"])
+        T = float(np.median(steps[steps > 0]))  # the period is the median step, always
     else:
         raise DataError(f"{where}: all time stamps are equal")
-    ticks = steps / T
-    irregular = np.abs(ticks - np.maximum(np.round(ticks), 1.0)) > _TICK_TOLERANCE
-    if irregular.any() or np.any(steps <= 0):
+    irregular = irregular_steps(steps, T)
+    if irregular.any():
         if not repair:
-            r = int(np.argmax(irregular | (steps <= 0))) + 1
+            if np.any(steps <= 0):
+                r = int(np.argmax(steps <= 0)) + 1
+                raise DataError(f"{where}: time does not increase at row {r}: t = {t[r]:.9g} s twice")
+            r = int(np.argmax(irregular)) + 1
             raise DataError(
                 f"{where}: irregular time step at row {r}: {steps[r - 1] * 1e3:.3g} ms for a {T * 1e3:.3g} ms period "
                 f"({int(irregular.sum())} such steps); load with repair=True to re-time"
             )
-        new_t, msg = _retime(t, data["q"], data["dq"], T, where)
-        warnings.warn(msg, LogRepairWarning, stacklevel=3)
+        new_t, msg, changed = retime(t, data["q"], data["dq"], T, where, fixed=period is not None)
+        if changed:
+            warnings.warn(msg, LogRepairWarning, stacklevel=3)
         notes_out.append(msg)
         data["t"] = new_t
     log = RobotLog(
