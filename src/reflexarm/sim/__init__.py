@@ -4,6 +4,7 @@ push, end-effector force step), noisy sensors, a closed-loop runner (Python, or 
 
 from reflexarm.sim.cinderblock import Cinderblock
 from reflexarm.sim.compiled_loop import compiled_reason, run_compiled, run_fast
+from reflexarm.sim.compiled_stream import stream_compiled, stream_fast
 from reflexarm.sim.elbow_stick import ElbowStick
 from reflexarm.sim.end_effector_force import EndEffectorForce
 from reflexarm.sim.hand_push import HandPush
@@ -35,4 +36,6 @@ __all__ = [
     "run_compiled",
     "run_fast",
     "stream_closed_loop",
+    "stream_compiled",
+    "stream_fast",
 ]

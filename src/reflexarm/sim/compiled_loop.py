@@ -34,6 +34,7 @@ from reflexarm.errors import ConfigError, SimulationError
 from reflexarm.signals import Command
 from reflexarm.sim._compiled_inputs import _core_params, _draw_noise, _forces, _sample_reference, _tick_times
 from reflexarm.sim._playback import ScenePlay, event_ticks, hand_push_back, hand_push_to, playback
+from reflexarm.sim._run_memory import check_memory
 from reflexarm.sim.plant import MAX_SPEED, Plant
 from reflexarm.sim.recording import _Recorder
 from reflexarm.sim.run_observers import (
@@ -99,6 +100,8 @@ def run_fast(
     (same arguments; ``progress`` and ``callback`` always take the Python loop). Active run observers that
     accept the compiled loop's recorded states (stills) get them after a compiled run; any other observer (a
     video, which renders frames during the run) takes the Python loop. ``trace.meta["loop"]`` says which."""
+    N, _ = _check(plant, controller, trajectory, duration)
+    check_memory(N, plant.n, "run_fast")  # both loops keep every tick in memory
     reset = bool(kwargs.get("reset_controller", True))
     if (
         kwargs.get("callback") is None
@@ -152,41 +155,30 @@ def _run(
     """:func:`run_compiled`; with ``still``, the states of a still are kept in C++ and handed to ``still``
     after the run (also when the run fails: the Python loop's observers have seen its ticks then too)."""
     N, meta = _check(plant, controller, trajectory, duration)
+    check_memory(N, plant.n, "run_compiled")
     reason = compiled_reason(plant, controller, reset_controller=reset_controller)
     if reason is not None:
         raise ConfigError(f"this run cannot use the compiled loop: {reason}")
+    with plant.in_use("a compiled run"):  # C++ steps the plant's MuJoCo data through raw pointers
+        return _run_held(plant, controller, trajectory, N, meta, still)
+
+
+def _run_held(
+    plant: Plant,
+    controller: ControllerLike,
+    trajectory: TrajectoryLike,
+    N: int,
+    meta: dict[str, Any],
+    still: Callable[[CompiledStill], None] | None,
+) -> Trace:
+    """:func:`_run` on the plant it holds."""
     mods = _modules()
     assert not isinstance(mods, str)
     core, cl = mods
     ctrl: Any = controller  # a reflexarm Controller (compiled_reason checked it)
     ctrl.reset()  # the switches to configure from are those after a reset
-    m, n = plant.model, plant.n
-    loop = cl.ClosedLoop(
-        m._address,
-        plant.data._address,
-        ctrl.robot.pin_model.saveToString(),
-        _core_params(ctrl, core),
-        np.asarray(plant._qadr_arr, dtype=np.int64),
-        np.asarray(plant._arm_dofs, dtype=np.int64),
-        np.asarray(plant._load_bodies, dtype=np.int64),
-        np.asarray(plant._arm_bodies, dtype=np.int64),
-        plant._force_adr,
-        plant._torque_adr,
-        plant._com_ref_body,
-        plant._sensor_site,
-        plant._physical_sensor,
-        plant.substeps,
-        MAX_SPEED,
-        tuple(float(g) for g in plant._gravity),
-    )
-    if getattr(ctrl, "contact_geometry", None) is not None:  # isolation in the tick, as the Python controller's
-        from reflexarm.control.collision.classify import contact_geometry_args
-
-        loop.set_contact_geometry(*contact_geometry_args(ctrl.contact_geometry, ctrl.isolation_share))
-    # MuJoCo's profiling timers read the clock dozens of times per step through the mujoco package's time
-    # callback (5-8 % of a step); unless someone installed a callback to read them, they read 0 in the loop
-    # (no effect on the state; reflexarm::QuietTimers)
-    loop.quiet_timers = mujoco.get_mjcb_time() is None
+    n = plant.n
+    loop = _make_loop(plant, ctrl, core, cl)
     if still is not None:
         loop.keep_still(_STILL_SPEC)
     times = _tick_times(plant, N)
@@ -288,6 +280,38 @@ def _run(
     if not np.array_equal(rec.t[: rec.done], times[: rec.done]):
         raise SimulationError("the compiled loop's clock differs from the sampled reference times; not returning it")
     return rec.trace(meta | {"loop": "compiled", "collision_event": _event(loop.event, ctrl)})
+
+
+def _make_loop(plant: Plant, ctrl: Any, core: ModuleType, cl: ModuleType) -> Any:
+    """The C++ ClosedLoop on ``plant``'s MuJoCo model and data with the (reset) controller's configuration."""
+    m = plant.model
+    loop = cl.ClosedLoop(
+        m._address,
+        plant.data._address,
+        ctrl.robot.pin_model.saveToString(),
+        _core_params(ctrl, core),
+        np.asarray(plant._qadr_arr, dtype=np.int64),
+        np.asarray(plant._arm_dofs, dtype=np.int64),
+        np.asarray(plant._load_bodies, dtype=np.int64),
+        np.asarray(plant._arm_bodies, dtype=np.int64),
+        plant._force_adr,
+        plant._torque_adr,
+        plant._com_ref_body,
+        plant._sensor_site,
+        plant._physical_sensor,
+        plant.substeps,
+        MAX_SPEED,
+        tuple(float(g) for g in plant._gravity),
+    )
+    if getattr(ctrl, "contact_geometry", None) is not None:  # isolation in the tick, as the Python controller's
+        from reflexarm.control.collision.classify import contact_geometry_args
+
+        loop.set_contact_geometry(*contact_geometry_args(ctrl.contact_geometry, ctrl.isolation_share))
+    # MuJoCo's profiling timers read the clock dozens of times per step through the mujoco package's time
+    # callback (5-8 % of a step); unless someone installed a callback to read them, they read 0 in the loop
+    # (no effect on the state; reflexarm::QuietTimers)
+    loop.quiet_timers = mujoco.get_mjcb_time() is None
+    return loop
 
 
 def _event(record: dict[str, Any], ctrl: Any) -> dict[str, Any] | None:

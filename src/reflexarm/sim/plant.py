@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Callable, Sequence
+import threading
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from typing import Any
 
 import mujoco
@@ -202,6 +204,10 @@ class Plant(_PlantSensors, _PlantForces):
         self._next_force = 0
         self._failed: str | None = None
         self._tick = 0
+        # one run at a time (in_use): MuJoCo's data stepped by two threads at once crashes the process
+        self._user_lock = threading.Lock()
+        self._user: str | None = None  # who runs the plant now ("... in thread 'name'")
+        self._user_thread: int | None = None
         self.reset(robot.home)
 
     # ------------------------------------------------------------------ facts
@@ -277,7 +283,12 @@ class Plant(_PlantSensors, _PlantForces):
     ) -> None:
         """Put the arm at ``q0`` (default: the robot's home) with velocity ``dq0`` (default 0), the scene at
         its initial state, time 0, no applied forces, zero torque; restart the noise sequence from
-        ``seed`` (default: the plant's seed)."""
+        ``seed`` (default: the plant's seed).
+
+        Raises:
+            SimulationError: another thread runs the plant now (:meth:`in_use`); reset it after that run.
+        """
+        self._check_user("reset()")
         n = self.n
         q = _state_vector(self.robot.home if q0 is None else q0, n, "q0")
         v = np.zeros(n) if dq0 is None else _state_vector(dq0, n, "dq0")
@@ -307,6 +318,8 @@ class Plant(_PlantSensors, _PlantForces):
             SimulationError: non-finite ``tau`` (names the joints), or the state diverged (NaN/inf or a
                 speed above ``MAX_SPEED``); the plant then refuses to step until :meth:`reset`.
         """
+        if self._user_thread is not None and self._user_thread != threading.get_ident():
+            self._check_user("step()")
         if self._failed is not None:
             raise SimulationError(f"the plant failed earlier ({self._failed}); call reset() first")
         t = np.asarray(tau, dtype=float)
@@ -337,6 +350,41 @@ class Plant(_PlantSensors, _PlantForces):
         vv = _kernels.sum_squares(self._qvel)
         if not vv < MAX_SPEED * MAX_SPEED or d.time < t_end - 0.5 * self.timestep:
             self._fail(vv)
+
+    # ------------------------------------------------------------------ one user at a time
+    @contextmanager
+    def in_use(self, what: str) -> Iterator[None]:
+        """Hold the plant for one run (``what`` names it in the errors of other users).
+
+        While held, another run (any thread) is refused, and :meth:`reset` / :meth:`step` from another thread
+        raise: MuJoCo's data stepped or reset by two threads at once crashes the process. The closed loops
+        (Python and compiled) hold their plant for the whole run; use one Plant per thread.
+
+        Raises:
+            SimulationError: the plant is already in use (the message says by what, in which thread).
+        """
+        if not self._user_lock.acquire(blocking=False):
+            raise SimulationError(
+                f"this Plant is in use by {self._user or 'another run'}; {what} cannot run on it at the same time "
+                "(one run per plant: make a Plant per thread)"
+            )
+        self._user = f"{what} in thread {threading.current_thread().name!r}"
+        self._user_thread = threading.get_ident()
+        try:
+            yield
+        finally:
+            self._user = None
+            self._user_thread = None
+            self._user_lock.release()
+
+    def _check_user(self, call: str) -> None:
+        """SimulationError if another thread holds the plant (:meth:`in_use`)."""
+        user, owner = self._user, self._user_thread
+        if owner is not None and owner != threading.get_ident():
+            raise SimulationError(
+                f"{call} from thread {threading.current_thread().name!r} while this Plant is in use by {user}; "
+                "wait for that run to end (one run per plant: make a Plant per thread)"
+            )
 
     def _fail(self, vv: float) -> None:
         d = self._data

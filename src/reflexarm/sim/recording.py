@@ -108,6 +108,7 @@ class RunStatistics:
             (:meth:`ticks_above`).
         path: the streamed trace file, if one was written.
         error: the exception that ended the run early, if any (``"Type: message"``).
+        loop: which loop ran: "python" or "compiled" (:func:`~reflexarm.sim.stream_fast`).
     """
 
     n: int
@@ -128,6 +129,7 @@ class RunStatistics:
     residual_counts: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), dtype=np.int64))
     path: Path | None = None
     error: str | None = None
+    loop: str = "python"
     _last_collision: bool = field(default=False, repr=False)
 
     def __post_init__(self) -> None:

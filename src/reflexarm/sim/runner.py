@@ -16,6 +16,7 @@ import numpy as np
 from reflexarm._progress import show_progress
 from reflexarm.errors import ConfigError
 from reflexarm.signals import Command, Measurement, Reference
+from reflexarm.sim._trace_rows import check_every, every_nth
 from reflexarm.sim.plant import Plant
 from reflexarm.sim.recording import RunStatistics, _Recorder
 from reflexarm.sim.run_observers import attach_observers
@@ -84,7 +85,8 @@ def run_closed_loop(
     callback = attach_observers(plant, callback)  # reflexarm.sim.run_observers (video, stills)
     rec = _Recorder(N, plant.n)
     try:
-        _loop(plant, controller, trajectory, N, rec, None, progress, callback, reset_controller)
+        with plant.in_use("a closed-loop run"):  # one run per plant (Plant.in_use)
+            _loop(plant, controller, trajectory, N, rec, None, progress, callback, reset_controller)
     except BaseException as e:
         try:
             e.trace = rec.trace(meta | {"error": f"{type(e).__name__}: {e}"})  # type: ignore[attr-defined]
@@ -111,6 +113,7 @@ def stream_closed_loop(
     progress: bool = False,
     callback: Callback | None = None,
     reset_controller: bool = True,
+    trace_every: int = 1,
 ) -> RunStatistics:
     """:func:`run_closed_loop` for long runs: memory bounded by one block, whatever ``duration``.
 
@@ -123,6 +126,7 @@ def stream_closed_loop(
     Args:
         path: write the full trace here (``.parquet``); None: statistics only.
         block_size: rows per block [ticks].
+        trace_every: write every this many ticks to ``path`` (those whose index is a multiple of it; 1: all).
         plant, controller, trajectory, duration, progress, callback, reset_controller: as in
             :func:`run_closed_loop`.
 
@@ -137,16 +141,19 @@ def stream_closed_loop(
     stats = RunStatistics(plant.n, path=None if path is None else Path(path))
     rec = _Recorder(min(block_size, N), plant.n)
     writer = None if path is None else TraceWriter(path)
+    every, first = check_every(trace_every), [0]
 
     def flush() -> None:
         block = rec.trace(meta, copy=False)
         stats.update(block)
         if writer is not None:
-            writer.write(block)
+            writer.write(every_nth(block, first[0], every))
+        first[0] += len(block)
         rec.clear()
 
     try:
-        _loop(plant, controller, trajectory, N, rec, flush, progress, callback, reset_controller)
+        with plant.in_use("a streamed closed-loop run"):  # one run per plant (Plant.in_use)
+            _loop(plant, controller, trajectory, N, rec, flush, progress, callback, reset_controller)
     except BaseException as e:
         stats.error = f"{type(e).__name__}: {e}"
         try:

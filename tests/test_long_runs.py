@@ -1,0 +1,155 @@
+"""Long runs in the compiled loop (reflexarm.sim.stream_fast): the statistics folded in C++ and the trace written in
+blocks against the Python loop's stream_closed_loop on the same plant, noise and controller (issue 19 item 1), and
+the size of an in-memory run checked before anything is allocated (issue 20 item 13).
+
+The reference is the Python loop: its statistics are numpy reductions of the recorded blocks
+(RunStatistics.update), its trace file is written from the rows the Python Controller returned. The compiled loop
+runs the same C++ tick on the same MuJoCo data, so both agree to the bit (as tests/test_compiled_loop.py shows for
+in-memory runs); the statistics are compared exactly.
+"""
+
+from __future__ import annotations
+
+import tracemalloc
+
+import numpy as np
+import pytest
+
+from reflexarm import load_robot
+from reflexarm.control import Controller, InputBounds
+from reflexarm.errors import ConfigError
+from reflexarm.experiments import collision as C
+from reflexarm.sim import PAPER_NOISE, Plant, Trace, run_fast, stream_closed_loop, stream_fast
+from reflexarm.sim.compiled_stream import stream_compiled, stream_reason
+
+pytest.importorskip("reflexarm._closed_loop", reason="compiled loop not built: run make install")
+
+STAT_FIELDS = ("max_abs_residual", "t_max_abs_residual", "max_abs_tau", "collided_ticks", "residual_counts")
+SCALARS = ("ticks", "t_first", "t_last", "collision_ticks", "collision_events", "first_collision_t", "fault_ticks")
+TRACE_FIELDS = ("t", "q", "dq", "q_meas", "q_d", "dq_d", "tau", "tau_m", "residual", "collision", "collided", "mode",
+                "fault", "wrench", "tau_ext", "f_ext_ee")  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def atlas():
+    return load_robot(C.ROBOT)
+
+
+@pytest.fixture(scope="module")
+def model(atlas):
+    return C.controller_model(atlas, 0.1, 0, None)[0]  # the free-motion run's +-10 % model
+
+
+def _setup(atlas, model, traj, *, threshold=1.5, torque_factor=3.0, seed=1):
+    plant = Plant(atlas, noise=PAPER_NOISE, seed=seed)
+    plant.reset(traj.sample(0.0).q_d)
+    bounds = InputBounds(torque_factor=torque_factor)
+    ctrl = Controller(model, stiffness=300.0, observer_gain=5.0, threshold=threshold, reaction="none",
+                      input_bounds=bounds)  # fmt: skip
+    return plant, ctrl
+
+
+def _assert_same_statistics(a, b):
+    for f in SCALARS:
+        assert getattr(b, f) == getattr(a, f), f
+    for f in STAT_FIELDS:
+        np.testing.assert_array_equal(getattr(b, f), getattr(a, f), err_msg=f)
+    assert b.modes == a.modes and b.faults == a.faults
+
+
+@pytest.mark.parametrize("torque_factor", [3.0, 0.09])  # 0.09: some ticks' measured torque is a fault
+def test_compiled_stream_is_the_python_stream(atlas, model, tmp_path, torque_factor):
+    """Free motion (the demo swing) with alarms (a low threshold): same statistics, same trace file, same plant."""
+    traj = C.free_motion_trajectory(2.5, "demo", atlas)
+    plant_a, ctrl_a = _setup(atlas, model, traj, torque_factor=torque_factor)
+    a = stream_closed_loop(plant_a, ctrl_a, traj, 2.5, path=tmp_path / "a.parquet", block_size=777)
+    plant_b, ctrl_b = _setup(atlas, model, traj, torque_factor=torque_factor)
+    b = stream_fast(plant_b, ctrl_b, traj, 2.5, path=tmp_path / "b.parquet", block_size=777)
+    assert (a.loop, b.loop) == ("python", "compiled")
+    assert a.ticks == 2500
+    if torque_factor < 1.0:  # the faults hold the arm: no alarm, but fault texts to count
+        assert a.fault_ticks > 0 and len(a.faults) >= 1
+    else:
+        assert a.collision_events > 0 and a.fault_ticks == 0
+    _assert_same_statistics(a, b)
+    ta, tb = Trace.load(tmp_path / "a.parquet"), Trace.load(tmp_path / "b.parquet")
+    for f in TRACE_FIELDS:
+        np.testing.assert_array_equal(getattr(tb, f), getattr(ta, f), err_msg=f)
+    # the plant is left in the same state, its clock, tick and noise sequence continue at the same place
+    np.testing.assert_array_equal(plant_b.q, plant_a.q)
+    np.testing.assert_array_equal(plant_b.dq, plant_a.dq)
+    assert plant_b._tick == plant_a._tick and plant_b.time == plant_a.time
+    np.testing.assert_array_equal(plant_b.measure().q, plant_a.measure().q)
+
+
+def test_statistics_only_and_a_decimated_trace(atlas, model, tmp_path):
+    """trace_every=k writes the ticks whose index is a multiple of k, whatever the block size, in both loops;
+    no file: statistics only, the same."""
+    traj = C.free_motion_trajectory(1.5, "demo", atlas)
+    plant, ctrl = _setup(atlas, model, traj)
+    full = stream_closed_loop(plant, ctrl, traj, 1.5, path=tmp_path / "full.parquet", block_size=500)
+    ref = Trace.load(tmp_path / "full.parquet")
+    for loop, block in (("compiled", 333), ("python", 333), ("compiled", 1500)):
+        plant, ctrl = _setup(atlas, model, traj)
+        run = stream_fast if loop == "compiled" else stream_closed_loop
+        out = tmp_path / f"{loop}{block}.parquet"
+        stats = run(plant, ctrl, traj, 1.5, path=out, block_size=block, trace_every=7)
+        dec = Trace.load(out)
+        assert len(dec) == 215  # ticks 0, 7, ..., 1498
+        for f in ("t", "residual", "tau", "mode", "collision"):
+            np.testing.assert_array_equal(getattr(dec, f), getattr(ref, f)[::7], err_msg=f"{loop} {f}")
+        _assert_same_statistics(full, stats)
+    plant, ctrl = _setup(atlas, model, traj)
+    none = stream_fast(plant, ctrl, traj, 1.5, block_size=400)
+    _assert_same_statistics(full, none)
+    assert none.path is None
+
+
+def test_what_the_compiled_stream_cannot_run_goes_to_python(atlas, model):
+    traj = C.free_motion_trajectory(0.3, "demo", atlas)
+    plant, ctrl = _setup(atlas, model, traj)
+    seen = []
+    stats = stream_fast(plant, ctrl, traj, 0.3, callback=lambda k, *_: seen.append(k))
+    assert stats.loop == "python" and len(seen) == 300
+    assert stream_reason(plant, ctrl, callback=print) == "a callback is called after every tick (Python loop)"
+    rate_limited = Controller(model, threshold=1.5, reaction="none", torque_rate_limit=1e4)
+    with pytest.raises(ConfigError, match="cannot use the compiled loop: the controller has a torque_rate_limit"):
+        stream_compiled(plant, rate_limited, traj, 0.3)
+    assert stream_fast(plant, rate_limited, traj, 0.3).loop == "python"
+    with pytest.raises(ConfigError, match=r"trace_every must be a positive number of ticks; got 0"):
+        stream_fast(plant, ctrl, traj, 0.3, trace_every=0)
+    with pytest.raises(ConfigError, match=r"block_size must be a positive number of ticks; got -1"):
+        stream_compiled(plant, ctrl, traj, 0.3, block_size=-1)
+
+
+def _peak(atlas, model, duration):
+    traj = C.free_motion_trajectory(duration, "demo", atlas)
+    plant, ctrl = _setup(atlas, model, traj)
+    tracemalloc.start()
+    try:
+        stream_fast(plant, ctrl, traj, duration, block_size=500)
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+def test_compiled_stream_memory_does_not_grow_with_the_duration(atlas, model):
+    """Issue 20 item 18: a soak's memory is one block's buffers (C++ folds the statistics), not the run's."""
+    _peak(atlas, model, 0.6)  # first-use allocations out of the way
+    # from 2 s on every buffer (blocks of 500 ticks, the plant's noise drawn 1024 rows at a time) is in use
+    short, long = _peak(atlas, model, 2.0), _peak(atlas, model, 5.0)
+    # 3000 more ticks kept would be >= 3000 x 73 x 8 B ~ 1.8 MB; streamed, only the longer trajectory's
+    # description in meta grows (~1 kB per second): 100 kB is 18 x below it
+    assert long - short < 100e3, (short, long)
+
+
+def test_run_fast_refuses_a_run_that_cannot_fit_in_memory(atlas, model):
+    """Issue 20 item 13: run_fast(duration=1e9) raised a raw MemoryError after allocating; now it is refused
+    before, naming the size and the streamed alternative."""
+    traj = C.free_motion_trajectory(1.0, "demo", atlas)
+    plant, ctrl = _setup(atlas, model, traj)
+    with pytest.raises(ConfigError, match=r"run_fast: 1,000,000,000,000 ticks keep ~.* GB in memory; .* GB are "
+                       r"available\. For a run this long use reflexarm\.sim\.stream_fast"):  # fmt: skip
+        run_fast(plant, ctrl, traj, 1e9)
+    assert plant._tick == 0 and plant._user is None  # nothing ran, the plant is free
+    run_fast(plant, ctrl, traj, 0.05)  # and usable
