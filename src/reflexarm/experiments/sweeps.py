@@ -3,7 +3,8 @@
 The machinery (:func:`run_sweep`) is generic: a list of :class:`SweepTask`, a picklable run function
 ``run_fn(task, context) -> dict`` and an output folder. Runs execute
 
-* through joblib on the local cores (``workers``; default: every core), or
+* on the local cores (``workers`` spawned processes, default every core; each is killed by the kernel when the
+  sweep's process dies, even by ``kill -9``: no orphaned workers), or
 * on a Dask cluster when ``scheduler`` (an address such as ``tcp://10.0.0.5:8786``) is given.
 
 Every finished run is written at once to ``<out>/runs/<key>.json`` (written to a temporary name and
@@ -22,6 +23,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import sys
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass, field
@@ -259,15 +261,48 @@ def connect_scheduler(scheduler: str, timeout: float) -> Any:
         ) from e
 
 
-def _iter_joblib(run_fn: RunFunction, todo: list[SweepTask], context: Any, workers: int) -> Iterable[tuple]:
-    from joblib import Parallel, delayed
+def _die_with_parent(parent: int) -> None:
+    """Worker initializer: the kernel kills this worker when the sweep's process dies, even by SIGKILL (Linux
+    PR_SET_PDEATHSIG; elsewhere the pool's own shutdown is all there is)."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+        import signal
 
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, int(signal.SIGKILL))  # 1 = PR_SET_PDEATHSIG
+    if os.getppid() != parent:  # the parent died before the line above took effect
+        os._exit(1)
+
+
+def _iter_local(run_fn: RunFunction, todo: list[SweepTask], context: Any, workers: int) -> Iterable[tuple]:
+    """The runs on ``workers`` local processes (spawned, each dies with this process), at most two queued per
+    worker, results as they finish."""
     if workers == 1:  # in-process, in order: no pickling, easiest to debug
         for task in todo:
             yield _call(run_fn, task, context)
         return
-    parallel = Parallel(n_jobs=workers, return_as="generator_unordered", batch_size=1, pre_dispatch="2*n_jobs")
-    yield from parallel(delayed(_call)(run_fn, task, context) for task in todo)
+    import multiprocessing
+    from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+
+    pool = ProcessPoolExecutor(
+        workers, mp_context=multiprocessing.get_context("spawn"), initializer=_die_with_parent,
+        initargs=(os.getpid(),),
+    )  # fmt: skip
+    pending: set[Future] = set()
+    queue = iter(todo)
+    try:
+        while True:
+            for task in queue:
+                pending.add(pool.submit(_call, run_fn, task, context))
+                if len(pending) >= 2 * workers:
+                    break
+            if not pending:
+                return
+            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in finished:
+                yield fut.result()
+    finally:
+        pool.shutdown(wait=not pending, cancel_futures=True)
 
 
 def _iter_dask(run_fn: RunFunction, todo: list[SweepTask], context: Any, scheduler: str, timeout: float) -> Iterable:
@@ -309,7 +344,7 @@ def run_sweep(
             ``results.csv`` and ``results.parquet``.
         context: one object shared by all runs (e.g. a reference trajectory); sent once per worker.
         manifest: settings the results depend on; stored on the first call, compared on a restart.
-        workers: local processes (joblib); default every core; 1 runs in this process, in order.
+        workers: local processes; default every core; 1 runs in this process, in order.
         scheduler: address of a Dask scheduler; when given the runs go to its cluster instead.
         scheduler_timeout: how long to try to reach the scheduler [s].
         progress: show a tqdm progress bar.
@@ -354,7 +389,7 @@ def run_sweep(
             it = (
                 _iter_dask(run_fn, todo, context, scheduler, scheduler_timeout)
                 if scheduler is not None
-                else _iter_joblib(run_fn, todo, context, min(n_workers, len(todo)))
+                else _iter_local(run_fn, todo, context, min(n_workers, len(todo)))
             )
             try:
                 for task, result, wall in it:
