@@ -114,13 +114,16 @@ def test_explicit_mapping_wins_and_is_checked(tmp_path):
     assert "own.csv: position from columns 'pos{i}' (mapping)" in back.notes
     with pytest.raises(DataError, match=r"own\.csv: column\(s\) 'speed1', 'speed2', 'speed3' of the mapping dq="):
         load_log(p, joint_names=NAMES, columns={**mapping, "dq": "speed{i}"})
-    with pytest.raises(ConfigError, match=r"unknown column mapping key 'qd'; keys: t, q, dq, tau, ddq, wrench"):
+    with pytest.raises(
+        ConfigError,
+        match=r"unknown column mapping key 'qd'; keys: t, q, dq, tau, ddq, current, wrench \(cur = current\)",
+    ):
         parse_column_mapping("qd=vel{i}")
     with pytest.raises(
         ConfigError, match=r"q='pos\{n\}': unknown placeholder \{n\}; allowed: \{joint\}, \{i\}, \{i0\}"
     ):
         parse_column_mapping("q=pos{n}")
-    with pytest.raises(ConfigError, match=r"entry 'q' is not KEY=TEMPLATE"):
+    with pytest.raises(ConfigError, match=r"entry 'q' is not KEY=SPEC"):
         parse_column_mapping("q")
 
 

@@ -8,7 +8,13 @@ from dataclasses import dataclass
 
 from reflexarm.errors import DataError
 
-_MEANING = {"q": "position", "dq": "velocity", "tau": "measured torque", "ddq": "acceleration"}
+_MEANING = {
+    "q": "position",
+    "dq": "velocity",
+    "tau": "measured torque",
+    "ddq": "acceleration",
+    "current": "motor current",
+}
 _STATE_FIELD = {"q": "position", "dq": "velocity", "tau": "effort"}
 _ARRAY_RE = re.compile(r"^(?:.*\.)?(name|position|velocity|effort)\.?(\d+)$")
 

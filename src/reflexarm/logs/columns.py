@@ -7,7 +7,9 @@ optional. :func:`plan_columns` finds them, in this order for each signal:
 1. an explicit **mapping** (``columns={"q": "position_{joint}", "t": "stamp_ns"}``, on the command line
    ``--columns q=position_{joint},t=stamp_ns``): a template per signal; ``{joint}`` is the joint's name,
    ``{i}`` its number from 1, ``{i0}`` its index from 0; for ``wrench`` ``{axis}`` is fx fy fz mx my mz
-   and ``{ros_axis}`` force.x .. torque.z; ``t`` names a column;
+   and ``{ros_axis}`` force.x .. torque.z; ``t`` names a column. Or **positions** in the file, 0-based with
+   the end excluded (``t=0,q=1:7,dq=7:13``; header-less files have nothing else), and a **scale** after
+   ``*`` (``tau=trq_{i}*0.001``); see :mod:`reflexarm.logs.column_mapping`;
 2. the **schema** of :mod:`reflexarm.logs.files`: ``q_1 .. q_n`` (1-based), or ``q_0 .. q_{n-1}``
    (0-based, recognized when ``q_0`` exists, and said so);
 3. **joint-named** columns (the joint names must be known): ``position_<joint>``, ``<joint>/position``,
@@ -28,6 +30,10 @@ any tail after a ``/`` or ``.`` (so ``/joint_states/shz/position`` matches ``shz
 suffix (``t_ns``). Wrench: ``fx .. mz``, ``force.x .. torque.z`` (also ``wrench.force.x``),
 ``force_x .. torque_z``.
 
+**Motor currents** instead of torques (``torque_from="current"``): the signal ``current`` is found as
+``tau`` is (mapping key ``current``, ``current_1..n``, ``current_<joint>``, ``<joint>/current``, ``cur``
+likewise, or the JointState layout's effort field), and the reader multiplies it by per-joint gains.
+
 Columns that match nothing needed are not an error: they are left out with a note naming them. A
 missing signal is a :class:`~reflexarm.errors.DataError` naming what was looked for.
 """
@@ -46,17 +52,33 @@ from reflexarm.logs._joint_state_columns import (
     _norm,
     _use_layout,
 )
-from reflexarm.logs.column_mapping import JOINT_SIGNALS, check_column_mapping, parse_column_mapping
+from reflexarm.logs.column_mapping import (
+    JOINT_SIGNALS,
+    ColumnSpec,
+    check_column_mapping,
+    parse_column_mapping,
+    parse_column_spec,
+)
 from reflexarm.logs.robot_log import WRENCH_COLUMNS
 
-__all__ = ["JOINT_SIGNALS", "ColumnPlan", "JointStateLayout", "parse_column_mapping", "plan_columns"]
+__all__ = [
+    "JOINT_SIGNALS",
+    "TORQUE_SOURCES",
+    "ColumnPlan",
+    "JointStateLayout",
+    "parse_column_mapping",
+    "plan_columns",
+]
 
+#: Where the measured torque comes from: torque columns, or motor currents times per-joint gains.
+TORQUE_SOURCES = ("torque", "current")
 _REQUIRED = ("q", "dq", "tau")
 _WORDS = {
     "q": ("position", "pos", "q"),
     "dq": ("velocity", "vel", "dq"),
     "tau": ("effort", "eff", "torque", "tau"),
     "ddq": ("acceleration", "acc", "ddq"),
+    "current": ("current", "cur"),
 }
 _ROS_AXES = ("force.x", "force.y", "force.z", "torque.x", "torque.y", "torque.z")
 _WRENCH_ALIASES = {
@@ -72,7 +94,9 @@ class ColumnPlan:
     """Where each signal is: ``time`` (one column, or the sec/nanosec pair), ``joints[signal]`` the
     column of each joint in the model's order (signals of the JointState layout are in ``layout``),
     ``wrench`` the six wrench columns or None; ``ignored`` the columns left out; ``notes`` what was
-    recognized (for the reader's report)."""
+    recognized (for the reader's report); ``scale[signal]`` the factor a mapping's ``*SCALE`` gives its
+    values (signals without one are not listed). With motor currents (``torque_from="current"``)
+    ``joints["current"]`` replaces ``joints["tau"]``."""
 
     time: tuple[str, ...]
     time_unit: str | None
@@ -83,6 +107,7 @@ class ColumnPlan:
     wrench: tuple[str, ...] | None = None
     ignored: tuple[str, ...] = ()
     notes: tuple[str, ...] = field(default=())
+    scale: dict[str, float] = field(default_factory=dict)
 
 
 class _Index:
@@ -90,6 +115,7 @@ class _Index:
 
     def __init__(self, columns: list[str], where: str) -> None:
         self.where = where
+        self.columns = list(columns)
         self.by_key: dict[str, list[str]] = {}
         self.full: dict[str, str] = {}
         for c in columns:
@@ -122,16 +148,32 @@ def plan_columns(
     n_joints: int | None = None,
     joint_names: tuple[str, ...] | None = None,
     mapping: dict[str, str] | None = None,
+    torque_from: str = "torque",
 ) -> ColumnPlan:
     """Find every signal among ``columns`` (see the module docstring).
 
+    ``torque_from="current"`` looks for motor currents (mapping key ``current``, ``current_1..n``,
+    ``current_<joint>``, ..., or the JointState layout's effort) instead of torques.
+
     Raises:
         DataError: no time column, a required signal missing for some joint (naming what was looked
-            for), a joint count that does not match ``n_joints``, an ambiguous name.
-        ConfigError: a malformed ``mapping``.
+            for), a joint count that does not match ``n_joints``, an ambiguous name, positions beyond
+            the file's columns or of the wrong count.
+        ConfigError: a malformed ``mapping``, an unknown ``torque_from``, a ``current`` mapping without
+            ``torque_from="current"``.
     """
     mapping = dict(mapping or {})
     check_column_mapping(mapping)
+    if torque_from not in TORQUE_SOURCES:
+        raise ConfigError(f"unknown torque source {torque_from!r}; choose one of: {', '.join(TORQUE_SOURCES)}")
+    if "current" in mapping and torque_from != "current":
+        raise ConfigError(
+            f"column mapping current={mapping['current']!r} names motor currents: read the torque from them with "
+            "torque_from='current' and per-joint gains (--torque-from current --gains G1,G2,.. [Nm/A])"
+        )
+    specs = {k: parse_column_spec(k, v) for k, v in mapping.items()}
+    required = ("q", "dq", "current") if torque_from == "current" else _REQUIRED
+    signals = ("q", "dq", "current", "ddq") if torque_from == "current" else JOINT_SIGNALS
     if joint_names is not None:
         joint_names = tuple(joint_names)
         if n_joints is not None and n_joints != len(joint_names):
@@ -140,37 +182,25 @@ def plan_columns(
     idx = _Index(columns, where)
     notes: list[str] = []
     used: set[str] = set()
-    time, unit = _find_time(idx, columns, mapping.get("t"), where, notes)
+    time, unit = _find_time(idx, columns, specs.get("t"), where, notes)
     used.update(time)
     layout = _find_layout(columns)
+    q_spec = specs.get("q")
+    if n_joints is None and q_spec is not None and q_spec.positions is not None:
+        n_joints = len(q_spec.positions)
     n = n_joints if n_joints is not None else _infer_n(columns, layout, where)
     count = _schema_count(columns)
     if count is not None and count != n and "q" not in mapping:
-        for s in _REQUIRED:  # a column missing among the log's own joints is named first
-            for j in range(1, count + 1):
-                if idx.full.get(f"{s}_{j}") is None and idx.full.get(f"{s}_{j - 1}") is None:
-                    raise DataError(
-                        f"{where}: column '{s}_{j}' missing; found: {', '.join(columns)}",
-                        source=where,
-                        column=f"{s}_{j}",
-                        expected=tuple(columns),
-                    )
-        raise DataError(
-            f"{where}: the log has {count} joints (q_1..q_{count}); the robot has {n}",
-            source=where,
-            column="q",
-            value=count,
-            expected=n,
-        )
+        _refuse_schema_count(idx, columns, count, n, required, where)
     joints: dict[str, tuple[str, ...]] = {}
     from_layout: list[str] = []
-    for s in JOINT_SIGNALS:
-        found = _find_joint_signal(s, idx, n, joint_names, mapping.get(s), where, notes)
+    for s in signals:
+        found = _find_joint_signal(s, idx, n, joint_names, specs.get(s), where, notes)
         if found is not None:
             joints[s] = found
-        elif layout is not None and s in layout.fields:
+        elif layout is not None and _layout_field(s) in layout.fields:
             from_layout.append(s)
-        elif s in _REQUIRED and count is not None:
+        elif s in required and count is not None:
             missing = next(f"{s}_{j}" for j in range(1, n + 1) if idx.full.get(f"{s}_{j}") is None)
             raise DataError(
                 f"{where}: column {missing!r} missing; found: {', '.join(columns)}",
@@ -178,20 +208,24 @@ def plan_columns(
                 column=missing,
                 expected=tuple(columns),
             )
-        elif s in _REQUIRED:
+        elif s in required:
             looked, message = _missing(s, n, joint_names, columns, where)
             raise DataError(message, source=where, column=looked, expected=tuple(columns))
     plan_layout = None
     if from_layout:
         assert layout is not None
-        plan_layout, note = _use_layout(layout, from_layout, n, joint_names, where)
+        plan_layout, note = _use_layout(layout, [_layout_field(s) for s in from_layout], n, joint_names, where)
+        if "current" in from_layout:
+            fields = {("current" if k == "tau" else k): v for k, v in plan_layout.fields.items()}
+            plan_layout = JointStateLayout(plan_layout.names, fields)
+            note += "; the effort field taken as motor currents"
         notes.append(note)
         used.update(plan_layout.names)
-        for s in from_layout:
-            used.update(plan_layout.fields[s])
+        for cols in plan_layout.fields.values():
+            used.update(cols)
     for cols in joints.values():
         used.update(cols)
-    wrench = _find_wrench(idx, mapping.get("wrench"), where)
+    wrench = _find_wrench(idx, specs.get("wrench"), where)
     if wrench is not None:
         used.update(wrench)
         if tuple(wrench) != WRENCH_COLUMNS:
@@ -209,22 +243,82 @@ def plan_columns(
         wrench=None if wrench is None else tuple(wrench),
         ignored=ignored,
         notes=tuple(notes),
+        scale={k: v.scale for k, v in specs.items() if v.scale != 1.0},
     )
 
 
+def _layout_field(s: str) -> str:
+    """The JointState layout's field of signal ``s`` (motor currents come in the effort field)."""
+    return "tau" if s == "current" else s
+
+
+def _refuse_schema_count(
+    idx: _Index, columns: list[str], count: int, n: int, required: tuple[str, ...], where: str
+) -> None:
+    for s in required:  # a column missing among the log's own joints is named first
+        for j in range(1, count + 1):
+            if idx.full.get(f"{s}_{j}") is None and idx.full.get(f"{s}_{j - 1}") is None:
+                raise DataError(
+                    f"{where}: column '{s}_{j}' missing; found: {', '.join(columns)}",
+                    source=where,
+                    column=f"{s}_{j}",
+                    expected=tuple(columns),
+                )
+    raise DataError(
+        f"{where}: the log has {count} joints (q_1..q_{count}); the robot has {n}",
+        source=where,
+        column="q",
+        value=count,
+        expected=n,
+    )
+
+
+def _by_position(key: str, spec: ColumnSpec, idx: _Index, where: str, expected: int | None) -> tuple[str, ...]:
+    """The columns at ``spec.positions`` (0-based, as they stand in the file), ``expected`` of them."""
+    assert spec.positions is not None
+    names = idx.columns
+    positions = spec.positions
+    if positions[-1] >= len(names):
+        raise DataError(
+            f"{where}: column mapping {key}={spec.describe()} reaches column {positions[-1]} (counted from 0); the "
+            f"file has {len(names)} columns (0..{len(names) - 1})",
+            source=where,
+            column=key,
+            value=positions[-1],
+            expected=len(names),
+        )
+    if expected is not None and len(positions) != expected:
+        what = "joints" if key != "wrench" else "wrench components (fx fy fz mx my mz)"
+        raise DataError(
+            f"{where}: column mapping {key}={spec.describe()} names {len(positions)} column(s) "
+            f"({', '.join(str(k) for k in positions)}); there are {expected} {what}: give one column each "
+            "(positions START:STOP, 0-based, STOP excluded)",
+            source=where,
+            column=key,
+            value=len(positions),
+            expected=expected,
+        )
+    return tuple(names[k] for k in positions)
+
+
 def _find_time(
-    idx: _Index, columns: list[str], explicit: str | None, where: str, notes: list[str]
+    idx: _Index, columns: list[str], spec: ColumnSpec | None, where: str, notes: list[str]
 ) -> tuple[tuple[str, ...], str | None]:
-    if explicit is not None:
-        c = idx.find(explicit)
-        if c is None:
+    if spec is not None and spec.positions is not None:
+        (at,) = _by_position("t", spec, idx, where, 1)
+        notes.append(f"{where}: time from column {spec.describe()} ({at!r})")
+        return (at,), None
+    if spec is not None:
+        explicit = str(spec.template)
+        named = idx.find(explicit)
+        if named is None:
             raise DataError(
                 f"{where}: time column {explicit!r} (column mapping t=) missing; found: {', '.join(columns)}",
                 source=where,
                 column=explicit,
                 expected=tuple(columns),
             )
-        return (c,), None
+        return (named,), None
     if "t" in columns:
         return ("t",), None
     for sec, nsec in _TIME_PAIRS:
@@ -279,11 +373,17 @@ def _find_joint_signal(
     idx: _Index,
     n: int,
     joint_names: tuple[str, ...] | None,
-    template: str | None,
+    spec: ColumnSpec | None,
     where: str,
     notes: list[str],
 ) -> tuple[str, ...] | None:
-    if template is not None:
+    scaled = "" if spec is None or spec.scale == 1.0 else f", times {spec.scale:g}"
+    if spec is not None and spec.positions is not None:
+        cols = _by_position(s, spec, idx, where, n)
+        notes.append(f"{where}: {_MEANING[s]} from columns {spec.describe()} by position ({', '.join(cols)}){scaled}")
+        return cols
+    if spec is not None:
+        template = str(spec.template)
         if joint_names is None and "{joint}" in template:
             raise ConfigError(f"column mapping {s}={template!r} uses {{joint}} but no joint names are known")
         names = joint_names or tuple("" for _ in range(n))
@@ -298,7 +398,7 @@ def _find_joint_signal(
                 column=tuple(missing),
                 expected=tuple(idx.full.values()),
             )
-        notes.append(f"{where}: {_MEANING[s]} from columns {template!r} (mapping)")
+        notes.append(f"{where}: {_MEANING[s]} from columns {template!r} (mapping){scaled}")
         return tuple(f for f in found if f is not None)
     schema = [idx.full.get(f"{s}_{j}") for j in range(1, n + 1)]
     zero = [idx.full.get(f"{s}_{j}") for j in range(n)]
@@ -362,8 +462,8 @@ def _missing(
     if joint_names is not None:
         j0 = joint_names[0]
         looked += [t.format(joint=j0) for t in _name_templates(s)]
-    if s in _STATE_FIELD:
-        looked.append(f"{_STATE_FIELD[s]}.0 (JointState layout)")
+    if s in _STATE_FIELD or s == "current":
+        looked.append(f"{_STATE_FIELD.get(s, 'effort')}.0 (JointState layout)")
     return tuple(looked), (
         f"{where}: no {_MEANING[s]} columns: looked for {', '.join(looked)}"
         + (f" (for joint 1, {joint_names[0]!r}; likewise the others)" if joint_names else "")
@@ -371,8 +471,11 @@ def _missing(
     )
 
 
-def _find_wrench(idx: _Index, template: str | None, where: str) -> list[str] | None:
-    if template is not None:
+def _find_wrench(idx: _Index, spec: ColumnSpec | None, where: str) -> list[str] | None:
+    if spec is not None and spec.positions is not None:
+        return list(_by_position("wrench", spec, idx, where, len(WRENCH_COLUMNS)))
+    if spec is not None:
+        template = str(spec.template)
         wanted = [template.format(axis=a, ros_axis=r) for a, r in zip(WRENCH_COLUMNS, _ROS_AXES, strict=True)]
         found = [idx.find(w) for w in wanted]
         missing = [w for w, f in zip(wanted, found, strict=True) if f is None]

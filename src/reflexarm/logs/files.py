@@ -35,9 +35,12 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 
-from reflexarm.errors import DataError
+from reflexarm.errors import ConfigError, DataError
 from reflexarm.logs.bags import BAG_SUFFIXES, read_bag
+from reflexarm.logs.columns import TORQUE_SOURCES
+from reflexarm.logs.motor_current import check_gains, torque_from_current
 from reflexarm.logs.robot_log import RobotLog, _finish, _numeric
 from reflexarm.logs.tables import read_table
 from reflexarm.logs.timestamps import relative_seconds
@@ -56,6 +59,8 @@ def load_log(
     wrench_topic: str | None = None,
     repair: bool = True,
     period: float | None = None,
+    torque_from: str = "torque",
+    gains: npt.ArrayLike | None = None,
 ) -> RobotLog:
     """Load a log: ``.csv``, ``.parquet``, ``.npz`` (schema in the module docstring) or a ROS 2 bag.
 
@@ -78,6 +83,11 @@ def load_log(
         repair: drop exact repeats and re-time jittery time stamps (with a warning); if False such
             logs raise :class:`DataError`.
         period: nominal sample period [s] for re-timing (default: the median step).
+        torque_from: ``"torque"`` (the log's torque columns / effort field) or ``"current"``: the measured
+            torque is ``gains`` times the log's motor currents (:mod:`reflexarm.logs.motor_current`;
+            tables: mapping key ``current`` or columns ``current_1..n``, ``current_<joint>``; bags: the
+            JointState effort field; npz: an array ``current`` instead of ``tau``).
+        gains: with ``torque_from="current"``, one gain per joint [Nm/A] in the model's joint order.
 
     Raises:
         DataError: unreadable file, missing columns, wrong joint count, NaN/inf, time going
@@ -98,6 +108,14 @@ def load_log(
         raise DataError(f"{where}: joint_topic / wrench_topic apply to bags (.db3, .mcap, a rosbag2 folder) only")
     if columns and (bag or suffix == ".npz"):
         raise DataError(f"{where}: a column mapping applies to CSV and Parquet logs only")
+    if torque_from not in TORQUE_SOURCES:
+        raise ConfigError(f"unknown torque source {torque_from!r}; choose one of: {', '.join(TORQUE_SOURCES)}")
+    if torque_from == "current":
+        check_gains(gains, n_joints, where)  # before reading a large file
+    elif gains is not None:
+        raise ConfigError(
+            f"{where}: gains [Nm/A] turn motor currents into torques: give them with torque_from='current'"
+        )
     notes: list[str] = []
     if bag:
         data, notes = read_bag(
@@ -105,36 +123,40 @@ def load_log(
             time_unit=time_unit,
         )  # fmt: skip
     elif suffix == ".npz":
-        data = _read_npz(p)
+        data = _read_npz(p, "current" if torque_from == "current" else "tau")
         data["t"], note = relative_seconds(data["t"], where=where, unit=time_unit)
         notes = [note] if note else []
     elif suffix in (".csv", ".parquet", ".pq"):
         data, notes = read_table(
             p, n_joints=n_joints, joint_names=names, columns=None if columns is None else dict(columns),
-            time_unit=time_unit,
+            time_unit=time_unit, torque_from=torque_from,
         )  # fmt: skip
     else:
         raise DataError(
             f"{where}: unknown log format {suffix!r}; use .csv, .parquet, .npz, or a ROS 2 bag (.db3, .mcap, folder)"
         )
+    if torque_from == "current":
+        current = data.pop("current" if "current" in data else "tau")  # a bag's effort field holds the currents
+        data["tau"], note = torque_from_current(current, gains, where)
+        notes.append(note)
     return _finish(data, where, n_joints, repair, period, notes=tuple(notes))
 
 
-def _read_npz(p: Path) -> dict[str, np.ndarray]:
+def _read_npz(p: Path, torque: str = "tau") -> dict[str, np.ndarray]:
     where = p.name
     try:
         with np.load(p, allow_pickle=False) as z:
             arrays = {k: np.asarray(z[k]) for k in z.files}
     except Exception as e:
         raise DataError(f"{where}: cannot read the file as npz: {e}") from e
-    allowed = ("t", "q", "dq", "tau", "ddq", "wrench")
+    allowed = ("t", "q", "dq", torque, "ddq", "wrench")
     unknown = [k for k in arrays if k not in allowed]
     if unknown:
         raise DataError(
-            f"{where}: unexpected array(s) {', '.join(map(repr, unknown))}; an npz log holds t, q, dq, tau and "
+            f"{where}: unexpected array(s) {', '.join(map(repr, unknown))}; an npz log holds t, q, dq, {torque} and "
             "optionally ddq, wrench"
         )
-    for k in ("t", "q", "dq", "tau"):
+    for k in ("t", "q", "dq", torque):
         if k not in arrays:
             raise DataError(f"{where}: array {k!r} missing; found: {', '.join(arrays) or 'nothing'}")
     return {k: _numeric(a, where, k) for k, a in arrays.items()}

@@ -23,26 +23,45 @@ def read_table(
     joint_names: tuple[str, ...] | None,
     columns: dict[str, str] | None,
     time_unit: str | None,
+    torque_from: str = "torque",
 ) -> tuple[dict[str, np.ndarray], list[str]]:
-    """The log's arrays (``t`` in s from the first sample, ``q``, ``dq``, ``tau``, optional ``ddq``,
-    ``wrench``) and the notes saying how they were found."""
-    import pandas as pd
-
+    """The log's arrays (``t`` in s from the first sample, ``q``, ``dq``, ``tau`` or, ``torque_from="current"``,
+    ``current``, optional ``ddq``, ``wrench``; a mapping's scales applied) and the notes saying how they were
+    found. A CSV file whose first row is all numbers has no header row: its columns are named by their
+    position from 0 and must be mapped by position (``columns={"t": "0", "q": "1:7", ...}``)."""
     where = p.name
     suffix = p.suffix.lower()
-    try:
-        df = pd.read_csv(p) if suffix == ".csv" else pd.read_parquet(p)
-    except Exception as e:  # pandas/pyarrow raise many types; explain and chain
-        raise DataError(f"{where}: cannot read the file as {suffix[1:]}: {e}") from e
-    names = [str(c).strip() for c in df.columns]
-    df.columns = names
-    dup = sorted({c for c in names if names.count(c) > 1})
-    if dup:
-        raise DataError(f"{where}: duplicated column(s) {', '.join(map(repr, dup))}")
+    header = _csv_header(p, where) if suffix == ".csv" else ()
+    df = _read_frame(p, where, suffix, header is None)
+    notes: list[str] = []
+    if header is None:
+        df.columns = [str(k) for k in range(df.shape[1])]
+        _refuse_unmapped_headerless(columns or {}, torque_from, df.shape[1], where)
+        notes.append(
+            f"{where}: no header row (the first row is numbers): columns named by position 0..{df.shape[1] - 1}"
+        )
+    else:
+        names = [str(c).strip() for c in df.columns]
+        if header and len(header) == len(names):
+            names = list(header)  # pandas renames repeated names (q_1, q_1.1): the file's own names
+        dup = sorted({c for c in names if names.count(c) > 1})
+        if dup:
+            at = [k for k, c in enumerate(names) if c == dup[0]]
+            raise DataError(
+                f"{where}: column {dup[0]!r} appears {len(at)} times (positions {', '.join(map(str, at))}, from 0)"
+                + (f"; also repeated: {', '.join(map(repr, dup[1:]))}" if dup[1:] else "")
+                + "; every column needs its own name: rename the copies",
+                source=where,
+                column=dup[0],
+                value=tuple(at),
+            )
+        df.columns = names
     df, expanded = _expand_arrays(df)
     names = [str(c) for c in df.columns]
-    plan = plan_columns(names, where=where, n_joints=n_joints, joint_names=joint_names, mapping=columns)
-    notes = list(plan.notes)
+    plan = plan_columns(
+        names, where=where, n_joints=n_joints, joint_names=joint_names, mapping=columns, torque_from=torque_from
+    )
+    notes += list(plan.notes)
     if expanded:
         notes.insert(
             0, f"{where}: array column(s) {', '.join(expanded)} expanded to one column per element (c.0, c.1, ..)"
@@ -86,7 +105,63 @@ def read_table(
             data[s] = arr
     if plan.wrench is not None:
         data["wrench"] = np.column_stack([_values(df, c, where) for c in plan.wrench])[keep]
+    for s, factor in plan.scale.items():
+        if s in data:
+            data[s] = data[s] * factor
     return data, notes
+
+
+def _csv_header(p: Path, where: str) -> list[str] | None:
+    """The CSV file's header row as written (repeated names kept), or None if its first row is all numbers."""
+    import csv
+
+    try:
+        with p.open(newline="", encoding="utf-8-sig", errors="replace") as fh:
+            row = next(csv.reader(fh), None)
+    except (OSError, csv.Error) as e:
+        raise DataError(f"{where}: cannot read the file as csv: {e}") from e
+    if row is None:
+        raise DataError(f"{where}: the file is empty")
+    cells = [c.strip() for c in row]
+    if any(cells) and all(_is_number(c) for c in cells if c):
+        return None
+    return cells
+
+
+def _read_frame(p: Path, where: str, suffix: str, headerless: bool) -> Any:
+    import pandas as pd
+
+    try:
+        if suffix == ".csv":
+            return pd.read_csv(p, header=None) if headerless else pd.read_csv(p)
+        return pd.read_parquet(p)
+    except Exception as e:  # pandas/pyarrow raise many types; explain and chain
+        raise DataError(f"{where}: cannot read the file as {suffix[1:]}: {e}") from e
+
+
+def _refuse_unmapped_headerless(columns: dict[str, str], torque_from: str, width: int, where: str) -> None:
+    """A header-less file's signals must all be mapped by position (nothing can be found by name)."""
+    from reflexarm.logs.column_mapping import parse_column_spec
+
+    torque = "current" if torque_from == "current" else "tau"
+    missing = [k for k in ("t", "q", "dq", torque) if k not in columns]
+    named = [k for k, v in columns.items() if parse_column_spec(k, v).positions is None]
+    if missing or named:
+        n = max((width - 1) // 3, 1)
+        example = (
+            f"t=0,q=1:{1 + n},dq={1 + n}:{1 + 2 * n},{'cur' if torque == 'current' else 'tau'}={1 + 2 * n}:{1 + 3 * n}"
+        )
+        problem = (
+            f"no position given for {', '.join(missing)}"
+            if missing
+            else f"{', '.join(named)} named by column name, which a header-less file has not"
+        )
+        raise DataError(
+            f"{where}: no header row (the first row is numbers, {width} columns): name the columns by position, "
+            f"0-based with the end excluded, e.g. --columns {example}; {problem}",
+            source=where,
+            column=tuple(missing or named),
+        )
 
 
 def _expand_arrays(df: Any) -> tuple[Any, list[str]]:
