@@ -22,11 +22,13 @@ from __future__ import annotations
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from reflexarm.errors import DataError
+from reflexarm.logs._bag_messages import raw_blocks
+from reflexarm.logs._cdr import JOINT_STATE, WRENCH, Batch, Kind, UndecodableMessage, concatenate, decode_block
 from reflexarm.logs.timestamps import relative_seconds
 
 __all__ = ["BAG_SUFFIXES", "JOINT_STATE_TYPE", "WRENCH_TYPE", "read_bag"]
@@ -35,6 +37,21 @@ __all__ = ["BAG_SUFFIXES", "JOINT_STATE_TYPE", "WRENCH_TYPE", "read_bag"]
 BAG_SUFFIXES = (".db3", ".mcap")
 JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
 WRENCH_TYPE = "geometry_msgs/msg/WrenchStamped"
+
+
+#: A message whose header stamp lies more than this many sample periods behind an earlier message's is
+#: not a message that arrived late but a clock that jumped back or runs backwards: an error.
+MAX_LATE_PERIODS = 10
+
+
+class _Topic(NamedTuple):
+    """A topic's messages decoded: batches of one layout each, every message's receive time [ns] and
+    how many messages were decoded in bulk."""
+
+    topic: str
+    batches: list[Batch]
+    received: np.ndarray
+    n_bulk: int
 
 
 @contextmanager
@@ -60,48 +77,31 @@ def read_bag(
     joint_topic: str | None,
     wrench_topic: str | None,
     time_unit: str | None = None,
+    bulk: bool = True,
 ) -> tuple[dict[str, np.ndarray], list[str]]:
     """The log's arrays (``t`` [s] from the first sample, ``q``, ``dq``, ``tau``, optional ``wrench``)
-    and notes saying what was read and how (see the module docstring).
+    and notes saying what was read and how (see the module docstring). ``bulk=False`` deserializes
+    every message with rosbags (the reference the bulk decoding is tested against).
 
     Raises:
         DataError: no or several JointState topics and none chosen, an unknown topic (the message lists
-            the bag's topics and types), missing arm joints or fields, unusable stamps.
+            the bag's topics and types), missing arm joints or fields, unusable stamps, a message that
+            does not decode as its type, a header clock that jumps back (topic, message and stamp named).
     """
     where = p.name
     if time_unit not in (None, "ns"):
         raise DataError(f"{where}: bag time stamps are nanoseconds; got time unit {time_unit!r}")
     with _open(p) as reader:
-        topics = {c.topic: c.msgtype for c in reader.connections}
-        listing = ", ".join(f"{t} ({m})" for t, m in sorted(topics.items())) or "none"
-        notes: list[str] = []
-        if joint_topic is None:
-            candidates = sorted(t for t, m in topics.items() if m == JOINT_STATE_TYPE)
-            if len(candidates) != 1:
-                what = "no" if not candidates else f"{len(candidates)}"
-                raise DataError(
-                    f"{where}: {what} {JOINT_STATE_TYPE} topics; "
-                    + ("choose one with the joint topic (--joint-topic); " if candidates else "")
-                    + f"topics: {listing}",
-                    source=where,
-                    column=tuple(candidates),
-                    expected=JOINT_STATE_TYPE,
-                )
-            joint_topic = candidates[0]
-            notes.append(f"{where}: joints from topic {joint_topic} ({JOINT_STATE_TYPE}, the bag's only one)")
-        _check_topic(where, topics, joint_topic, JOINT_STATE_TYPE, listing)
-        if wrench_topic is not None:
-            _check_topic(where, topics, wrench_topic, WRENCH_TYPE, listing)
-        else:
-            others = sorted(t for t, m in topics.items() if m == WRENCH_TYPE)
-            if others:
-                notes.append(f"{where}: {WRENCH_TYPE} topic(s) {', '.join(others)} not used (no wrench topic given)")
-        joints = _joint_messages(reader, joint_topic)
-        wrench = None if wrench_topic is None else _wrench_messages(reader, wrench_topic)
-    data, order_notes = _map_joints(joints, joint_names, n_joints, joint_topic, where)
+        joint_topic, notes = _choose_topics(reader, joint_topic, wrench_topic, where)
+        joints = _read_topic(reader, joint_topic, JOINT_STATE, where, bulk)
+        wrench = (
+            None if wrench_topic is None else _wrench_messages(_read_topic(reader, wrench_topic, WRENCH, where, bulk))
+        )
+    data, order_notes = _map_joints(joints, joint_names, n_joints, where)
     notes += order_notes
-    header, received = data.pop("header"), data.pop("received")
+    header, received, index = data.pop("header"), data.pop("received"), data.pop("index")
     stamps, clock = _choose_clock(header, received, joint_topic, where, notes)
+    _check_clock(stamps, index, joint_topic, clock, where)
     if np.any(np.diff(stamps) < 0):  # recorded out of order: the stamps give the sampling order
         order = np.argsort(stamps, kind="stable")
         moved = int(np.sum(order != np.arange(order.size)))
@@ -111,6 +111,7 @@ def read_bag(
         notes.append(f"{where}: {moved:,} {joint_topic} message(s) were recorded out of stamp order; sorted by stamp")
     if wrench is not None:
         w_stamps = wrench["header"] if clock == "header" else wrench["received"]
+        _check_clock(w_stamps, wrench["index"], wrench_topic or "", clock, where)
         keep, data["wrench"], note = _align_wrench(stamps, w_stamps, wrench, wrench_topic or "", where)
         notes.append(note)
         stamps = stamps[keep]
@@ -125,6 +126,67 @@ def read_bag(
     if t_note:
         notes.append(t_note)
     return data, notes
+
+
+def _choose_topics(reader: Any, joint_topic: str | None, wrench_topic: str | None, where: str) -> tuple[str, list[str]]:
+    """The JointState topic (given, or the bag's only one) and notes; both topics checked."""
+    topics = {c.topic: c.msgtype for c in reader.connections}
+    listing = ", ".join(f"{t} ({m})" for t, m in sorted(topics.items())) or "none"
+    notes: list[str] = []
+    if joint_topic is None:
+        candidates = sorted(t for t, m in topics.items() if m == JOINT_STATE_TYPE)
+        if len(candidates) != 1:
+            what = "no" if not candidates else f"{len(candidates)}"
+            raise DataError(
+                f"{where}: {what} {JOINT_STATE_TYPE} topics; "
+                + ("choose one with the joint topic (--joint-topic); " if candidates else "")
+                + f"topics: {listing}",
+                source=where,
+                column=tuple(candidates),
+                expected=JOINT_STATE_TYPE,
+            )
+        joint_topic = candidates[0]
+        notes.append(f"{where}: joints from topic {joint_topic} ({JOINT_STATE_TYPE}, the bag's only one)")
+    _check_topic(where, topics, joint_topic, JOINT_STATE_TYPE, listing)
+    if wrench_topic is not None:
+        _check_topic(where, topics, wrench_topic, WRENCH_TYPE, listing)
+    else:
+        others = sorted(t for t, m in topics.items() if m == WRENCH_TYPE)
+        if others:
+            notes.append(f"{where}: {WRENCH_TYPE} topic(s) {', '.join(others)} not used (no wrench topic given)")
+    return joint_topic, notes
+
+
+def _check_clock(stamps: np.ndarray, index: np.ndarray, topic: str, clock: str, where: str) -> None:
+    """Refuse a clock that jumps back or runs backwards (a message stamped more than
+    :data:`MAX_LATE_PERIODS` sample periods before an earlier message): sorting by stamp would then
+    interleave two stretches of motion, and no stamp says which sample came when."""
+    if stamps.size < 2:
+        return
+    steps = np.abs(np.diff(stamps))
+    steps = steps[steps > 0]
+    if not steps.size:
+        return
+    period = float(np.median(steps))
+    latest = np.maximum.accumulate(stamps)
+    late = latest - stamps
+    bad = np.flatnonzero(late > MAX_LATE_PERIODS * period)
+    if not bad.size:
+        return
+    i = int(bad[0])
+    j = int(np.argmax(stamps[:i] == latest[i]))
+    what = "header stamp" if clock == "header" else "receive time"
+    raise DataError(
+        f"{where}: the {topic} {what}s go back {late[i] * 1e-9:.6g} s at message {int(index[i])} "
+        f"({what} {_ns_text(int(stamps[i]))} s after {_ns_text(int(latest[i]))} s at message {int(index[j])}): "
+        f"more than {MAX_LATE_PERIODS} sample periods ({MAX_LATE_PERIODS * period * 1e-9:.3g} s), so not a late "
+        "message but a clock that jumped back or runs backwards; the samples' order and times are unknown",
+        source=where, column=topic, row=int(index[i]), value=int(stamps[i]), expected=f">= {int(latest[i])}",
+    )  # fmt: skip
+
+
+def _ns_text(ns: int) -> str:
+    return f"{ns // 1_000_000_000}.{ns % 1_000_000_000:09d}"
 
 
 def _check_topic(where: str, topics: dict[str, str], topic: str, msgtype: str, listing: str) -> None:
@@ -145,125 +207,134 @@ def _check_topic(where: str, topics: dict[str, str], topic: str, msgtype: str, l
         )
 
 
-def _stamp(msg: Any) -> int:
-    return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
-
-
-def _joint_messages(reader: Any, topic: str) -> list[tuple[int, int, tuple[str, ...], Any, Any, Any]]:
-    conns = [c for c in reader.connections if c.topic == topic]
-    out = []
-    for conn, received, raw in reader.messages(connections=conns):
-        msg = reader.deserialize(raw, conn.msgtype)
-        out.append((_stamp(msg), int(received), tuple(msg.name), msg.position, msg.velocity, msg.effort))
-    return out
-
-
-def _wrench_messages(reader: Any, topic: str) -> dict[str, Any]:
-    conns = [c for c in reader.connections if c.topic == topic]
-    header, received, values, frames = [], [], [], set()
-    for conn, rec, raw in reader.messages(connections=conns):
-        msg = reader.deserialize(raw, conn.msgtype)
-        f, m = msg.wrench.force, msg.wrench.torque
-        header.append(_stamp(msg))
-        received.append(int(rec))
-        values.append((f.x, f.y, f.z, m.x, m.y, m.z))
-        frames.add(str(msg.header.frame_id))
-    if not values:
-        raise DataError(f"wrench topic {topic!r} has no messages")
-    return {
-        "header": np.asarray(header, dtype=np.int64),
-        "received": np.asarray(received, dtype=np.int64),
-        "values": np.asarray(values, dtype=float),
-        "frames": sorted(frames),
-    }
+def _read_topic(reader: Any, topic: str, kind: Kind, where: str, bulk: bool) -> _Topic:
+    """Every message of ``topic`` decoded (in bulk where the layout allows, see :mod:`._cdr`)."""
+    templates: dict[int, list[Any]] = {}
+    batches: list[Batch] = []
+    received: list[np.ndarray] = []
+    count = n_bulk = 0
+    blocks = raw_blocks(reader, topic)
+    while True:
+        try:
+            block = next(blocks, None)
+        except Exception as e:  # rosbags' container errors (truncated chunk, checksum, database)
+            raise DataError(
+                f"{where}: cannot read the {topic} messages after message {count - 1} "
+                f"(bag time {_ns_text(int(received[-1][-1])) + ' s' if received else 'none'}): {e}",
+                source=where, column=topic, row=count,
+            ) from e  # fmt: skip
+        if block is None:
+            break
+        try:
+            got, n = decode_block(block, count, kind, reader.deserialize, templates, bulk=bulk)
+        except UndecodableMessage as e:
+            i = e.index
+            raise DataError(
+                f"{where}: {topic} message {i} (bag time {_ns_text(int(block.received[i - count]))} s) does not "
+                f"decode as {kind.msgtype}: {e.reason}",
+                source=where, column=topic, row=i, value=e.reason, expected=kind.msgtype,
+            ) from e  # fmt: skip
+        batches += got
+        received.append(block.received)
+        count += block.size.size
+        n_bulk += n
+    if not count:
+        raise DataError(f"{where}: topic {topic} has no messages", source=where, column=topic)
+    return _Topic(topic, concatenate(batches), np.concatenate(received), n_bulk)
 
 
 def _map_joints(
-    messages: list[tuple[int, int, tuple[str, ...], Any, Any, Any]],
+    joints: _Topic,
     joint_names: tuple[str, ...] | None,
     n_joints: int | None,
-    topic: str,
     where: str,
 ) -> tuple[dict[str, np.ndarray], list[str]]:
-    if not messages:
-        raise DataError(f"{where}: topic {topic} has no messages")
+    topic, batches = joints.topic, joints.batches
     notes: list[str] = []
     if joint_names is None:
-        first = next((m[2] for m in messages if n_joints is None or len(m[2]) == n_joints), messages[0][2])
-        joint_names = first
-        which = "first message" if first == messages[0][2] else f"first message with {n_joints} joints"
-        notes.append(f"{where}: joint order taken from the {which}: {', '.join(joint_names)}")
-        if n_joints is not None and len(joint_names) != n_joints:
-            raise DataError(
-                f"{where}: the first {topic} message has {len(joint_names)} joints ({', '.join(joint_names)}); "
-                f"the robot has {n_joints}",
-                source=where,
-                column=topic,
-                value=len(joint_names),
-                expected=n_joints,
-            )
+        joint_names, note = _first_order(batches, n_joints, topic, where)
+        notes.append(note)
     n = len(joint_names)
-    orders: dict[tuple[str, ...], np.ndarray | None] = {}
+    orders: list[tuple[Batch, np.ndarray]] = []
     skipped: dict[str, int] = {}
-    rows: list[int] = []
-    elements: list[np.ndarray] = []
-    for r, (_, _, names, *_) in enumerate(messages):
-        if names not in orders:
-            where_is = {name: k for k, name in enumerate(names)}
-            have = [j for j in joint_names if j in where_is]
-            if not have:
-                orders[names] = None
-            elif len(have) < n:
-                missing = [j for j in joint_names if j not in where_is]
-                raise DataError(
-                    f"{where}: {topic} message {r} holds joints {', '.join(names)}: the arm's joint(s) "
-                    f"{', '.join(map(repr, missing))} missing (a message must hold all of the arm's joints or none)",
-                    source=where,
-                    column=topic,
-                    row=r,
-                    joint=missing[0],
-                    value=names,
-                    expected=joint_names,
-                )
-            else:
-                orders[names] = np.array([where_is[j] for j in joint_names])
-        order = orders[names]
-        if order is None:
+    for b in batches:  # in the order of their first message
+        names = b.key[0]
+        where_is = {name: k for k, name in enumerate(names)}
+        have = [j for j in joint_names if j in where_is]
+        if not have:
             for name in names:
-                skipped[name] = skipped.get(name, 0) + 1
-            continue
-        rows.append(r)
-        elements.append(order)
-    if not rows:
+                skipped[name] = skipped.get(name, 0) + b.msg_index.size
+        elif len(have) < n:
+            r = int(b.msg_index[0])
+            missing = [j for j in joint_names if j not in where_is]
+            raise DataError(
+                f"{where}: {topic} message {r} holds joints {', '.join(names)}: the arm's joint(s) "
+                f"{', '.join(map(repr, missing))} missing (a message must hold all of the arm's joints or none)",
+                source=where, column=topic, row=r, joint=missing[0], value=names, expected=joint_names,
+            )  # fmt: skip
+        else:
+            orders.append((b, np.array([where_is[j] for j in joint_names])))
+    if not orders:
         raise DataError(f"{where}: no {topic} message holds the arm's joints ({', '.join(joint_names)}); "
                         f"joints found: {', '.join(skipped) or 'none'}")  # fmt: skip
-    data: dict[str, np.ndarray] = {}
-    for k, (signal, field) in enumerate((("q", "position"), ("dq", "velocity"), ("tau", "effort"))):
-        out = np.empty((len(rows), n))
-        for i, (r, order) in enumerate(zip(rows, elements, strict=True)):
-            values = np.asarray(messages[r][3 + k], dtype=float)
-            if values.size != len(messages[r][2]):
-                raise DataError(
-                    f"{where}: {topic} message {r} has {values.size} {field} values for {len(messages[r][2])} joints"
-                    + (f"; the arm's {field} is required" if values.size == 0 else ""),
-                    source=where,
-                    column=f"{topic} {field}",
-                    row=r,
-                    value=values.size,
-                    expected=len(messages[r][2]),
-                )
-            out[i] = values[order]
-        data[signal] = out
-    data["header"] = np.asarray([messages[r][0] for r in rows], dtype=np.int64)
-    data["received"] = np.asarray([messages[r][1] for r in rows], dtype=np.int64)
-    if len([o for o in orders.values() if o is not None]) > 1:
+    _check_lengths(orders, topic, where)
+    rows = np.sort(np.concatenate([b.msg_index for b, _ in orders]))
+    data: dict[str, np.ndarray] = {k: np.empty((rows.size, n)) for k in ("q", "dq", "tau")}
+    header = np.empty(rows.size, dtype=np.int64)
+    for b, order in orders:
+        at = np.searchsorted(rows, b.msg_index)
+        for k, signal in enumerate(("q", "dq", "tau")):
+            data[signal][at] = b.arrays[k][:, order]
+        header[at] = b.stamp
+    data["header"], data["received"], data["index"] = header, joints.received[rows], rows
+    if len({b.key[0] for b, _ in orders}) > 1:
         notes.append(f"{where}: the joint order changes between {topic} messages; mapped by name per message")
     if skipped:
         notes.append(
-            f"{where}: left out {len(messages) - len(rows):,} {topic} message(s) holding none of the arm's joints "
-            f"(joints {', '.join(skipped)}: not in the arm)"
+            f"{where}: left out {joints.received.size - rows.size:,} {topic} message(s) holding none of the arm's "
+            f"joints (joints {', '.join(skipped)}: not in the arm)"
         )
     return data, notes
+
+
+def _first_order(batches: list[Batch], n_joints: int | None, topic: str, where: str) -> tuple[tuple[str, ...], str]:
+    """Without joint names: the first message's order (with the robot's joint count, if known)."""
+    first = batches[0].key[0]
+    fitting = [b for b in batches if n_joints is None or len(b.key[0]) == n_joints]
+    names = min(fitting, key=lambda b: int(b.msg_index[0])).key[0] if fitting else first
+    which = "first message" if names == first else f"first message with {n_joints} joints"
+    if n_joints is not None and len(names) != n_joints:
+        raise DataError(
+            f"{where}: the first {topic} message has {len(names)} joints ({', '.join(names)}); "
+            f"the robot has {n_joints}",
+            source=where, column=topic, value=len(names), expected=n_joints,
+        )  # fmt: skip
+    return names, f"{where}: joint order taken from the {which}: {', '.join(names)}"
+
+
+def _check_lengths(orders: list[tuple[Batch, np.ndarray]], topic: str, where: str) -> None:
+    """Every arm message holds one position, velocity and effort value per joint name."""
+    for k, field in enumerate(("position", "velocity", "effort")):
+        bad = [b for b, _ in orders if b.key[1 + k] != len(b.key[0])]
+        if bad:
+            b = min(bad, key=lambda b: int(b.msg_index[0]))
+            r, size, names = int(b.msg_index[0]), b.key[1 + k], len(b.key[0])
+            raise DataError(
+                f"{where}: {topic} message {r} has {size} {field} values for {names} joints"
+                + (f"; the arm's {field} is required" if size == 0 else ""),
+                source=where, column=f"{topic} {field}", row=r, value=size, expected=names,
+            )  # fmt: skip
+
+
+def _wrench_messages(wrench: _Topic) -> dict[str, Any]:
+    (b,) = concatenate([bt._replace(key=()) for bt in wrench.batches])
+    return {
+        "header": b.stamp,
+        "received": wrench.received[b.msg_index],
+        "index": b.msg_index,
+        "values": b.arrays[0],
+        "frames": sorted(bt.key[0] for bt in wrench.batches),
+    }
 
 
 def _choose_clock(

@@ -1,0 +1,193 @@
+"""The raw messages of one bag topic, in blocks: each message's CDR bytes and its bag (receive) time
+[ns], in the order ``rosbags``' reader gives them (by receive time, ties in storage order).
+
+``rosbags`` opens the bag, parses its metadata, indexes and connections, reads and decompresses (and
+checksums) MCAP chunks and queries the sqlite3 database. Two of its per-message layers are skipped
+where the result is the same:
+
+* **MCAP** (chunked, indexed, chunks in time order as rosbag2 writes them): the messages of a chunk
+  are found through the chunk's message index records (log time and offset per message, read with
+  numpy), each record checked against its index entry (opcode, channel, log time, length) before its
+  bytes are used; a chunk whose records do not match goes through rosbags' own chunk reader (``msgsrc``).
+* **sqlite3** (without per-message compression): each storage file's rows are read with rosbags' own
+  query on the database connection rosbags opened, in blocks, without its per-message generator,
+  connection remapping and merge layers.
+
+Anything else (per-message compression, overlapping or unindexed MCAP chunks, several bags) is read
+through ``AnyReader.messages`` itself.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator
+from itertools import islice
+from typing import Any
+
+import numpy as np
+
+from reflexarm.logs._cdr import RawBlock
+
+__all__ = ["BLOCK", "raw_blocks"]
+
+#: Messages per block: bounds the memory of the raw bytes held at once.
+BLOCK = 1 << 16
+_INDEX = np.dtype([("time", "<u8"), ("offset", "<u8")])
+
+
+def raw_blocks(reader: Any, topic: str) -> Iterator[RawBlock]:
+    """The raw messages of ``topic`` in blocks of about :data:`BLOCK` messages."""
+    storages = _storages(reader)
+    if storages is None:
+        yield from _blocks(reader.messages(connections=[c for c in reader.connections if c.topic == topic]))
+        return
+    from rosbags.rosbag2.storage_mcap import McapReader
+    from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
+
+    for storage in storages:
+        conns = [c for c in storage.connections if c.topic == topic]
+        if not conns:
+            continue
+        chunks = _mcap_chunks(storage, conns) if isinstance(storage, McapReader) else None
+        if chunks is not None:
+            yield from _mcap_blocks(storage, conns, chunks)
+        else:
+            yield from _blocks(
+                _sqlite_rows(storage, conns) if isinstance(storage, Sqlite3Reader) else storage.messages(conns)
+            )
+
+
+def _sqlite_rows(storage: Any, conns: list[Any]) -> Iterable[tuple[Any, int, Any]]:
+    """The rows of rosbags' own message query (``Sqlite3Reader.messages`` without start / stop), read
+    from the database connection rosbags opened, without a Python generator step per message."""
+    ids = tuple({c.id for c in conns})
+    query = (
+        "SELECT topics.id,messages.timestamp,messages.data FROM messages JOIN topics ON messages.topic_id=topics.id "
+        f"WHERE topics.id IN ({','.join('?' for _ in ids)}) ORDER BY timestamp"
+    )
+    return storage.dbconn.execute(query, ids)  # type: ignore[no-any-return]
+
+
+def _blocks(messages: Iterable[tuple[Any, int, Any]]) -> Iterator[RawBlock]:
+    it = iter(messages)
+    while True:
+        block = list(islice(it, BLOCK))
+        if not block:
+            return
+        _, received, raws = zip(*block, strict=True)
+        size = np.fromiter(map(len, raws), dtype=np.int64, count=len(raws))
+        data = np.frombuffer(b"".join(raws), dtype=np.uint8)
+        yield RawBlock(data, np.cumsum(size) - size, size, np.fromiter(received, dtype=np.int64, count=len(block)))
+
+
+def _storages(reader: Any) -> list[Any] | None:
+    """The storage files of a single rosbag2 bag read as the bag reader reads them, else None."""
+    from rosbags.rosbag2 import Reader
+    from rosbags.rosbag2.reader import DirectoryReader
+    from rosbags.rosbag2.storage_mcap import McapReader
+    from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
+
+    if len(reader.readers) != 1 or not isinstance(reader.readers[0], Reader):
+        return None
+    storage = reader.readers[0].storage
+    if isinstance(storage, DirectoryReader):
+        if storage.metadata.compression_mode == "message":
+            return None
+        storages = list(storage.storages)
+    else:
+        storages = [storage]
+    return storages if all(isinstance(s, McapReader | Sqlite3Reader) for s in storages) else None
+
+
+def _mcap_chunks(storage: Any, conns: list[Any]) -> list[Any] | None:
+    """The chunks holding ``conns``, if each is indexed and they follow each other in time (then reading
+    them one after the other gives rosbags' merged order), else None."""
+    ids = {c.id for c in conns}
+    chunks = [x for x in storage.chunks if any(x.channel_count.get(i, 0) for i in ids)]
+    if not storage.chunks:
+        return None
+    for a, b in zip(chunks, chunks[1:], strict=False):
+        if b.message_start_time < a.message_end_time:
+            return None
+    return chunks
+
+
+def _mcap_blocks(storage: Any, conns: list[Any], chunks: list[Any]) -> Iterator[RawBlock]:
+    parts: list[RawBlock] = []
+    for chunk in chunks:
+        parts.append(_chunk_messages(storage, conns, chunk))
+        if sum(p.size.size for p in parts) >= BLOCK:
+            yield _join(parts)
+            parts = []
+    if parts:
+        yield _join(parts)
+
+
+def _join(parts: list[RawBlock]) -> RawBlock:
+    shift = np.cumsum([0] + [p.data.size for p in parts[:-1]])
+    return RawBlock(
+        np.concatenate([p.data for p in parts]),
+        np.concatenate([p.start + s for p, s in zip(parts, shift, strict=True)]),
+        np.concatenate([p.size for p in parts]),
+        np.concatenate([p.received for p in parts]),
+    )
+
+
+def _read_chunk(storage: Any, chunk: Any) -> bytes:
+    from rosbags.rosbag2.storage_mcap import decompress, deserialize_uint32, read_exact
+
+    bio = storage.bio
+    bio.seek(chunk.chunk_start_offset + 9 + 24)
+    (crc,) = deserialize_uint32(read_exact(bio, 4))
+    bio.seek(chunk.chunk_start_offset + 9 + 40 + len(chunk.compression))
+    return bytes(decompress(read_exact(bio, chunk.compressed_size), chunk.compression, chunk.uncompressed_size, crc))
+
+
+def _index(storage: Any, chunk: Any, ids: set[int]) -> np.ndarray | None:
+    """The chunk's message index entries (log time, offset) of channels ``ids``, in record order."""
+    from rosbags.rosbag2.storage_mcap import read_exact
+
+    parts = []
+    for cid in ids:
+        if not chunk.channel_count.get(cid, 0):
+            continue
+        storage.bio.seek(chunk.message_index_offsets[cid])
+        head = read_exact(storage.bio, 1 + 8 + 2 + 4)
+        size = int.from_bytes(head[11:15], "little")
+        if head[0] != 0x07 or int.from_bytes(head[9:11], "little") != cid or size % 16:
+            return None
+        parts.append(np.frombuffer(read_exact(storage.bio, size), dtype=_INDEX))
+    entries = np.concatenate(parts) if parts else np.zeros(0, _INDEX)
+    return entries[np.argsort(entries["offset"], kind="stable")]
+
+
+def _chunk_messages(storage: Any, conns: list[Any], chunk: Any) -> RawBlock:
+    """The chunk's messages of ``conns`` in log time order (ties in record order, as rosbags' ``msgsrc``)."""
+    ids = {c.id for c in conns}
+    data = _read_chunk(storage, chunk)
+    entries = _index(storage, chunk, ids)
+    if entries is not None and entries.size:
+        u8 = np.frombuffer(data, dtype=np.uint8)
+        off = entries["offset"].astype(np.int64)
+        if off.max() + 31 <= u8.size:
+            head = u8[off[:, None] + np.arange(31)]  # opcode, length, channel, sequence, log time, publish time
+            length = head[:, 1:9].copy().view("<u8")[:, 0].astype(np.int64)
+            channel = head[:, 9:11].copy().view("<u2")[:, 0]
+            log_time = head[:, 15:23].copy().view("<u8")[:, 0]
+            ok = (head[:, 0] == 0x05) & (length >= 22) & (off + 9 + length <= u8.size)
+            ok &= np.isin(channel, list(ids)) & (log_time == entries["time"])
+            if ok.all():
+                order = np.argsort(log_time, kind="stable")
+                return RawBlock(u8, (off + 31)[order], (length - 22)[order], log_time[order].astype(np.int64))
+    return _chunk_by_rosbags(storage, conns, chunk)
+
+
+def _chunk_by_rosbags(storage: Any, conns: list[Any], chunk: Any) -> RawBlock:
+    from rosbags.rosbag2.storage_mcap import msgsrc
+
+    cmap = {c.id: c for c in conns}
+    msgs = msgsrc(chunk, cmap, chunk.message_start_time, chunk.message_end_time + 1, storage.bio)
+    blocks = list(_blocks((m.connection, m.timestamp, m.data) for m in msgs if m.offset))
+    if not blocks:
+        empty = np.zeros(0, dtype=np.int64)
+        return RawBlock(np.zeros(0, dtype=np.uint8), empty, empty, empty)
+    return _join(blocks)
