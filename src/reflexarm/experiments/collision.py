@@ -56,6 +56,7 @@ __all__ = [
     "ee_collision_trajectory",
     "compare_with_paper",
     "controller_model",
+    "default_trace_every",
     "free_motion_false_alarms",
     "free_motion_trajectory",
     "link_collision_trajectory",
@@ -403,15 +404,18 @@ def free_motion_false_alarms(
     motion: str = "demo",
     trace_path: str | None = None,
     robot: RobotModel | None = None,
+    trace_every: int | None = None,
 ) -> dict[str, object]:
     """Run the demo trajectory back and forth without obstacle for ``duration`` s with detection on.
 
     Returns the number of detections (false alarms) and the largest |residual| per joint. The controller's
     model is chosen by ``model_error``/``model_seed``/``model`` as in :func:`run_ee_collision`; ``motion``
     picks the path (:func:`free_motion_trajectory`). The run keeps running statistics only
-    (:func:`~reflexarm.sim.stream_closed_loop`: separate detections, ticks per mode and fault, ticks
-    above fractions of ``threshold`` per joint), in memory independent of ``duration``; ``trace_path``
-    (``.parquet``) also streams the whole trace to disk block by block.
+    (:func:`~reflexarm.sim.stream_fast`: the compiled loop, statistics folded in C++; separate detections,
+    ticks per mode and fault, ticks above fractions of ``threshold`` per joint), in memory independent of
+    ``duration``; ``trace_path`` (``.parquet``) also streams the trace to disk block by block: every
+    ``trace_every``-th tick (default :func:`default_trace_every`: every tick up to
+    :data:`FULL_TRACE_UP_TO_S`, every :data:`LONG_RUN_TRACE_EVERY`-th beyond).
     """
     robot = load_robot(ROBOT) if robot is None else robot
     ctrl_model, _model_info = controller_model(robot, model_error, model_seed, model)
@@ -420,10 +424,11 @@ def free_motion_false_alarms(
     plant.reset(traj.sample(0.0).q_d)
     ctrl = Controller(ctrl_model, stiffness=300.0, observer_gain=5.0, threshold=threshold, reaction="none")
     # running statistics only (the trace streamed to ``trace_path`` block by block if given): the memory
-    # does not grow with the duration, so hours of free motion fit (the whole trace took ~1.7 MB/s)
-    from reflexarm.sim import stream_closed_loop
+    # does not grow with the duration, so hours of free motion fit; the compiled loop unless it cannot
+    from reflexarm.sim import stream_fast
 
-    stats = stream_closed_loop(plant, ctrl, traj, duration, path=trace_path, progress=progress)
+    every = default_trace_every(duration) if trace_every is None else trace_every
+    stats = stream_fast(plant, ctrl, traj, duration, path=trace_path, progress=progress, trace_every=every)
     return {
         "duration_s": stats.t_last,
         "false_alarm_ticks": stats.collision_ticks,
@@ -435,9 +440,24 @@ def free_motion_false_alarms(
         # for choosing zeta afterwards: ticks per joint at or above fractions of it (0.1 Nm resolution)
         "ticks_above_Nm": {f"{x:g}": stats.ticks_above(x).tolist() for x in threshold * np.array([0.5, 0.75, 1.0])},
         "trace_file": None if trace_path is None else str(trace_path),
+        "trace_every_ticks": every if trace_path is not None else None,
         "robot": robot.name,
         "motion": motion,
+        "loop": stats.loop,
     }
+
+
+#: A free-motion trace keeps every tick up to this duration [s] (~0.5 MB per simulated second of the Atlas arm).
+FULL_TRACE_UP_TO_S = 600.0
+#: ... and every this many ticks beyond (10 Hz at 1 kHz: ~18 MB per simulated hour of the Atlas arm; the
+#: statistics, the largest residuals and the histogram, are over every tick all the same).
+LONG_RUN_TRACE_EVERY = 100
+
+
+def default_trace_every(duration: float) -> int:
+    """Ticks per written row of a free-motion trace of ``duration`` s: 1 up to :data:`FULL_TRACE_UP_TO_S`,
+    :data:`LONG_RUN_TRACE_EVERY` beyond (a long run's trace stays small: ~18 MB per simulated hour)."""
+    return 1 if duration <= FULL_TRACE_UP_TO_S else LONG_RUN_TRACE_EVERY
 
 
 def _contact_estimate(trace: Trace) -> dict[str, object] | None:
