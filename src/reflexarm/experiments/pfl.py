@@ -70,6 +70,7 @@ class ContactResult:
     controller_force_at_peak_N: float | None
     contact_time_s: float | None
     detection_delay_s: float | None
+    detected_before_contact: bool
     below_qs_after_detection_s: float | None
     max_force_after_window_N: float | None
     F_T_N: float
@@ -131,11 +132,14 @@ def contact_result(
         standard_mass_kg=m_std,
         max_force_N=float(F.max()),
         standard_permissible_speed_m_s=permissible_speed_for_mass(m_std, region) if m_h < math.inf else math.nan,
+        detected_before_contact=False,
         F_T_N=region.transient_force,
         F_QS_N=region.quasi_static_force,
     )
     t_det = trace.first_time(trace.collision) if detection else None
     hits = np.flatnonzero(F > 0.0)
+    if t_det is not None and (hits.size == 0 or t_det < float(trace.t[hits[0]])):
+        common["detected_before_contact"] = True  # a false alarm: the reaction started before any contact
     if hits.size == 0:
         none = dict.fromkeys(f for f in ContactResult.__dataclass_fields__ if f not in common)
         return ContactResult(**{**none, **common})  # type: ignore[arg-type]

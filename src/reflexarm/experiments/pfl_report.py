@@ -41,9 +41,16 @@ def speed_table(study: PflStudy) -> list[dict[str, Any]]:
         for reaction in reactions:
             rr = study.select(arm=arm, region=region, mode="transient", detection=True, reaction=reaction)
             row[f"v_sim_{reaction}_m_s"] = safe_speeds(rr)["simulated_safe_speed_m_s"]
+        delays = [r["detection_delay_s"] for r in _ok(study.select(arm=arm, region=region, mode="transient"))]
+        delays = [d for d in delays if d is not None and d >= 0.0]
+        row["transient_detection_delay_s"] = max(delays) if delays else None
         for reaction in reactions:
             c = _ok(study.select(arm=arm, region=region, mode="clamped", reaction=reaction))
+            row[f"clamped_{reaction}_max_N"] = c[0]["max_force_N"] if c else None
             row[f"clamped_{reaction}_after_{QS_WINDOW_S:g}s_N"] = c[0]["max_force_after_window_N"] if c else None
+            row[f"clamped_{reaction}_below_F_QS_after_s"] = c[0]["below_qs_after_detection_s"] if c else None
+        false_alarms = [r for r in study.select(arm=arm, region=region) if r.get("detected_before_contact")]
+        row["false_alarms"] = len(false_alarms)
         errors = sorted({r["error"] for r in study.select(arm=arm, region=region) if r.get("error")})
         row["errors"] = "; ".join(errors)
         out.append(row)
@@ -75,13 +82,19 @@ def _region_figure(study: PflStudy, region: str, path: Path) -> Path:
         off = sorted((r for r in rows if r["arm"] == arm and not r["detection"]), key=lambda r: r["approach_speed_m_s"])
         v = [r["approach_speed_m_s"] for r in off]
         ax.plot(v, [r["peak_force_N"] for r in off], "o", color=c, label=f"{arm}: simulated, detection off")
-        ax.plot(v, [r["analytic_force_N"] for r in off], "-", color=c, label=f"{arm}: v sqrt(mu k), m_R(q, u)")
-        ax.plot(v, [r["analytic_standard_force_N"] for r in off], ":", color=c, label=f"{arm}: m_R = M/2")
+        if off:  # the analytic lines are straight through 0: drawn up to past the limit F_T
+            slope = off[0]["analytic_force_N"] / off[0]["approach_speed_m_s"]
+            slope_std = off[0]["analytic_standard_force_N"] / off[0]["approach_speed_m_s"]
+            top = max(1.1 * off[0]["F_T_N"] / slope, max(v))
+            ax.plot([0.0, top], [0.0, slope * top], "-", color=c, label=f"{arm}: v sqrt(mu k), m_R(q, u)")
+            ax.plot([0.0, top], [0.0, slope_std * top], ":", color=c, label=f"{arm}: m_R = M/2")
         det = [r for r in rows if r["arm"] == arm and r["detection"]]
         ax.plot([r["approach_speed_m_s"] for r in det], [r["peak_force_N"] for r in det], "x", color=c, alpha=0.6)
     if rows:
         ax.axhline(rows[0]["F_T_N"], color="k", lw=1.5, label=f"F_T = {rows[0]['F_T_N']:g} N")
         ax.axhline(rows[0]["F_QS_N"], color="k", ls="--", lw=1.0, label=f"F_QS = {rows[0]['F_QS_N']:g} N")
+    ax.set_xlim(left=0.0)
+    ax.set_ylim(bottom=0.0)
     ax.set_xlabel("approach speed [m/s]")
     ax.set_ylabel("peak contact force [N]")
     ax.set_title(f"{region}: transient contact (x: with detection and each reaction)")
@@ -99,26 +112,35 @@ def _fmt(v: Any) -> str:
     return f"{v:.3g}" if isinstance(v, float) else html.escape(str(v))
 
 
-def _html(study: PflStudy, table: list[dict[str, Any]], figures: list[Path]) -> str:
-    keys = [k for k in table[0] if k != "errors"] if table else []
+def _table_html(table: list[dict[str, Any]], keys: list[str]) -> str:
     head = "".join(f"<th>{html.escape(k)}</th>" for k in keys)
-    body = "".join("<tr>" + "".join(f"<td>{_fmt(r[k])}</td>" for k in keys) + "</tr>" for r in table)
+    body = "".join("<tr>" + "".join(f"<td>{_fmt(r.get(k))}</td>" for k in keys) + "</tr>" for r in table)
+    return f"<table><tr>{head}</tr>{body}</table>"
+
+
+def _html(study: PflStudy, table: list[dict[str, Any]], figures: list[Path]) -> str:
+    keys = list(table[0]) if table else []
+    ident = ["arm", "region"]
+    transient = ident + [k for k in keys if k not in ident and not k.startswith("clamped_") and k != "errors"]
+    clamped = ident + ["F_QS_N"] + [k for k in keys if k.startswith("clamped_")]
     errors = sorted({r["error"] for r in study.rows if r.get("error")})
     err = "".join(f"<li>{html.escape(e)}</li>" for e in errors) or "<li>none</li>"
     figs = "".join(f'<img src="{f.name}" width="48%">' for f in figures)
     cond = html.escape(json.dumps(study.conditions, default=str))
     return f"""<!doctype html><html><head><meta charset="utf-8"><title>reflexarm pfl</title>
-<style>body{{font-family:sans-serif;font-size:11px;margin:12px}}table{{border-collapse:collapse}}
+<style>body{{font-family:sans-serif;font-size:11px;margin:12px}}table{{border-collapse:collapse;margin-bottom:8px}}
 td,th{{border:1px solid #bbb;padding:2px 4px;text-align:right}}</style></head><body>
 <h2>Human contact limits (ISO/TS 15066 Annex A): permissible speeds and simulated contacts</h2>
 <p>Transient contact: two masses and the region's spring, F = v sqrt(mu k), v_max = F_T / sqrt(mu k),
 mu = (1/m_H + 1/m_R)^-1; m_R = M/2 (standard, no payload) or m_R(q, u) = 1/(u^T J M^-1 J^T u) at the end effector
 in its direction of travel at contact. Simulated: the demo swing of each arm into the region (MuJoCo plant, the
 region's spring k and mass m_H; clamped: a wall behind the spring), the arm's own controller, detection and
-reaction. Speeds [m/s], forces [N], masses [kg]. Skull and face: Table A.2 gives no transient limit; F_QS stands
-in (this package's choice). "v_sim" is the speed at which the simulated peak reaches F_T (proportional
-scaling of the tested runs); clamped columns: the largest force from {QS_WINDOW_S:g} s after detection.</p>
-<table><tr>{head}</tr>{body}</table>
+reaction. Speeds [m/s], forces [N], masses [kg], times [s]. Skull and face: Table A.2 gives no transient limit;
+F_QS stands in (this package's choice). "v_sim" is the speed at which the simulated peak reaches F_T
+(proportional scaling of the tested runs); a reaction can only lower it if detection comes before the peak.</p>
+<h3>Transient contact: permissible speed [m/s]</h3>{_table_html(table, transient)}
+<h3>Clamped contact (wall behind the region): largest force [N], largest force from {QS_WINDOW_S:g} s after
+detection [N], time after detection until the force stays below F_QS [s]</h3>{_table_html(table, clamped)}
 <h3>Runs that could not be made</h3><ul>{err}</ul>
 <h3>Per region: peak force vs speed</h3>{figs}
 <p>Conditions: {cond}</p></body></html>"""
