@@ -154,3 +154,59 @@ def test_unknown_region_and_reaction_are_named():
         run_region_contact(robot, "knee", 0.25)
     with pytest.raises(ConfigError, match="unknown reaction 'stop'; choose one of: none, gravity"):
         run_region_contact(robot, "hand", 0.25, reaction="stop")
+
+
+def test_cli_checks_a_trajectory_file_sample_by_sample(tmp_path, capsys):
+    import json
+
+    from reflexarm.cli import main
+
+    robot = _robot("panda")
+    t = np.linspace(0.0, 1.0, 101)
+    q = robot.home + np.outer(np.sin(np.pi * t), [1.2, 0, 0, 0, 0, 0, 0])  # joint 1 swings out at up to ~3.8 rad/s
+    path = tmp_path / "motion.csv"
+    np.savetxt(
+        path, np.column_stack([t, q]), delimiter=",", header="t," + ",".join(f"q{i}" for i in range(1, 8)), comments=""
+    )
+    assert (
+        main(["pfl", "--arms", "panda", "--regions", "skull,chest", "--trajectory", str(path), "--out", str(tmp_path)])
+        == 0
+    )
+    out = capsys.readouterr().out
+    assert "skull:" in out and "samples over the limit" in out and "m/s" in out
+    report = json.loads((tmp_path / "pfl_trajectory.json").read_text())
+    skull = report["regions"]["skull"]
+    assert skull["samples_over_limit"] == len(skull["violations"]) > 0
+    first = skull["violations"][0]
+    assert first["speed_m_s"] > first["permissible_speed_m_s"] and set(first) >= {"t_s", "point", "effective_mass_kg"}
+    # a file without the arm's seven joints is refused, naming what it found
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,a,b\n0,0,0\n1,0,0\n")
+    assert main(["pfl", "--arms", "panda", "--trajectory", str(bad), "--out", str(tmp_path)]) == 2
+    assert "--trajectory needs columns t and 7 joint positions [rad]; found ['t', 'a', 'b']" in capsys.readouterr().err
+
+
+def test_scene_refuses_bad_input():
+    with pytest.raises(ConfigError, match="unknown contact mode 'pinned'; choose one of: transient, clamped"):
+        HumanContact("hand", (0, 0, 0), (1, 0, 0), mode="pinned")
+    with pytest.raises(ConfigError, match="normal must be a non-zero direction"):
+        HumanContact("hand", (0, 0, 0), (0, 0, 0))
+    with pytest.raises(ConfigError, match="surface must be a finite 3-vector"):
+        HumanContact("hand", (0, np.nan, 0), (1, 0, 0))
+
+
+def test_study_outputs_carry_units_and_name_failed_runs(tmp_path):
+    from reflexarm.experiments.pfl_report import speed_table, write_pfl_outputs
+    from reflexarm.experiments.pfl_study import run_pfl_study
+
+    study = run_pfl_study([("panda", _robot("panda"))], ["hand"], [0.25, 5.0], ["retract"])
+    failed = [r for r in study.rows if r["error"]]
+    assert failed and all("reaches at most 0.79 m/s" in r["error"] for r in failed)  # 5 m/s: said, not dropped
+    table = speed_table(study)
+    assert table[0]["v_posture_m_s"] > table[0]["v_standard_m_s"] > 0.0  # m_R(q, u) < M/2 on this swing
+    paths = write_pfl_outputs(study, tmp_path)
+    header = paths["table_csv"].read_text().splitlines()[0]
+    assert "v_standard_m_s" in header and "F_T_N" in header and "effective_mass_kg" in header
+    page = paths["html"].read_text()
+    assert "Speeds [m/s], forces [N], masses [kg]" in page and "reaches at most 0.79 m/s" in page
+    assert paths["pfl_hand"].stat().st_size > 10_000
