@@ -249,8 +249,12 @@ def decode_block(
             else:
                 r = int(np.argmax(left))
                 raw = block.raw(int(idx[r]))
-                msg = _deserialize(deserialize, kind, raw, first + int(idx[r]))
-                made = _template(kind, raw, msg) if sum(map(len, templates.values())) < MAX_TEMPLATES else None
+                try:
+                    msg = deserialize(raw, kind.msgtype)
+                except Exception:  # left to the one-by-one pass, which names the block's first such message
+                    msg = None
+                full = sum(map(len, templates.values())) >= MAX_TEMPLATES
+                made = None if msg is None or full else _template(kind, raw, msg)
                 if made is None:
                     single.append(int(idx[r]))
                     left[r] = False
