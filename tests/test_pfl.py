@@ -97,7 +97,6 @@ def test_closed_loop_hand_within_15_percent(arm, speed):
     np.testing.assert_allclose(r.peak_force_N, r.analytic_force_N, rtol=CLOSED_LOOP_RTOL)
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("arm", ARMS)
 @pytest.mark.parametrize("region", ["chest", "abdomen"])
 def test_closed_loop_soft_regions_lie_above_by_the_controllers_push(arm, region):
@@ -109,7 +108,6 @@ def test_closed_loop_soft_regions_lie_above_by_the_controllers_push(arm, region)
         assert 1.0 < r.simulated_over_analytic < 1.6, (arm, region, speed, r.simulated_over_analytic)
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("arm", ARMS)
 @pytest.mark.parametrize("reaction", ["retract", "compliant"])
 def test_clamped_force_falls_below_quasi_static_limit_within_half_a_second(arm, reaction):
