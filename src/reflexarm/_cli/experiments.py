@@ -323,6 +323,52 @@ def _mode_table(args: argparse.Namespace) -> int:
     return 0 if all(r["agrees_with_paper"] for r in rows) else 1
 
 
+def _sweep_table(summary: Any, kind: str, model_error: float) -> tuple[list[dict[str, Any]], list[tuple]]:
+    """The rows (one per level, DC beside DC+EFC) and columns of the sweep's printed table."""
+    s = summary
+    by = {c: s[s["condition"] == c].set_index("level") for c in ("DC", "DC+EFC")}
+    dc, efc = by["DC"], by["DC+EFC"]
+    rows = []
+    for lv in dc.index:
+        row: dict[str, Any] = {
+            "level": lv,
+            "dc": dc.loc[lv, "norm_mean"],
+            "efc": efc.loc[lv, "norm_mean"],
+            "ratio": dc.loc[lv, "msie_mean"] / efc.loc[lv, "msie_mean"],
+            "dc_abs": dc.loc[lv, "msie_mean"],
+            "efc_abs": efc.loc[lv, "msie_mean"],
+        }
+        for key in s.columns:
+            if key in dc.columns and key not in ("n", "condition") and not key.startswith(("norm_", "msie_")):
+                row[f"dc_{key}"] = dc.loc[lv, key]
+        rows.append(row)
+    unit = "%" if kind == "model-error" else "x"
+    columns = [
+        ("level", f"level [{unit}]", "{:g}"),
+        ("dc", "||MSIE|| DC", "{:.4f}"),
+        ("efc", "||MSIE|| DC+EFC", "{:.5f}"),
+        ("ratio", "DC/DC+EFC", "{:.1f}"),
+        ("dc_abs", "MSIE DC [rad^2]", "{:.4e}"),
+        ("efc_abs", "MSIE DC+EFC [rad^2]", "{:.4e}"),
+    ]
+    if kind == "model-error" or model_error > 0:
+        columns += [
+            ("dc_g_error_median", "g err med", "{:.2%}"),
+            ("dc_g_error_max", "g err max", "{:.1%}"),
+            ("dc_M_error_median", "M err med", "{:.2%}"),
+            ("dc_M_error_max", "M err max", "{:.1%}"),
+        ]
+    if kind == "noise":
+        columns += [
+            ("dc_residual1_load_std_Nm", "std res1 [Nm]", "{:.2f}"),
+            ("dc_residual1_noise_pred_Nm", "pred. std", "{:.2f}"),
+            ("dc_residual1_clip_fraction", "|res1|>cut", "{:.3f}"),
+            ("dc_compensated1_load_Nm", "mean cut res1", "{:.2f}"),
+            ("dc_tau_ext1_load_Nm", "tau_ext1 [Nm]", "{:.2f}"),
+        ]
+    return rows, columns
+
+
 def _sweep(args: argparse.Namespace) -> int:
     from reflexarm.errors import ConfigError
     from reflexarm.experiments.plots import crossover_levels
@@ -356,47 +402,8 @@ def _sweep(args: argparse.Namespace) -> int:
         progress=not args.quiet,
     )
     wall = time.perf_counter() - t0
+    rows, columns = _sweep_table(res.summary, args.kind, setup.model_error)
     s = res.summary
-    by = {c: s[s["condition"] == c].set_index("level") for c in ("DC", "DC+EFC")}
-    dc, efc = by["DC"], by["DC+EFC"]
-    rows = []
-    for lv in dc.index:
-        row: dict[str, Any] = {
-            "level": lv,
-            "dc": dc.loc[lv, "norm_mean"],
-            "efc": efc.loc[lv, "norm_mean"],
-            "ratio": dc.loc[lv, "msie_mean"] / efc.loc[lv, "msie_mean"],
-            "dc_abs": dc.loc[lv, "msie_mean"],
-            "efc_abs": efc.loc[lv, "msie_mean"],
-        }
-        for key in s.columns:
-            if key in dc.columns and key not in ("n", "condition") and not key.startswith(("norm_", "msie_")):
-                row[f"dc_{key}"] = dc.loc[lv, key]
-        rows.append(row)
-    unit = "%" if args.kind == "model-error" else "x"
-    columns = [
-        ("level", f"level [{unit}]", "{:g}"),
-        ("dc", "||MSIE|| DC", "{:.4f}"),
-        ("efc", "||MSIE|| DC+EFC", "{:.5f}"),
-        ("ratio", "DC/DC+EFC", "{:.1f}"),
-        ("dc_abs", "MSIE DC [rad^2]", "{:.4e}"),
-        ("efc_abs", "MSIE DC+EFC [rad^2]", "{:.4e}"),
-    ]
-    if args.kind == "model-error" or setup.model_error > 0:
-        columns += [
-            ("dc_g_error_median", "g err med", "{:.2%}"),
-            ("dc_g_error_max", "g err max", "{:.1%}"),
-            ("dc_M_error_median", "M err med", "{:.2%}"),
-            ("dc_M_error_max", "M err max", "{:.1%}"),
-        ]
-    if args.kind == "noise":
-        columns += [
-            ("dc_residual1_load_std_Nm", "std res1 [Nm]", "{:.2f}"),
-            ("dc_residual1_noise_pred_Nm", "pred. std", "{:.2f}"),
-            ("dc_residual1_clip_fraction", "|res1|>cut", "{:.3f}"),
-            ("dc_compensated1_load_Nm", "mean cut res1", "{:.2f}"),
-            ("dc_tau_ext1_load_Nm", "tau_ext1 [Nm]", "{:.2f}"),
-        ]
     _print_rows(rows, columns)
     if args.kind == "model-error":
         print(

@@ -218,6 +218,19 @@ class Controller:
             as_switch(kappa_eps, "kappa_eps"),
             as_switch(kappa_ext, "kappa_ext"),
         )
+        self._check_limits(residual_limit, switch_time, period_band, input_bounds, torque_limit, torque_rate_limit)
+        self._bind_core(contact_geometry, isolation_share, euler)
+
+    def _check_limits(
+        self,
+        residual_limit: float,
+        switch_time: float,
+        period_band: tuple[float, float],
+        input_bounds: InputBounds | None,
+        torque_limit: npt.ArrayLike | str | None,
+        torque_rate_limit: npt.ArrayLike | None,
+    ) -> None:
+        """The construction's limits and bands, checked (ConfigError naming the argument)."""
         self.residual_limit = as_positive_scalar(residual_limit, "residual_limit")
         if not (isinstance(switch_time, (int, float)) and math.isfinite(switch_time) and switch_time >= 0):
             raise ConfigError(f"switch_time must be a non-negative number of seconds; got {switch_time!r}")
@@ -225,15 +238,21 @@ class Controller:
         gains = [self.observer.observer_gain]
         if self.detection_observer is not None:
             gains.append(self.detection_observer.observer_gain)
-        self.period_band = check_period_band(period_band, self.dt, gains, exact=observer_discretization == "exact")
+        exact = self.observer_discretization == "exact"
+        self.period_band = check_period_band(period_band, self.dt, gains, exact=exact)
         self.input_bounds = InputBounds() if input_bounds is None else input_bounds
         if not isinstance(self.input_bounds, InputBounds):
             raise ConfigError(f"input_bounds must be an InputBounds; got {type(input_bounds).__name__}")
         self.torque_limit = resolve_torque_limit(self.robot, torque_limit)
         self.torque_rate_limit = (
-            None if torque_rate_limit is None else as_vector(torque_rate_limit, n, "torque_rate_limit", positive=True)
+            None
+            if torque_rate_limit is None
+            else as_vector(torque_rate_limit, self.n, "torque_rate_limit", positive=True)
         )
 
+    def _bind_core(self, contact_geometry: CollisionGeometry | str | None, isolation_share: float, euler: bool) -> None:
+        """The C++ core configured with the checked settings, and the Python views onto its state."""
+        n = self.n
         core = load_core()
         try:  # the model crosses as text (a Boost.Python pin.Model cannot be passed to nanobind)
             self._core = c = core.Controller(self.robot.pin_model.saveToString(), core_params(self, core))

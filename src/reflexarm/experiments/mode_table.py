@@ -140,25 +140,11 @@ def mode_table(
         # link compliance, without and with the supervisor's automatic switch
         link_ratio: dict[bool, float] = {}
         for supervised in (False, True):
-            push = LinkForce(body=link, magnitude=setup.force, t_on=setup.t_on, t_off=setup.t_off)
-            plant, _ = build_plant(setup, [push], noise_scale=setup.noise_scale, seed=noise_seed)
-            ctrl = (
-                _supervised_controller(
-                    setup, mode.kappa_eps, mode.kappa_ext, model_seed, threshold, detection_observer_gain, reaction
-                )
-                if supervised
-                else make_controller(setup, mode.kappa_eps, mode.kappa_ext, model_seed=model_seed)
+            reaction_args = (threshold, detection_observer_gain, reaction) if supervised else None
+            link_ratio[supervised], tr_l = _link_compliance(
+                setup, name, robot, link, q0, (model_seed, noise_seed), reaction_args, progress
             )
-            runner_ctrl: Controller | ModeSupervisor = ModeSupervisor(ctrl, mode=name) if supervised else ctrl
-            tr_l = run_closed_loop(plant, runner_ctrl, HoldReference(q0), setup.duration, progress=progress)
-            if isinstance(runner_ctrl, ModeSupervisor):
-                runner_ctrl.log_to(tr_l)
             traces[f"{name}/link_force{'/supervised' if supervised else ''}"] = tr_l
-            P = ee_positions(tr_l, robot, link)
-            dp = window_mean(tr_l.t, P, *setup.load_window) - window_mean(tr_l.t, P, *setup.pre_window)
-            f_l = window_mean(tr_l.t, tr_l.extras["link_force"], *setup.load_window)
-            J_l = robot.compute_frame_jacobian(q0, link, world_aligned=True)[:3]
-            link_ratio[supervised] = float(np.linalg.norm(dp)) / _designed_displacement(robot, q0, J_l, f_l, k)
         rows.append(
             {
                 "mode": name,
@@ -174,9 +160,47 @@ def mode_table(
                 "paper_link_compliant": mode.link_compliant,
             }
         )
-    base = acc["compliant"]
+    _mark_rows(rows, acc["compliant"])
+    return rows, traces
+
+
+def _link_compliance(
+    setup: CompensationSetup,
+    name: str,
+    robot: RobotModel,
+    link: str,
+    q0: np.ndarray,
+    seeds: tuple[int, int],
+    supervision: tuple[float | tuple[float, ...], float | None, str] | None,
+    progress: bool,
+) -> tuple[float, Trace]:
+    """The link push held in ``q0`` in mode ``name``: (measured / prescribed displacement of the link, trace);
+    ``supervision`` (threshold, detection observer gain, reaction) runs it under the ModeSupervisor."""
+    mode = CONTROL_MODES[name]
+    model_seed, noise_seed = seeds
+    push = LinkForce(body=link, magnitude=setup.force, t_on=setup.t_on, t_off=setup.t_off)
+    plant, _ = build_plant(setup, [push], noise_scale=setup.noise_scale, seed=noise_seed)
+    if supervision is None:
+        runner_ctrl: Controller | ModeSupervisor = make_controller(
+            setup, mode.kappa_eps, mode.kappa_ext, model_seed=model_seed
+        )
+    else:
+        ctrl = _supervised_controller(setup, mode.kappa_eps, mode.kappa_ext, model_seed, *supervision)
+        runner_ctrl = ModeSupervisor(ctrl, mode=name)
+    tr = run_closed_loop(plant, runner_ctrl, HoldReference(q0), setup.duration, progress=progress)
+    if isinstance(runner_ctrl, ModeSupervisor):
+        runner_ctrl.log_to(tr)
+    P = ee_positions(tr, robot, link)
+    dp = window_mean(tr.t, P, *setup.load_window) - window_mean(tr.t, P, *setup.pre_window)
+    f = window_mean(tr.t, tr.extras["link_force"], *setup.load_window)
+    J = robot.compute_frame_jacobian(q0, link, world_aligned=True)[:3]
+    return float(np.linalg.norm(dp)) / _designed_displacement(robot, q0, J, f, setup.stiffness), tr
+
+
+def _mark_rows(rows: list[dict[str, Any]], compliant_rms: float) -> None:
+    """The derived marks of each row (accurate, compliant at the end effector / link) and the paper check."""
     for row in rows:
-        row["accuracy_ratio"] = row["tracking_rms_rad"] / base
+        row["accuracy_ratio"] = row["tracking_rms_rad"] / compliant_rms
         row["accurate"] = row["mode"] != "compliant" and row["accuracy_ratio"] <= CHECK_RATIO
         row["ee_compliant"] = row["ee_compliance_ratio"] >= CHECK_RATIO
         row["link_compliant"] = row["link_compliance_ratio"] >= CHECK_RATIO
@@ -186,4 +210,3 @@ def mode_table(
             and row["ee_compliant"] == row["paper_ee_compliant"]
             and row["link_compliant"] == row["paper_link_compliant"]
         )
-    return rows, traces

@@ -25,7 +25,8 @@ import math
 import os
 import sys
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -321,6 +322,20 @@ def _iter_dask(run_fn: RunFunction, todo: list[SweepTask], context: Any, schedul
         client.close()
 
 
+@contextmanager
+def _sweep_bar(total: int, initial: int, progress: bool, name: str) -> Iterator[Any]:
+    """The sweep's progress bar (runs), closed whatever happens."""
+    from tqdm.auto import tqdm
+
+    from reflexarm._progress import show_progress
+
+    bar = tqdm(total=total, initial=initial, disable=not show_progress(progress), desc=name, unit="run")
+    try:
+        yield bar
+    finally:
+        bar.close()
+
+
 def run_sweep(
     tasks: Sequence[SweepTask],
     run_fn: RunFunction,
@@ -372,25 +387,13 @@ def run_sweep(
     skipped = [t.key for t in tasks if t.key in done]
     ran: list[str] = []
     run_wall: dict[str, float] = {}
-
-    from tqdm.auto import tqdm
-
-    from reflexarm._progress import show_progress
-
-    bar = tqdm(
-        total=len(tasks),
-        initial=len(skipped),
-        disable=not show_progress(progress),
-        desc=out.name or "sweep",
-        unit="run",
-    )
-    try:
-        if todo:
-            it = (
-                _iter_dask(run_fn, todo, context, scheduler, scheduler_timeout)
-                if scheduler is not None
-                else _iter_local(run_fn, todo, context, min(n_workers, len(todo)))
-            )
+    if todo:
+        it = (
+            _iter_dask(run_fn, todo, context, scheduler, scheduler_timeout)
+            if scheduler is not None
+            else _iter_local(run_fn, todo, context, min(n_workers, len(todo)))
+        )
+        with _sweep_bar(len(tasks), len(skipped), progress, out.name or "sweep") as bar:
             try:
                 for task, result, wall in it:
                     _write_run(runs, task, result, wall)
@@ -405,8 +408,6 @@ def run_sweep(
                     f"stored in {runs} and will not be re-run"
                 )
                 raise
-    finally:
-        bar.close()
     table = load_runs(out, tasks)
     table.to_csv(out / "results.csv", index=False)
     table.to_parquet(out / "results.parquet", index=False)
