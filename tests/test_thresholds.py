@@ -99,9 +99,11 @@ def test_study_and_command_agree_and_number_joints_from_one(atlas, tmp_path):
     assert np.all(prop.collision > 0.5 * np.array([j.fit.x_max for j in prop.joints]))
     out = tmp_path / "out"
     args = f"tune-thresholds {path} --rate 60 --contact-rate 600 --step-torque 20 --step-force 50 --gap 0.1 --out {out}"
-    code = main(args.split())
+    assert main(args.split()) == 2, "a log at rest: levels of joints that did not move are refused"
+    code = main([*args.split(), "--allow-unmoved"])
     assert code == 0
     doc = json.loads((out / "thresholds.json").read_text())
+    assert [c["moved"] for c in doc["coverage"]] == [False] * atlas.n  # marked, as the arm never moved
     # the bootstrap draws differ (200 in the command, 50 here); the levels do not depend on them
     np.testing.assert_allclose(doc["collision_Nm"], prop.collision, rtol=1e-9)
     np.testing.assert_allclose(doc["contact_Nm"], prop.contact, rtol=1e-9)
@@ -132,7 +134,7 @@ def test_a_log_too_short_for_the_rate_is_refused_with_the_minimum(atlas, tmp_pat
     out = tmp_path / "out"
     path = save_log(log, tmp_path / "short.parquet")
     args = f"tune-thresholds {path} --rate 1 --contact-rate 600 --gap 0.1 --allow-extrapolation --no-figure --out {out}"
-    assert main(args.split()) == 0
+    assert main([*args.split(), "--allow-unmoved"]) == 0  # a log at rest
     notes = json.loads((out / "thresholds.json").read_text())["notes"]
     assert sum("needs at least 42.0 min" in note for note in notes) == 1, notes  # noted once, not twice
 

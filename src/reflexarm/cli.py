@@ -25,6 +25,7 @@ _COMMAND_MODULES = (
     "isolation",
     "reaction_study",
     "detection",
+    "detect",
     "pfl",
 )
 

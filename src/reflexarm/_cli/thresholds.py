@@ -11,9 +11,10 @@ import warnings
 from pathlib import Path
 from typing import Any
 
-from reflexarm._cli.common import add_model_options, model_choice, model_error_line
+from reflexarm._cli.common import add_model_options
+from reflexarm._cli.detect import _robot_default_from_model, load_robot_and_model
 from reflexarm._cli.log_options import add_log_options, load_log_from_args
-from reflexarm._cli.robot_options import add_robot_options, load_robot_from_args
+from reflexarm._cli.robot_options import DEFAULT_ROBOT, add_robot_options, load_robot_from_args
 
 _SWITCH = (0, 1)
 
@@ -33,6 +34,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("logs", nargs="+", metavar="LOG", help="free-motion log(s): CSV / Parquet / npz / ROS 2 bag, or a "
                    "reflexarm trace (.parquet); several logs are pooled")  # fmt: skip
     add_robot_options(p)
+    _robot_default_from_model(p)
     add_model_options(
         p, default_error=0.0, seed_help="seed of --model-error (to replay a simulated arm's perturbed model)"
     )
@@ -42,6 +44,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument(
         "--detection-observer-gain", type=float, default=None, help="k_o of a separate detection observer [1/s]"
     )
+    g.add_argument(
+        "--observer-discretization", choices=("euler", "exact"), default=None,
+        help="euler (k_o dt < 1) or exact (stable at any gain, what 'detect' runs) (default: exact with "
+        "--detection-observer-gain, else euler)",
+    )  # fmt: skip
     g.add_argument("--kappa-f", type=int, choices=_SWITCH, default=0, help="friction term in the observer (default 0)")
     g.add_argument("--kappa-ext", type=int, choices=_SWITCH, default=0, help="EFC: wrist wrench in the observer")
     g.add_argument("--kappa-eps", type=int, choices=_SWITCH, default=0, help="disturbance compensation (recorded only)")
@@ -80,6 +87,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="reflexarm traces: tune on the residual their controller computed online (with the measured noise) "
         "instead of replaying it (a trace holds true velocities); right when that controller is the one you run",
     )
+    p.add_argument(
+        "--allow-unmoved", action="store_true",
+        help="write levels for joints that did not move in the logs (marked 'moved': false); default: refuse",
+    )  # fmt: skip
     p.add_argument("--out", type=Path, default=Path("results/thresholds"), help="output folder")
     p.add_argument("--no-figure", action="store_true", help="skip the figures")
     p.set_defaults(func=_tune)
@@ -121,26 +132,29 @@ def _load(args: argparse.Namespace, path: str, robot: Any) -> Any:
 def _tune(args: argparse.Namespace) -> int:
     from reflexarm.tuning import ObserverSettings, ThresholdWarning, tune_thresholds
 
-    robot = load_robot_from_args(args)
     if args.recorded_residual:  # the residual is the run's: its model, not --model (kinematics for J^T F only)
-        model = robot
+        args.robot = args.robot or DEFAULT_ROBOT
+        robot = model = load_robot_from_args(args)
         print(
             f"robot {robot.name} ({robot.n} joints); controller model: the one each trace's run used (its residual "
             "was recorded online); --model and --model-error are ignored",
             file=sys.stderr,
         )
     else:
-        choice = model_choice(args)
-        model = choice.build(robot)
-        print(f"robot {robot.name} ({robot.n} joints); controller model: {choice.label()}", file=sys.stderr)
+        robot, model, line = load_robot_and_model(args)
+        print(line, file=sys.stderr)
         if model is not robot:
-            print(model_error_line(robot, model), file=sys.stderr)
+            print(_model_error_line(robot, model, args), file=sys.stderr)
+    discretization = args.observer_discretization
+    if discretization is None:
+        discretization = "exact" if args.detection_observer_gain is not None else "euler"
     settings = ObserverSettings(
         observer_gain=args.observer_gain,
         detection_observer_gain=args.detection_observer_gain,
         kappa_f=args.kappa_f,
         kappa_ext=args.kappa_ext,
         kappa_eps=args.kappa_eps,
+        observer_discretization=discretization,
     )
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ThresholdWarning)
@@ -169,6 +183,7 @@ def _tune(args: argparse.Namespace) -> int:
             "residuals recorded online by the traces' controllers, with the model and observer each run used: "
             "--model, --model-error and the observer options were not applied (the delays use --observer-gain)"
         )
+    _check_coverage(proposal, args.allow_unmoved)
     pairs = _pairs(args, model, settings) if args.detection_gains else None
     if pairs is not None:
         proposal.detection_pairs = pairs.as_dict()
@@ -210,3 +225,44 @@ def _pairs(args: argparse.Namespace, model: Any, settings: Any) -> Any:
     for w in caught:
         print(f"warning (pairs): {w.message}", file=sys.stderr)
     return pairs
+
+
+def _model_error_line(robot: Any, model: Any, args: argparse.Namespace) -> str:
+    """How far the controller's model is from the robot file's parameters, saying what is compared (issue 18
+    item 8): an identified model against the robot file, not against the arm that produced the logs."""
+    from reflexarm.robots.perturbation import measure_model_error
+
+    size = measure_model_error(robot, model)
+    numbers = (
+        f"over {size.n_states} random states: g(q) median {100 * size.gravity_median:.1f} % (max "
+        f"{100 * size.gravity_max:.1f} %), M(q) median {100 * size.mass_matrix_median:.1f} %"
+    )
+    if args.model is not None:
+        return (
+            f"achieved model error: the identified model {Path(args.model).name} against the robot file "
+            f"{robot.name!r} (its nominal parameters; not against the arm that recorded the logs, which no file "
+            f"describes) {numbers}"
+        )
+    what = "the perturbed model against the robot file"
+    return f"achieved model error: {what} {robot.name!r} (the simulated arm's true parameters) {numbers}"
+
+
+def _check_coverage(proposal: Any, allow_unmoved: bool) -> None:
+    """Refuse levels for joints that did not move in the logs (unless ``allow_unmoved``: they are written marked
+    ``"moved": false``)."""
+    from reflexarm.errors import ConfigError
+
+    still = proposal.unmoved
+    if not still:
+        return
+    lines = "\n".join(proposal.coverage[j].line() for j in still)
+    if not allow_unmoved:
+        raise ConfigError(
+            f"joint(s) {', '.join(str(j + 1) for j in still)} did not move in the logs: a level tuned on a joint at "
+            f"rest describes its noise only and raises false alarms when it moves\n{lines}\nrecord free motion that "
+            "moves every joint, or give --allow-unmoved to write the levels marked 'moved': false"
+        )
+    proposal.notes.append(
+        f"levels of joint(s) {', '.join(str(j + 1) for j in still)} written although they did not move "
+        "(--allow-unmoved): marked 'moved': false; 'reflexarm detect' warns when a log moves them"
+    )

@@ -66,6 +66,9 @@ def format_report(proposal: ThresholdProposal) -> str:
             for r in rows
         )
         lines.append(f"{proposal.step_force:g} N at the end effector, {level} level: {cells}")
+    if proposal.coverage is not None:
+        lines.append("coverage of the logs (range: share of the joint limits; speed: of the velocity limit):")
+        lines += [c.line() for c in proposal.coverage]
     tail = "".join(f"\nnote: {x}" for x in proposal.notes)
     return head + "\n".join(lines) + tail
 

@@ -40,6 +40,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import poisson
 
+from reflexarm.detect.coverage import JointCoverage
 from reflexarm.errors import ConfigError, DataError
 from reflexarm.logs.robot_log import RobotLog
 from reflexarm.robots.robot_model import RobotModel
@@ -153,6 +154,13 @@ class ThresholdProposal:
     force_steps: dict[str, list[dict[str, object]]] = field(default_factory=dict)
     #: (k_o, zeta) pairs of :func:`~reflexarm.tuning.propose_detection_pairs` (its ``as_dict``), or None
     detection_pairs: dict[str, object] | None = None
+    #: what the logs covered of each joint's range and speed (None for residuals given without their logs)
+    coverage: list[JointCoverage] | None = None
+
+    @property
+    def unmoved(self) -> list[int]:
+        """0-based joints that did not move in the logs (their levels describe noise at rest)."""
+        return [] if self.coverage is None else [c.joint for c in self.coverage if not c.moved]
 
     @property
     def collision(self) -> np.ndarray:
@@ -165,8 +173,11 @@ class ThresholdProposal:
         return np.array([j.contact for j in self.joints])
 
     def rows(self) -> list[dict[str, object]]:
-        """One row per joint (1-based)."""
-        return [j.row() for j in self.joints]
+        """One row per joint (1-based), with what the logs covered of it when known."""
+        rows = [j.row() for j in self.joints]
+        for row, c in zip(rows, self.coverage or [], strict=False):
+            row.update(moved=c.moved, range_share=c.range_share, speed_max=c.speed)
+        return rows
 
     def as_dict(self) -> dict[str, object]:
         """JSON-ready summary (joints 1-based), with the method and the formulas stated."""
@@ -203,6 +214,7 @@ class ThresholdProposal:
                 "levels": self.force_steps,
             },
             "notes": list(self.notes),
+            "coverage": None if self.coverage is None else [c.as_dict() for c in self.coverage],
             **({} if self.detection_pairs is None else {"detection_pairs": self.detection_pairs}),
         }
 
@@ -234,6 +246,46 @@ def _check_rate(value: float, name: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
         raise ConfigError(f"{name} must be a positive number of false alarms per hour; got {value!r}")
     return float(value)
+
+
+def _replay_logs(
+    log_list: Sequence[RobotLog | ResidualReplay | str | os.PathLike[str]],
+    robot: RobotModel,
+    settings: ObserverSettings,
+    read: Callable[[str | os.PathLike[str]], RobotLog],
+) -> tuple[list[ResidualReplay], np.ndarray | None, list[JointCoverage] | None, list[str]]:
+    """The residual of each log (one-sample glitches repaired first), the first log's median posture, the logs'
+    coverage (None when some item is a residual without its log) and the notes on repaired glitches."""
+    from reflexarm.detect.coverage import measure_coverage
+    from reflexarm.detect.glitches import repair_glitches
+
+    replays, q_parts, dq_parts, notes = [], [], [], []
+    posture: np.ndarray | None = None
+    for item in log_list:
+        if isinstance(item, ResidualReplay):
+            replays.append(item)
+            continue
+        log = item if isinstance(item, RobotLog) else read(item)
+        if posture is None:
+            posture = np.median(log.q, axis=0)
+        log, glitches = repair_glitches(log)
+        if glitches:
+            where = ", ".join(f"joint {g.joint + 1} {g.kind} at {g.t:.3f} s" for g in glitches[:5])
+            notes.append(f"{log.source}: {len(glitches)} one-sample glitch(es) repaired before the replay (they "
+                         f"set no level): {where}{' ...' if len(glitches) > 5 else ''}")  # fmt: skip
+        q_parts.append(log.q)
+        dq_parts.append(log.dq)
+        replays.append(replay_residual(log, robot, settings))
+        del log
+    coverage = measure_coverage(q_parts, dq_parts, robot) if len(q_parts) == len(replays) else None
+    if coverage is not None and not all(c.moved for c in coverage):
+        still = [c for c in coverage if not c.moved]
+        msg = (f"joint(s) {', '.join(f'{c.joint + 1} ({c.name})' for c in still)} did not move in the logs: their "
+               "levels describe the noise of a joint at rest and would raise false alarms on a motion that moves "
+               "them (record motion of every joint)")  # fmt: skip
+        warnings.warn(msg, ThresholdWarning, stacklevel=3)
+        notes.append(msg)
+    return replays, posture, coverage, notes
 
 
 def tune_thresholds(
@@ -295,17 +347,7 @@ def tune_thresholds(
     ):
         raise ConfigError(f"step_force must be a positive force [N]; got {step_force!r}")
     read = load or (lambda path: load_free_motion_log(path, robot))
-    replays = []
-    posture: np.ndarray | None = None
-    for item in log_list:
-        if isinstance(item, ResidualReplay):
-            replays.append(item)
-            continue
-        log = item if isinstance(item, RobotLog) else read(item)
-        if posture is None:
-            posture = np.median(log.q, axis=0)
-        replays.append(replay_residual(log, robot, s))
-        del log
+    replays, posture, coverage, notes = _replay_logs(log_list, robot, s, read)
     dt = replays[0].dt
     for r in replays[1:]:
         if abs(r.dt - dt) > 1e-3 * dt:
@@ -317,7 +359,6 @@ def tune_thresholds(
     gap = GAP_TIME_CONSTANTS / k_o if gap_s is None else float(gap_s)
     duration = sum(r.duration for r in replays)
     n = robot.n
-    notes: list[str] = []
     for level, r_arm in (("collision", rate), ("contact", contact_rate)):
         minimum = n / r_arm * 3600.0 / MAX_EXTRAPOLATION
         if duration < minimum:
@@ -386,6 +427,7 @@ def tune_thresholds(
         method=method,
         replays=replays,
         notes=notes,
+        coverage=coverage,
     )
     if step_force is not None and posture is not None:
         proposal.step_force = float(step_force)
