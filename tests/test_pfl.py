@@ -7,7 +7,8 @@ region.
 2. The closed loop with detection off: the same swing under the study's impedance controller. The controller
    keeps driving the arm into the body during the impact, so the simulation lies above the free-mass
    prediction by its drive force; how far depends on how long the contact lasts (hand: ~8 ms, a few %;
-   chest and abdomen: 20-40 ms, up to ~50 % on Atlas, see the README's pfl section).
+   chest and abdomen: 20-40 ms, up to ~50 % on Atlas, see the README's pfl section); with the share of the
+   measured drive force that a linearly rising force adds at the peak, within 15 %.
 3. Clamping: a wall behind the spring; retract and compliant bring the force below F_QS within 0.5 s.
 """
 
@@ -100,12 +101,16 @@ def test_closed_loop_hand_within_15_percent(arm, speed):
 @pytest.mark.parametrize("arm", ARMS)
 @pytest.mark.parametrize("region", ["chest", "abdomen"])
 def test_closed_loop_soft_regions_lie_above_by_the_controllers_push(arm, region):
-    """Measured, not the issue's 15 %: the controller pushes during the long contact (positive drive force at the
-    peak), so the simulated peak lies above the free-mass prediction, at every speed."""
+    """Measured, not the issue's 15 %: on chest and abdomen the contact lasts 20-40 ms and the controller drives
+    the arm on (positive drive force along u at the peak), so the simulated peak lies 14-52 % above the free-mass
+    prediction at every speed. That drive force, rising from first contact to the peak, adds (1 - 2/pi) of its
+    value at the peak to an undamped spring's peak: with it the simulation is within 15 %. (The drive force is
+    read from the run's commanded torques: this checks the explanation, it is no independent prediction.)"""
     for speed in SPEEDS:
         r = _closed_loop(arm, region, speed)
         assert r.controller_force_at_peak_N is not None and r.controller_force_at_peak_N > 0.0
-        assert 1.0 < r.simulated_over_analytic < 1.6, (arm, region, speed, r.simulated_over_analytic)
+        assert r.simulated_over_analytic is not None and r.simulated_over_analytic > 1.0 + CLOSED_LOOP_RTOL / 2
+        np.testing.assert_allclose(r.peak_force_N, r.controller_corrected_force_N, rtol=CLOSED_LOOP_RTOL)
 
 
 @pytest.mark.parametrize("arm", ARMS)
