@@ -38,6 +38,8 @@ def speed_table(study: PflStudy) -> list[dict[str, Any]]:
         row["v_standard_m_s"] = first["standard_permissible_speed_m_s"] if first else None
         row["v_posture_m_s"] = first["permissible_speed_m_s"] if first else None
         row["v_sim_detection_off_m_s"] = safe_speeds(off)["simulated_safe_speed_m_s"]
+        ratios = [r["peak_force_N"] / r["analytic_force_N"] for r in off if r.get("analytic_force_N")]
+        row["sim_over_analytic_max"] = max(ratios) if ratios else None
         for reaction in reactions:
             rr = study.select(arm=arm, region=region, mode="transient", detection=True, reaction=reaction)
             row[f"v_sim_{reaction}_m_s"] = safe_speeds(rr)["simulated_safe_speed_m_s"]
