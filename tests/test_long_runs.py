@@ -153,3 +153,21 @@ def test_run_fast_refuses_a_run_that_cannot_fit_in_memory(atlas, model):
         run_fast(plant, ctrl, traj, 1e9)
     assert plant._tick == 0 and plant._user is None  # nothing ran, the plant is free
     run_fast(plant, ctrl, traj, 0.05)  # and usable
+
+
+def test_recorded_measurements_are_the_python_loops(atlas, model):
+    """record_measurements (what tune-thresholds' simulated logs hold): the compiled loop keeps the measured q, dq,
+    tau_m and wrench of every tick, as a callback on the Python loop records them from Plant.measure."""
+    from reflexarm.sim.compiled_stream import _record_in_python, record_measurements
+
+    traj = C.free_motion_trajectory(1.2, "demo", atlas)
+    plant_a, ctrl_a = _setup(atlas, model, traj)
+    stats_a, a = _record_in_python(plant_a, ctrl_a, traj, 1.2, 1200, 500, False)
+    plant_b, ctrl_b = _setup(atlas, model, traj)
+    stats_b, b = record_measurements(plant_b, ctrl_b, traj, 1.2, block_size=500)
+    assert (stats_a.loop, stats_b.loop) == ("python", "compiled")
+    for k in ("t", "q", "dq", "tau_m", "wrench"):
+        assert b[k].shape[0] == 1200
+        np.testing.assert_array_equal(b[k], a[k], err_msg=k)
+    _assert_same_statistics(stats_a, stats_b)
+    assert np.abs(b["dq"] - b["dq"].mean(axis=0)).max() > 0  # measured, i.e. noisy, not the true velocities

@@ -286,6 +286,22 @@ NB_MODULE(_closed_loop, m)
       },
       "i"_a, "(last_x, has_last, applied, force, target, point_local) of push i now.")
     .def(
+      "record_measured_velocity",
+      [](PyLoop & self, nb::object dq_meas) {
+        if (dq_meas.is_none())
+        {
+          self.loop.setMeasuredVelocityBuffer(nullptr);
+          return;
+        }
+        Arr<double> a;
+        if (!nb::try_cast(dq_meas, a, false))
+          throw reflexarm::ConfigError("ClosedLoop: dq_meas must be a writable C-contiguous float64 array");
+        self.loop.setMeasuredVelocityBuffer(rowsOf(a, self.rows, self.loop.nv(), "dq_meas"));
+      },
+      "dq_meas"_a.none(),
+      "Record the measured (noisy) velocity of each tick into dq_meas (rows x n, the rows of set_buffers; call "
+      "after it, which stops the recording; None: stop).")
+    .def(
       "keep_still", [](PyLoop & self, int spec) { self.loop.keepStill(spec); }, "spec"_a,
       "Keep MuJoCo's state (mj_getState with the mjtState mask `spec`; 0: stop) at the first tick sensed and at "
       "the tick of the largest sum of tau_ext_i^2 (strictly larger than any before; reflexarm::StillStates).")

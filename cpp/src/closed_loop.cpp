@@ -230,6 +230,9 @@ namespace reflexarm
       buf_.residual[k * n + i] = cmd_.residual[i];
       buf_.collided[k * n + i] = cmd_.collided[i];
     }
+    if (buf_.dq_meas != nullptr)
+      for (int i = 0; i < n; ++i)
+        buf_.dq_meas[k * n + i] = y[n + i];
     buf_.collision[k] = cmd_.collision ? 1 : 0;
     buf_.mode[k] = static_cast<std::int32_t>(cmd_.mode);
     buf_.fault_code[k] = static_cast<std::int32_t>(code);

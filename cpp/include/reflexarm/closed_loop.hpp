@@ -62,6 +62,7 @@ namespace reflexarm
     std::uint8_t *collision = nullptr, *collided = nullptr; ///< N, N x n
     std::int32_t *mode = nullptr, *fault_code = nullptr;    ///< N each
     double * fault_info = nullptr; ///< N x 5: signal, component, value, lo, hi
+    double * dq_meas = nullptr;    ///< N x n: measured (noisy) velocity, or nullptr: not recorded
   };
 
   /// Per-tick positions of one mocap body (N x 3; a NaN row leaves the body where it is).
@@ -168,6 +169,8 @@ namespace reflexarm
     int measurementSize() const noexcept { return 3 * n_ + 9; }
 
     void setBuffers(const RunBuffers & buffers) { buf_ = buffers; }
+    /// Record the measured velocity into `dq_meas` (N x n rows of the buffers set last; nullptr: stop).
+    void setMeasuredVelocityBuffer(double * dq_meas) noexcept { buf_.dq_meas = dq_meas; }
     void setForces(const std::vector<AppliedForce> & forces) { forces_ = forces; }
     void setMocapPlans(const std::vector<MocapPlan> & plans) { mocap_plans_ = plans; }
     void setPushes(const std::vector<SpringPush> & pushes) { pushes_ = pushes; }

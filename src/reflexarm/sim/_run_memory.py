@@ -12,7 +12,7 @@ import os
 
 from reflexarm.errors import ConfigError
 
-__all__ = ["available_bytes", "check_memory", "run_bytes"]
+__all__ = ["available_bytes", "check_log_memory", "check_memory", "run_bytes"]
 
 
 def run_bytes(ticks: int, n: int) -> int:
@@ -57,4 +57,16 @@ def check_memory(ticks: int, n: int, what: str) -> None:
         f"{what}: {ticks:,} ticks keep ~{need / 1e9:.3g} GB in memory; {have / 1e9:.3g} GB are available. For a "
         "run this long use reflexarm.sim.stream_fast (statistics in C++ and the trace streamed to a Parquet file, "
         "in memory that does not grow with the duration) or a shorter duration"
+    )
+
+
+def check_log_memory(ticks: int, n: int, what: str) -> None:
+    """ConfigError if a log of ``ticks`` measurements (t, q, dq, tau_m, wrench) would not fit in memory."""
+    need = int(ticks) * 8 * (1 + 3 * n + 6)
+    have = available_bytes()
+    if have is None or need <= have:
+        return
+    raise ConfigError(
+        f"{what}: a log of {ticks:,} ticks needs ~{need / 1e9:.3g} GB in memory; {have / 1e9:.3g} GB are available: "
+        "record a shorter duration (several logs can be pooled)"
     )

@@ -26,6 +26,7 @@ import numpy as np
 from reflexarm._progress import show_progress
 from reflexarm.errors import ConfigError, SimulationError
 from reflexarm.sim._compiled_inputs import _draw_noise, _forces, _sample_reference, _tick_times
+from reflexarm.sim._run_memory import check_log_memory
 from reflexarm.sim._trace_rows import check_every
 from reflexarm.sim.compiled_loop import _MODES, _STILL_SPEC, _make_loop, _modules, compiled_reason
 from reflexarm.sim.plant import Plant
@@ -47,7 +48,7 @@ from reflexarm.sim.runner import (
 )
 from reflexarm.sim.trace import TraceWriter
 
-__all__ = ["stream_compiled", "stream_fast", "stream_reason"]
+__all__ = ["record_measurements", "stream_compiled", "stream_fast", "stream_reason"]
 
 
 def stream_reason(
@@ -133,6 +134,56 @@ def stream_compiled(
     )  # fmt: skip
 
 
+def record_measurements(
+    plant: Plant,
+    controller: ControllerLike,
+    trajectory: TrajectoryLike,
+    duration: float,
+    *,
+    block_size: int = DEFAULT_BLOCK_SIZE,
+    progress: bool = False,
+) -> tuple[RunStatistics, dict[str, np.ndarray]]:
+    """A streamed run (no trace file) that keeps what the controller measured on every tick, a robot's log:
+    ``t`` (N,), ``q``, ``dq``, ``tau_m`` (N, n) and ``wrench`` (N, 6), as :meth:`Plant.measure` returned them
+    (with their noise). The compiled loop when :func:`stream_reason` allows it, else the Python loop with a
+    callback; the same numbers either way (tests/test_long_runs.py).
+
+    Raises:
+        ConfigError: the log's rows cannot fit in the memory available (checked before allocating).
+    """
+    N, _ = _check(plant, controller, trajectory, duration)
+    n = plant.n
+    check_log_memory(N, n, "record_measurements")
+    if stream_reason(plant, controller) is not None or observers_active():
+        return _record_in_python(plant, controller, trajectory, duration, N, block_size, progress)
+    mods = _modules()
+    assert not isinstance(mods, str)
+    with plant.in_use("a compiled recording run"):
+        run = _BlockRun(plant, controller, mods, min(block_size, N), {}, None, 1, False, log_rows=N)
+        try:
+            run.run(trajectory, N, progress)
+        finally:
+            run.finish(None)
+    assert run.log is not None
+    return run.stats, {k: v[: run.done] for k, v in run.log.items()}
+
+
+def _record_in_python(
+    plant: Plant, controller: ControllerLike, trajectory: TrajectoryLike, duration: float, N: int, B: int, p: bool
+) -> tuple[RunStatistics, dict[str, np.ndarray]]:
+    n = plant.n
+    log = {"t": np.zeros(N), "q": np.zeros((N, n)), "dq": np.zeros((N, n)), "tau_m": np.zeros((N, n)),
+           "wrench": np.zeros((N, 6))}  # fmt: skip
+    count = [0]
+
+    def record(k: int, _plant: Plant, m: Any, _cmd: Any) -> None:
+        log["t"][k], log["q"][k], log["dq"][k], log["tau_m"][k], log["wrench"][k] = m.t, m.q, m.dq, m.tau_m, m.wrench
+        count[0] = k + 1
+
+    stats = stream_closed_loop(plant, controller, trajectory, duration, block_size=B, progress=p, callback=record)
+    return stats, {k: v[: count[0]] for k, v in log.items()}
+
+
 def _stream(
     plant: Plant,
     controller: ControllerLike,
@@ -180,6 +231,7 @@ class _BlockRun:
         path: str | os.PathLike[str] | None,
         every: int,
         keep_still: bool,
+        log_rows: int = 0,
     ) -> None:
         self.core, cl = mods
         self.plant, self.meta, self.every, self.B = plant, meta, every, B
@@ -199,6 +251,13 @@ class _BlockRun:
         self.tick0, self.done, self.acted = plant._tick, 0, 0
         self.still_rows: dict[str, tuple[int, float, Any]] = {}  # "start"/"peak": (tick, time, Command)
         self.peak2 = 0.0
+        # what the controller measured on every tick (record_measurements), copied out block by block
+        n_ = plant.n
+        widths = {"t": 1, "q": n_, "dq": n_, "tau_m": n_, "wrench": 6}
+        self.log = {k: np.zeros((log_rows, w)) for k, w in widths.items()} if log_rows else None
+        if self.log is not None:
+            self.log["t"] = self.log["t"][:, 0].copy()
+            self.dq_meas = np.zeros((B, n))
         loop.set_scene_data([], [], [])
         loop.set_forces(_forces(plant))  # forces the caller applied before the run stay on
         loop.set_applied_torque(np.array(plant._tau))
@@ -230,8 +289,12 @@ class _BlockRun:
             rec.collision[:m].view(np.uint8), rec.collided[:m].view(np.uint8), self.mode[:m], self.code[:m],
             self.info[:m],
         )  # fmt: skip
+        if self.log is not None:
+            loop.record_measured_velocity(self.dq_meas[:m])
         ran, status = loop.run(0, m)
         rec.done = ran
+        if self.log is not None:
+            self._copy_log(ran)
         self.acted = self.done + ran  # a failing tick is recorded and was stepped
         self._fold(ran)
         self._watch_still(ran)
@@ -243,6 +306,14 @@ class _BlockRun:
             plant._fail(float(np.sum(plant.data.qvel**2)) if status == 1 else np.inf)
         if not np.array_equal(rec.t[:ran], times[:ran]):
             raise SimulationError("the compiled loop's clock differs from the sampled reference times")
+
+    def _copy_log(self, rows: int) -> None:
+        """The block's measurements (what Plant.measure returned: t, q, dq, tau_m, wrench) into the log."""
+        assert self.log is not None
+        k, rec = self.done, self.rec
+        for key, src in (("t", rec.t), ("q", rec.q_meas), ("dq", self.dq_meas), ("tau_m", rec.tau_m),
+                         ("wrench", rec.wrench)):  # fmt: skip
+            self.log[key][k : k + rows] = src[:rows]
 
     def _fold(self, rows: int) -> None:
         """The block's rows into the C++ statistics; the fault texts of its fault rows counted by text."""

@@ -16,7 +16,6 @@ import numpy.typing as npt
 
 from reflexarm.logs.robot_log import RobotLog
 from reflexarm.robots.robot_model import RobotModel
-from reflexarm.signals import Command, Measurement
 
 __all__ = ["FreeMotionRun", "record_free_motion_log"]
 
@@ -85,7 +84,7 @@ def record_free_motion_log(
     from reflexarm.control import Controller
     from reflexarm.experiments.collision import ROBOT, controller_model, free_motion_trajectory
     from reflexarm.robots import load_robot
-    from reflexarm.sim import PAPER_NOISE, Plant, stream_closed_loop
+    from reflexarm.sim import PAPER_NOISE, Plant
 
     robot = load_robot(ROBOT) if robot is None else robot
     ctrl_model, info = controller_model(robot, model_error, model_seed, model)
@@ -94,20 +93,12 @@ def record_free_motion_log(
     plant.reset(traj.sample(0.0).q_d)
     ctrl = Controller(ctrl_model, stiffness=300.0, observer_gain=observer_gain, threshold=threshold, reaction="none")
     n = robot.n
-    size = int(round(duration / plant.control_period)) + 2
-    t = np.zeros(size)
-    q, dq, tau = np.zeros((size, n)), np.zeros((size, n)), np.zeros((size, n))
-    wrench = np.zeros((size, 6))
-    count = [0]
+    # the compiled loop keeps what the controller measured on every tick (the Python loop if it cannot)
+    from reflexarm.sim.compiled_stream import record_measurements
 
-    def record(k: int, _plant: Plant, m: Measurement, _cmd: Command) -> None:
-        t[k], q[k], dq[k], tau[k], wrench[k] = m.t, m.q, m.dq, m.tau_m, m.wrench
-        count[0] = k + 1
-
-    stats = stream_closed_loop(plant, ctrl, traj, duration, progress=progress, callback=record)
-    N = count[0]
+    stats, m = record_measurements(plant, ctrl, traj, duration, progress=progress)
     source = f"free-motion {motion} {duration:g} s (noise seed {seed}, model {info})"
-    log = RobotLog(t=t[:N], q=q[:N], dq=dq[:N], tau=tau[:N], wrench=wrench[:N], source=source)
+    log = RobotLog(t=m["t"], q=m["q"], dq=m["dq"], tau=m["tau_m"], wrench=m["wrench"], source=source)
     thr = np.broadcast_to(np.asarray(threshold, dtype=float), (n,)).copy()
     return FreeMotionRun(
         log=log,
