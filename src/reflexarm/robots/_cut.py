@@ -19,8 +19,9 @@ import numpy as np
 import pinocchio as pin
 
 from reflexarm.errors import ModelError
+from reflexarm.robots._coupling import Mimic, coupling_notes
 
-__all__ = ["ChainCut", "cut_chain", "freeze_joints", "link_names", "needs_cut"]
+__all__ = ["ChainCut", "cut_chain", "frame_notes", "freeze_joints", "link_names", "needs_cut"]
 
 
 @dataclass(frozen=True)
@@ -33,12 +34,15 @@ class ChainCut:
         locked: joint name -> position [rad or m] at which each joint off the chain is held (a free
             joint is held at the file's pose and listed with ``nan``).
         notes: what the cut changed that a user should know (clipped locks, a fixed floating base).
+        beyond_tip: frame name -> the locked joints between the tip link and that frame, for each frame
+            that hangs below the tip behind a locked joint (a finger link of a cut-off gripper).
     """
 
     base: str
     tip: str
     locked: Mapping[str, float]
     notes: tuple[str, ...] = field(default=())
+    beyond_tip: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, object]:
         """``{"base", "tip", "locked"}``, JSON-ready (free joints omitted from ``locked``)."""
@@ -123,12 +127,15 @@ def cut_chain(
     locked: Mapping[str, float] | None,
     defaults: Mapping[str, float],
     path: Path,
+    couplings: Mapping[str, Mimic] | None = None,
 ) -> tuple[pin.Model, ChainCut, list[int]]:
     """The reduced model of the base..tip chain, the cut's description and the chain's joint ids in
     ``model`` (in order).
 
-    ``locked`` positions override ``defaults`` (e.g. the file's "home" keyframe), which override 0; each
-    is clipped to the joint's limits with a note. With ``tip=None`` the model must be serial apart from a
+    ``locked`` positions override ``defaults`` (e.g. the file's "home" keyframe), which override 0 (for
+    the follower of a locked joint in ``couplings``, a URDF ``<mimic>``: its position for the leader's
+    lock); each is clipped to the joint's limits with a note, and couplings the cut does not keep are
+    named in a note (see ``_coupling.py``). With ``tip=None`` the model must be serial apart from a
     floating base (which is then fixed) and the tip is its last link; ``base=None`` starts the arm at the
     root link (or the link a floating base carries).
 
@@ -160,7 +167,8 @@ def cut_chain(
             f"joint(s) {on_chain} are on the arm from {base!r} to {tip!r}{where}; only joints off the chain can be "
             "locked"
         )
-    q_ref, values, notes = _lock_values(model, chain, locked or {}, defaults, where)
+    q_ref, values, notes = _lock_values(model, chain, locked or {}, defaults, where, couplings or {})
+    notes += coupling_notes(couplings or {}, {names[j] for j in chain}, values, where)
     base_joint = model.frames[model.getFrameId(base, pin.FrameType.BODY)].parentJoint
     below_root = [names[j] for j in model.supports[base_joint] if j > 0 and model.nvs[j] == 1]
     if below_root:
@@ -173,20 +181,39 @@ def cut_chain(
     lock_ids = [j for j in range(1, model.njoints) if j not in chain]
     reduced = pin.buildReducedModel(model, lock_ids, q_ref) if lock_ids else model.copy()
     reduced.name = model.name
-    return reduced, ChainCut(base, tip, values, tuple(notes)), chain
+    return reduced, ChainCut(base, tip, values, tuple(notes), _beyond_tip(model, tip)), chain
+
+
+def _beyond_tip(model: pin.Model, tip: str) -> dict[str, tuple[str, ...]]:
+    """Frames below the tip link behind a joint (which the cut locks), with those joints."""
+    tip_fid = int(model.getFrameId(tip, pin.FrameType.BODY))
+    tip_joint = int(model.frames[tip_fid].parentJoint)
+    out = {}
+    for fid, frame in enumerate(model.frames):
+        if tip_fid not in _frame_ancestors(model, fid) or fid == tip_fid:
+            continue
+        between = [str(model.names[j]) for j in model.supports[frame.parentJoint] if j > tip_joint]
+        if between:
+            out[str(frame.name)] = tuple(between)
+    return out
 
 
 def _lock_values(
-    model: pin.Model, chain: list[int], locked: Mapping[str, float], defaults: Mapping[str, float], where: str
+    model: pin.Model,
+    chain: list[int],
+    locked: Mapping[str, float],
+    defaults: Mapping[str, float],
+    where: str,
+    couplings: Mapping[str, Mimic],
 ) -> tuple[np.ndarray, dict[str, float], list[str]]:
     """The reference configuration of the reduction, the lock of each joint off the chain (``nan`` for a
-    free or ball joint, held at its neutral pose) and notes (clipped locks, fixed floating bases)."""
+    free or ball joint, held at its neutral pose) and notes (clipped locks, fixed floating bases).
+    Followers of a coupling come after their leaders."""
     q_ref = pin.neutral(model)
     values: dict[str, float] = {}
     notes: list[str] = []
-    for j in range(1, model.njoints):
-        if j in chain:
-            continue
+    off_chain = [j for j in range(1, model.njoints) if j not in chain]
+    for j in sorted(off_chain, key=lambda j: str(model.names[j]) in couplings):
         name = str(model.names[j])
         if model.nqs[j] != 1:
             if name in locked:
@@ -203,6 +230,9 @@ def _lock_values(
             continue
         iq = model.idx_qs[j]
         wanted = float(locked.get(name, defaults.get(name, 0.0)))
+        coupling = couplings.get(name)
+        if coupling is not None and name not in locked and coupling.leader in values:
+            wanted = coupling.offset + coupling.multiplier * values[coupling.leader]
         lo, hi = float(model.lowerPositionLimit[iq]), float(model.upperPositionLimit[iq])
         value = float(np.clip(wanted, lo, hi))
         if value != wanted:
@@ -213,6 +243,32 @@ def _lock_values(
         q_ref[iq] = value
         values[name] = value
     return q_ref, values, notes
+
+
+def frame_notes(model: pin.Model, frames: tuple[str, str], cut: ChainCut | None, path: Path) -> tuple[str, ...]:
+    """Refuse an end-effector or sensor frame (``frames``) of the arm's model that does not move with the arm;
+    explain one past the tip of ``cut``.
+
+    Raises:
+        ModelError: the frame is fixed in the world (on the base, or on another limb of a cut robot).
+    """
+    notes = []
+    labels = {frames[0]: "end-effector and sensor" if frames[0] == frames[1] else "end-effector"}
+    labels.setdefault(frames[1], "sensor")
+    for frame, label in labels.items():
+        if model.frames[model.getFrameId(frame)].parentJoint == 0:
+            raise ModelError(
+                f"the {label} frame {frame!r} of {str(path)!r} does not move with the arm (it is fixed in the "
+                "world: on the base, or off the arm cut out of the file); name a frame on the arm (`reflexarm robots "
+                "FILE` lists them)"
+            )
+        behind = cut.beyond_tip.get(frame) if cut is not None else None
+        if behind and cut is not None:
+            notes.append(
+                f"robot in {str(path)!r}: the {label} frame {frame!r} lies past the tip link {cut.tip!r}, behind the "
+                f"locked joint(s) {list(behind)}: it moves rigidly with {cut.tip!r}, where the locks put it"
+            )
+    return tuple(notes)
 
 
 # ---------------------------------------------------------------------- the plant's side
@@ -281,8 +337,9 @@ def freeze_joints(spec: mujoco.MjSpec, values: Mapping[str, float], path: Path) 
     for sensor in list(spec.sensors):
         if sensor.objtype == mujoco.mjtObj.mjOBJ_JOINT and sensor.objname in named:
             spec.delete(sensor)
-    for eq in list(spec.equalities):
-        if eq.objtype == mujoco.mjtObj.mjOBJ_JOINT and (eq.name1 in named or eq.name2 in named):
+    frozen_names = {mj.joint(j).name for j in frozen}
+    for eq in list(spec.equalities):  # a URDF <mimic> comes as a joint equality whose objtype is left unset
+        if eq.type == mujoco.mjtEq.mjEQ_JOINT and ({eq.name1, eq.name2} & frozen_names):
             spec.delete(eq)
 
 

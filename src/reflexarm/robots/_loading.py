@@ -26,9 +26,10 @@ import numpy as np
 import pinocchio as pin
 
 from reflexarm.errors import ModelError
+from reflexarm.robots._coupling import coupling_notes, mjcf_couplings, urdf_mimics
 from reflexarm.robots._cut import ChainCut, cut_chain, freeze_joints, needs_cut
 from reflexarm.robots._mjcf import compile_mjcf, joint_facts, load_mjcf_spec
-from reflexarm.robots._urdf import UrdfFile, mujoco_urdf_text, read_urdf
+from reflexarm.robots._urdf import UrdfFile, mujoco_urdf, read_urdf
 
 __all__ = ["LoadedFile", "build_pinocchio_model"]
 
@@ -69,12 +70,17 @@ def build_pinocchio_model(
     suffix = path.suffix.lower()
     if suffix == ".urdf":
         urdf = read_urdf(path)
-        model = _build_urdf(urdf)
-        notes = urdf.notes + mujoco_urdf_text(urdf)[1]
+        model, limit_notes = _build_urdf(urdf)
+        notes = urdf.notes + limit_notes + mujoco_urdf(urdf).notes
+        couplings = urdf_mimics(urdf.root, path)
         cut = None
         if base is not None or tip is not None or locked or needs_cut(model):
-            model, cut, _ = cut_chain(model, base=base, tip=tip, locked=locked, defaults={}, path=path)
+            model, cut, _ = cut_chain(
+                model, base=base, tip=tip, locked=locked, defaults={}, path=path, couplings=couplings
+            )
             notes += cut.notes
+        else:
+            notes += coupling_notes(couplings, list(model.names)[1:], {}, f" in {str(path)!r}")
         return model, LoadedFile(np.zeros(model.nv), np.zeros(model.nv), notes, cut)
     if suffix in (".xml", ".mjcf"):
         return _build_mjcf(path, base, tip, locked)
@@ -87,7 +93,8 @@ def build_tree_model(path: Path) -> tuple[pin.Model, list[str]]:
         raise ModelError(f"robot file {str(path)!r} does not exist")
     if path.suffix.lower() == ".urdf":
         urdf = read_urdf(path)
-        return _build_urdf(urdf), urdf.notes
+        model, limit_notes = _build_urdf(urdf)
+        return model, urdf.notes + limit_notes
     try:
         return pin.buildModelFromMJCF(str(path)), []
     except Exception as e:
@@ -95,37 +102,72 @@ def build_tree_model(path: Path) -> tuple[pin.Model, list[str]]:
 
 
 # ---------------------------------------------------------------------- URDF
-def _build_urdf(urdf: UrdfFile) -> pin.Model:
-    path, root = urdf.path, urdf.root
-    continuous = [j for j in root.iter("joint") if j.get("type") == "continuous"]
+def _build_urdf(urdf: UrdfFile) -> tuple[pin.Model, list[str]]:
+    """The Pinocchio model of a URDF with continuous joints and the open sides of ``<limit>`` elements
+    without lower/upper unbounded (see :func:`_open_limits`), and notes on the latter."""
+    path = urdf.path
+    open_sides = _open_limits(urdf.root)
+    continuous = {str(j.get("name")) for j in urdf.root.iter("joint") if j.get("type") == "continuous"}
     try:
-        if not continuous:
-            return pin.buildModelFromXML(urdf.text)
+        if not continuous and not open_sides:
+            return pin.buildModelFromXML(urdf.text), []
         original = pin.buildModelFromXML(urdf.text)
         rewritten = UrdfFile(path, ET.fromstring(urdf.text))
         for joint in rewritten.root.iter("joint"):
-            if joint.get("type") != "continuous":
+            name = str(joint.get("name"))
+            sides = ("lower", "upper") if name in continuous else open_sides.get(name, ())
+            if not sides:
                 continue
-            joint.set("type", "revolute")
+            joint.set("type", "revolute" if name in continuous else str(joint.get("type")))
             limit = joint.find("limit")
             if limit is None:
                 limit = ET.SubElement(joint, "limit", effort="1", velocity="1")
-            limit.set("lower", repr(-_UNBOUNDED))
-            limit.set("upper", repr(_UNBOUNDED))
+            for side in sides:
+                limit.set(side, repr(-_UNBOUNDED if side == "lower" else _UNBOUNDED))
         model = pin.buildModelFromXML(rewritten.text)
     except Exception as e:  # pinocchio raises RuntimeError/ValueError with terse text
         raise ModelError(f"cannot parse robot file {str(path)!r}: {e}") from e
-    names = {j.get("name") for j in continuous}
     for j in range(1, model.njoints):
-        if model.names[j] not in names:
+        name = str(model.names[j])
+        sides = ("lower", "upper") if name in continuous else open_sides.get(name, ())
+        iq, iv, jo = model.idx_qs[j], model.idx_vs[j], original.getJointId(name)
+        if "lower" in sides:
+            model.lowerPositionLimit[iq] = -np.inf
+        if "upper" in sides:
+            model.upperPositionLimit[iq] = np.inf
+        if sides:
+            ov = original.idx_vs[jo]
+            model.effortLimit[iv] = original.effortLimit[ov]
+            model.velocityLimit[iv] = original.velocityLimit[ov]
+    notes = [
+        f"robot file {str(path)!r}: joint {name!r} has a <limit> without {' and '.join(sides)}, which URDF reads as "
+        f"0 (a range of [{'0' if 'lower' in sides else 'lower'}, {'0' if 'upper' in sides else 'upper'}]: "
+        f"{'the joint could not move' if len(sides) > 1 else 'maybe not what was meant'}); the controller's model "
+        f"and the plant take it as unbounded {_SIDE_WORDS[sides]} (MuJoCo's URDF reader sets no limit either); give "
+        f"{' and '.join(f'{side}=' for side in sides)} if the joint has a range (excite keeps the motion within it)"
+        for name, sides in open_sides.items()
+    ]
+    return model, notes
+
+
+_SIDE_WORDS = {("lower",): "below", ("upper",): "above", ("lower", "upper"): "both ways"}
+
+
+def _open_limits(root: ET.Element) -> dict[str, tuple[str, ...]]:
+    """Revolute and prismatic joints whose ``<limit>`` lacks ``lower`` and/or ``upper``, with the sides missing.
+
+    URDF defaults them to 0 (a revolute joint with neither would be held in [0, 0]); MuJoCo's URDF reader
+    leaves such a joint unlimited. Both models take the missing side as unbounded, with a note.
+    """
+    out = {}
+    for joint in root.iter("joint"):
+        limit = joint.find("limit")
+        if joint.get("type") not in ("revolute", "prismatic") or limit is None:
             continue
-        iq, iv, jo = model.idx_qs[j], model.idx_vs[j], original.getJointId(model.names[j])
-        model.lowerPositionLimit[iq] = -np.inf
-        model.upperPositionLimit[iq] = np.inf
-        ov = original.idx_vs[jo]
-        model.effortLimit[iv] = original.effortLimit[ov]
-        model.velocityLimit[iv] = original.velocityLimit[ov]
-    return model
+        sides = tuple(side for side in ("lower", "upper") if limit.get(side) is None)
+        if sides:
+            out[str(joint.get("name"))] = sides
+    return out
 
 
 # ---------------------------------------------------------------------- MJCF
@@ -161,10 +203,14 @@ def _build_mjcf(
     notes += facts.notes
     stiffness = dict(zip(names, facts.stiffness, strict=True))
     springref = dict(zip(names, facts.springref, strict=True))
+    couplings = mjcf_couplings(mj)
     if base is None and tip is None and not locked and not needs_cut(model):
         _check_agreement(model, mj, names, path)
+        notes += coupling_notes(couplings, names, {}, f" in {str(path)!r}")
         return model, LoadedFile(facts.stiffness, facts.springref, notes)
-    reduced, cut, chain = cut_chain(model, base=base, tip=tip, locked=locked, defaults=_home(mj), path=path)
+    reduced, cut, chain = cut_chain(
+        model, base=base, tip=tip, locked=locked, defaults=_home(mj), path=path, couplings=couplings
+    )
     spec = load_mjcf_spec(path)[0]  # its notes were given with compile_mjcf's
     freeze_joints(spec, cut.locked, path)
     try:

@@ -7,9 +7,14 @@
   file's folder and its parents (``DIR/PKG/rest``, or ``DIR/rest`` when ``DIR`` is named ``PKG``);
   ``file://`` and relative paths are taken from the file's folder. MuJoCo gets absolute paths; meshes
   that cannot be found are dropped with their geoms and a note (meshes only shape contact and visuals;
-  the dynamics come from ``<inertial>``). Pinocchio does not read meshes for the dynamics at all. A link
-  left without any collision geometry that way gets, in the plant only, a box with its mass and inertia
-  (no larger than the link's reach; so scenes still touch the arm), with a note.
+  the dynamics come from ``<inertial>``). Pinocchio does not read meshes for the dynamics at all.
+- Mesh formats: MuJoCo decodes STL, OBJ and MSH. COLLADA (``.dae``, what most ROS description packages
+  ship) is read by ``_collada.py`` and given to MuJoCo as the vertices of its convex hull, which is what
+  MuJoCo collides with for any mesh; other formats and unreadable files are dropped with a note, as
+  missing ones are. Never fatal.
+- A link with a mass and no collision geometry (none in the file, e.g. a hand that comes from another
+  file, or its meshes dropped) gets, in the plant only, a box with its mass and inertia (no larger than
+  the link's reach; so scenes still touch the arm), with a note.
 """
 
 from __future__ import annotations
@@ -20,11 +25,13 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import mujoco
 import numpy as np
 
 from reflexarm.errors import ModelError
+from reflexarm.robots._collada import collada_vertices
 
-__all__ = ["UrdfFile", "mujoco_urdf_text", "read_urdf", "resolve_mesh_uri"]
+__all__ = ["MujocoUrdf", "UrdfFile", "mujoco_urdf", "mujoco_urdf_spec", "read_urdf", "resolve_mesh_uri"]
 
 #: How many folders above the robot file are searched for a ``package://`` package.
 PACKAGE_SEARCH_DEPTH = 4
@@ -109,40 +116,52 @@ def resolve_mesh_uri(uri: str, path: Path) -> tuple[Path | None, str]:
     return (f, "") if f.is_file() else (None, f"{f} does not exist")
 
 
-def mujoco_urdf_text(urdf: UrdfFile) -> tuple[str, list[str]]:
-    """URDF text MuJoCo compiles from a string, with notes on the meshes.
+@dataclass
+class MujocoUrdf:
+    """The URDF text MuJoCo compiles, the vertices [m] of the collision meshes it cannot decode (by the
+    absolute file name the text gives them) and notes on the meshes and stand-in boxes."""
 
-    Found meshes get absolute file names; visuals and geoms whose mesh cannot be found are dropped; the
-    file's own ``<mujoco>`` block is replaced by one that discards visuals, keeps fixed-joint links as
-    bodies (so tool and sensor links stay addressable) and never derives inertia from geometry (as
-    Pinocchio does not).
+    text: str
+    vertices: dict[str, np.ndarray]
+    notes: list[str]
+
+
+def mujoco_urdf(urdf: UrdfFile) -> MujocoUrdf:
+    """The URDF as MuJoCo gets it (see :func:`mujoco_urdf_spec`), with notes on the meshes.
+
+    Found meshes get absolute file names; visuals are dropped, and so are collision geoms whose mesh
+    cannot be found or read (a format MuJoCo does not decode and reflexarm does not convert, a broken
+    ``.dae``); ``.dae`` meshes are read as their vertices (MuJoCo collides with their convex hull, as with
+    an STL). Each link with a mass and no collision geometry left (none in the file, or its meshes
+    dropped) gets a stand-in box. The file's own ``<mujoco>`` block is replaced by one that discards
+    visuals, keeps fixed-joint links as bodies (so tool and sensor links stay addressable) and never
+    derives inertia from geometry (as Pinocchio does not).
     """
     root = copy.deepcopy(urdf.root)
     found: dict[str, str] = {}
     missing: dict[str, str] = {}
+    unreadable: dict[str, str] = {}
+    vertices: dict[str, np.ndarray] = {}
     dropped = 0
-    bare: list[ET.Element] = []  # links left without collision geometry by a missing mesh
     for link in root.iter("link"):
-        for tag in ("visual", "collision"):
-            for element in link.findall(tag):
-                mesh = element.find("geometry/mesh")
-                if mesh is None:
-                    continue
-                if tag == "visual":
-                    link.remove(element)
-                    continue
-                uri = mesh.get("filename", "")
-                f, how = resolve_mesh_uri(uri, urdf.path)
-                if f is None:
-                    missing[uri] = how
-                    link.remove(element)
-                    dropped += 1
-                    if link.find("collision") is None and link not in bare:
-                        bare.append(link)
-                    continue
-                mesh.set("filename", str(f.resolve()))
-                if how:
-                    found[how.split(" -> ")[0]] = how
+        for element in link.findall("visual"):
+            link.remove(element)
+        for element in link.findall("collision"):
+            mesh = element.find("geometry/mesh")
+            if mesh is None:
+                continue
+            uri = mesh.get("filename", "")
+            f, how = resolve_mesh_uri(uri, urdf.path)
+            problem = how if f is None else _mesh_problem(f.resolve(), vertices)
+            if problem:
+                (missing if f is None else unreadable)[uri] = problem
+                link.remove(element)
+                dropped += f is None
+                continue
+            mesh.set("filename", str(f.resolve()))  # type: ignore[union-attr]  # f is None has a problem
+            if how:
+                found[how.split(" -> ")[0]] = how
+    bare = [link for link in root.iter("link") if link.find("collision") is None]
     boxed = _inertia_boxes(root, bare)
     for old in root.findall("mujoco"):
         root.remove(old)
@@ -151,20 +170,96 @@ def mujoco_urdf_text(urdf: UrdfFile) -> tuple[str, list[str]]:
         block, "compiler", discardvisual="true", fusestatic="false", inertiafromgeom="false", strippath="false"
     )
     where = f"robot file {str(urdf.path)!r}"
+    notes = _mesh_notes(where, found, (missing, dropped), unreadable, vertices, boxed)
+    return MujocoUrdf(ET.tostring(root, encoding="unicode"), vertices, notes)
+
+
+def mujoco_urdf_spec(urdf: UrdfFile) -> tuple[mujoco.MjSpec, list[str]]:
+    """The MjSpec of a URDF as the plant compiles it (see :func:`mujoco_urdf`): ``.dae`` meshes given to
+    MuJoCo as their vertices, whose convex hull MuJoCo collides with, as it does with an STL's.
+
+    Raises:
+        ModelError: MuJoCo cannot parse the rewritten file (its message names the file).
+    """
+    out = mujoco_urdf(urdf)
+    try:
+        spec = mujoco.MjSpec.from_string(out.text)
+    except Exception as e:  # MuJoCo raises ValueError with the parser's text
+        raise ModelError(f"MuJoCo cannot parse robot file {str(urdf.path)!r}: {e}") from e
+    for mesh in spec.meshes:
+        points = out.vertices.get(mesh.file)
+        if points is not None:
+            mesh.file = ""
+            mesh.uservert = points.ravel()
+    return spec, out.notes
+
+
+#: Mesh files MuJoCo decodes itself (it matches these suffixes exactly: ``.Stl`` is refused).
+MUJOCO_MESH_SUFFIXES = (".stl", ".STL", ".obj", ".OBJ", ".msh", ".MSH")
+
+
+def _mesh_problem(f: Path, vertices: dict[str, np.ndarray]) -> str:
+    """Why MuJoCo cannot use the mesh file ``f`` ("" if it can); a ``.dae`` is read into ``vertices``."""
+    if f.suffix in MUJOCO_MESH_SUFFIXES:
+        return ""
+    if f.suffix.lower() == ".dae":
+        try:
+            vertices[str(f)] = _hull_points(collada_vertices(f))
+        except ModelError as e:
+            return str(e)
+        return ""
+    return f"{f.name}: MuJoCo reads STL, OBJ and MSH meshes, and reflexarm converts COLLADA (.dae); not {f.suffix!r}"
+
+
+def _hull_points(points: np.ndarray) -> np.ndarray:
+    """The vertices of the convex hull of ``points`` (all of them when qhull cannot build one: MuJoCo
+    then says why)."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    try:
+        return np.ascontiguousarray(points[ConvexHull(points).vertices])
+    except (QhullError, ValueError):
+        return np.ascontiguousarray(points)
+
+
+def _mesh_notes(
+    where: str,
+    found: dict[str, str],
+    missing_dropped: tuple[dict[str, str], int],
+    unreadable: dict[str, str],
+    vertices: dict[str, np.ndarray],
+    boxed: list[str],
+) -> list[str]:
     notes = [f"{where}: mesh package resolved: {how}" for how in found.values()]
+    missing, dropped = missing_dropped
     if missing:
-        shown = ", ".join(sorted(missing)[:3]) + (f" and {len(missing) - 3} more" if len(missing) > 3 else "")
         notes.append(
-            f"{where}: {len(missing)} mesh file(s) not found ({shown}); the {dropped} collision geom(s) using them "
-            "were dropped (meshes only shape contact; masses and inertias come from the <inertial> elements)"
+            f"{where}: {len(missing)} mesh file(s) not found ({_shown(sorted(missing))}); the {dropped} collision "
+            "geom(s) using them were dropped (meshes only shape contact; masses and inertias come from the <inertial> "
+            "elements)"
+        )
+    if unreadable:
+        notes.append(
+            f"{where}: {len(unreadable)} mesh file(s) cannot be read ({_shown(list(unreadable.values()))}); the "
+            "collision geom(s) using them were dropped"
+        )
+    if vertices:
+        names = sorted(Path(f).name for f in vertices)
+        notes.append(
+            f"{where}: {len(vertices)} COLLADA (.dae) collision mesh(es) ({_shown(names)}) given to MuJoCo as "
+            "their vertices (it collides with their convex hull, as with an STL)"
         )
     if boxed:
         notes.append(
-            f"{where}: in the plant, {len(boxed)} link(s) left without collision geometry ({', '.join(boxed[:4])}"
-            f"{' ...' if len(boxed) > 4 else ''}) touch the scene through a box with the link's mass and inertia "
+            f"{where}: in the plant, {len(boxed)} link(s) without collision geometry (in the file, or after the "
+            f"meshes above) ({_shown(boxed, 4)}) touch the scene through a box with the link's mass and inertia "
             "(centred at its centre of mass, along its principal axes, no larger than the link's reach)"
         )
-    return ET.tostring(root, encoding="unicode"), notes
+    return notes
+
+
+def _shown(items: list[str], count: int = 3) -> str:
+    return ", ".join(items[:count]) + (f" and {len(items) - count} more" if len(items) > count else "")
 
 
 def _inertia_boxes(root: ET.Element, links: list[ET.Element]) -> list[str]:

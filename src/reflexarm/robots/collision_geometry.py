@@ -20,7 +20,6 @@ collision geometry has zero points (:attr:`LinkSurface.has_geometry` is False).
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -30,8 +29,9 @@ import pinocchio as pin
 
 from reflexarm.errors import ConfigError, ModelError
 from reflexarm.robots._cut import freeze_joints
-from reflexarm.robots._mjcf import RobotFileWarning, load_mjcf_spec
-from reflexarm.robots._urdf import mujoco_urdf_text, read_urdf
+from reflexarm.robots._mjcf import load_mjcf_spec
+from reflexarm.robots._notes import warn_note
+from reflexarm.robots._urdf import mujoco_urdf_spec, read_urdf
 from reflexarm.robots.robot_model import RobotModel
 
 __all__ = ["CollisionGeometry", "LinkSurface", "compile_collision_model", "link_collision_geometry"]
@@ -117,11 +117,7 @@ def compile_collision_model(robot: RobotModel) -> tuple[mujoco.MjModel, np.ndarr
     if not path.is_file():
         raise ModelError(f"robot file {str(path)!r} does not exist")
     if path.suffix.lower() == ".urdf":
-        text, _ = mujoco_urdf_text(read_urdf(path))
-        try:
-            spec = mujoco.MjSpec.from_string(text)
-        except Exception as e:  # MuJoCo raises ValueError with the parser's text
-            raise ModelError(f"MuJoCo cannot parse robot file {str(path)!r}: {e}") from e
+        spec, _ = mujoco_urdf_spec(read_urdf(path))
     else:
         spec, _ = load_mjcf_spec(path)
     if robot.cut is not None:
@@ -404,7 +400,7 @@ def link_collision_geometry(robot: RobotModel, *, spacing: float = 0.01, seed: i
             )
         )
     for note in notes:
-        warnings.warn(note, RobotFileWarning, stacklevel=2)
+        warn_note(note)
     return CollisionGeometry(robot.name, float(spacing), tuple(links), tuple(notes))
 
 

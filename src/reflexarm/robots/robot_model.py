@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import warnings
 from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -13,9 +12,9 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from reflexarm.errors import ModelError
-from reflexarm.robots._cut import ChainCut
+from reflexarm.robots._cut import ChainCut, frame_notes
 from reflexarm.robots._loading import build_pinocchio_model
-from reflexarm.robots._mjcf import RobotFileWarning
+from reflexarm.robots._notes import warn_note
 from reflexarm.robots.friction import CoulombViscousFriction
 
 if TYPE_CHECKING:  # at run time they come through __getattr__ below (loader.py imports this module)
@@ -154,8 +153,9 @@ class RobotModel:
             notes=loaded.notes,
             cut=loaded.cut,
         )
-        for note in robot.notes:
-            warnings.warn(note, RobotFileWarning, stacklevel=3)
+        frames = (robot.ee_frame, robot.sensor_frame)
+        for note in robot.notes + frame_notes(robot.pin_model, frames, robot.cut, p):
+            warn_note(note, stacklevel=3)
         return robot
 
     def copy(self) -> RobotModel:

@@ -15,7 +15,6 @@ absent are dropped with their geoms, as for URDF (see ``reflexarm.robots._mjcf``
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -24,9 +23,11 @@ import numpy as np
 import pinocchio as pin
 
 from reflexarm.errors import ModelError
+from reflexarm.robots._coupling import drop_joint_equalities
 from reflexarm.robots._cut import freeze_joints
-from reflexarm.robots._mjcf import RobotFileWarning, load_mjcf_spec
-from reflexarm.robots._urdf import mujoco_urdf_text, read_urdf
+from reflexarm.robots._mjcf import load_mjcf_spec
+from reflexarm.robots._notes import warn_note
+from reflexarm.robots._urdf import mujoco_urdf_spec, read_urdf
 from reflexarm.robots.friction import CoulombViscousFriction
 from reflexarm.robots.robot_model import RobotModel
 
@@ -66,19 +67,15 @@ class BuildInfo:
 
 def load_spec(path: Path) -> tuple[mujoco.MjSpec, bool]:
     """Parse a robot file into an MjSpec; URDF files are rewritten first (see ``robots/_urdf.py``: joints
-    to undefined links dropped, ``package://`` meshes resolved or dropped, visuals discarded, fixed links
-    kept as bodies, no inertia from geometry). The notes were given when the RobotModel was loaded."""
+    to undefined links dropped, ``package://`` meshes resolved or dropped, ``.dae`` meshes read, visuals
+    discarded, fixed links kept as bodies, no inertia from geometry). The notes were given when the
+    RobotModel was loaded."""
     if not path.is_file():
         raise ModelError(f"robot file {str(path)!r} does not exist")
     is_urdf = path.suffix.lower() == ".urdf"
     if not is_urdf:
         return load_mjcf_spec(path)[0], False
-    text, _ = mujoco_urdf_text(read_urdf(path))
-    try:
-        spec = mujoco.MjSpec.from_string(text)
-    except Exception as e:  # MuJoCo raises ValueError with the parser's text
-        raise ModelError(f"MuJoCo cannot parse robot file {str(path)!r}: {e}") from e
-    return spec, is_urdf
+    return mujoco_urdf_spec(read_urdf(path))[0], is_urdf
 
 
 def _frame_pose(robot: RobotModel, frame: str, q: np.ndarray) -> pin.SE3:
@@ -263,8 +260,9 @@ def build_robot_spec(
     notes = _remove_actuation(spec, path)
     if robot.cut is not None:
         freeze_joints(spec, robot.cut.locked, path)  # the same joints at the same positions as the model
+    drop_joint_equalities(spec)  # couplings of arm joints: independent joints in the model (see _coupling.py)
     for note in notes:
-        warnings.warn(note, RobotFileWarning, stacklevel=4)
+        warn_note(note, stacklevel=4)
     if is_urdf:
         # URDF has no collision masks: give the arm the built-in convention (no self-collision).
         for geom in spec.geoms:

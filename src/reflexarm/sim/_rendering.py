@@ -83,6 +83,8 @@ def frame_scene(
     The camera looks at the centre of the bounding box of the arm's and the scene's geoms (floors left
     out), from far enough that the box's enclosing sphere fits the narrower field of view. Without
     ``azimuth`` it looks across the line from the arm to the scene objects, so neither hides the other.
+    A plant without any finite geometry is framed by its bodies' origins (the still is a side product of a
+    run and never fails it).
     """
     m = plant.model
     d = plant.data if data is None else data
@@ -95,8 +97,8 @@ def frame_scene(
         near = np.linalg.norm(d.geom_xpos[other] - 0.5 * (lo_arm + hi_arm), axis=1) <= reach
         other_pts = _corners(m, d, other[near])
     pts = np.vstack([arm_pts, other_pts])
-    if pts.shape[0] == 0:
-        raise SimulationError("the plant has no finite geometry to frame (only planes)")
+    if pts.shape[0] == 0:  # no finite geometry (a file of inertials only): the bodies' origins, never an error
+        pts = np.vstack([np.asarray(d.xpos[1:], dtype=float).reshape(-1, 3), np.zeros((1, 3))])
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     centre = 0.5 * (lo + hi)
     radius = max(0.5 * float(np.linalg.norm(hi - lo)), 0.05)
