@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from reflexarm.control.collision.contact import Determined
+from reflexarm.control.collision.contact import ContactEstimate, Determined
 from reflexarm.control.collision.identify import compute_link_kinematics
 from reflexarm.control.collision.isolate import ContactIsolator
 from reflexarm.errors import ConfigError
@@ -302,28 +302,33 @@ def run_isolation_study(
             d, q_meas = _disturbance(robot, models[k], c.q, residual_noise, rng)
             r = c.torque + d
         est = isolators[k].isolate(q_meas, r)
-        f_true = float(np.linalg.norm(c.force))
-        row: dict[str, Any] = {
-            "index": i,
-            "link": c.link,
-            "link_name": names[c.link],
-            "estimated_link": est.link,
-            "sensed": est.determined != Determined.NONE,
-            "correct": est.link == c.link,
-            "determined": est.determined.value,
-            "explained": "no single contact" not in est.reason,
-            "own_joint_insignificant": bool(abs(c.torque[c.link]) <= significance[c.link]),
-            "force_true_N": f_true,
-            "fit_error_Nm": est.fit_error,
-            "point_error": float(np.linalg.norm(est.point - c.point)) if est.point is not None else float("nan"),
-            "force_error_pct": float(100.0 * abs(np.linalg.norm(est.force) - f_true) / f_true)
-            if est.force is not None
-            else float("nan"),
-            "direction_error_deg": _angle(est.force, c.force) if est.force is not None else float("nan"),
-        }
+        row = _row(i, c, est, names[c.link], significance)
         study.rows.append(row)
     study.summary = _summarise(study.rows, robot.n, names)
     return study
+
+
+def _row(index: int, c: Contact, est: ContactEstimate, link_name: str, significance: np.ndarray) -> dict[str, Any]:
+    """One contact's row: the truth beside the estimate and their errors."""
+    f_true = float(np.linalg.norm(c.force))
+    return {
+        "index": index,
+        "link": c.link,
+        "link_name": link_name,
+        "estimated_link": est.link,
+        "sensed": est.determined != Determined.NONE,
+        "correct": est.link == c.link,
+        "determined": est.determined.value,
+        "explained": "no single contact" not in est.reason,
+        "own_joint_insignificant": bool(abs(c.torque[c.link]) <= significance[c.link]),
+        "force_true_N": f_true,
+        "fit_error_Nm": est.fit_error,
+        "point_error": float(np.linalg.norm(est.point - c.point)) if est.point is not None else float("nan"),
+        "force_error_pct": float(100.0 * abs(np.linalg.norm(est.force) - f_true) / f_true)
+        if est.force is not None
+        else float("nan"),
+        "direction_error_deg": _angle(est.force, c.force) if est.force is not None else float("nan"),
+    }
 
 
 def _angle(a: np.ndarray, b: np.ndarray) -> float:
