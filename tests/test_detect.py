@@ -82,8 +82,8 @@ def test_a_current_based_copy_gives_the_same_events(iiwa, tuned, tmp_path):
     current = tmp_path / "current.csv"
     table.to_csv(current, index=False, float_format="%.12g")
     found = {}
-    for name, path, extra in (("torque", torque, []), ("current", current,
-                              ["--torque-from", "current", "--gains", ",".join(f"{g:.17g}" for g in gains)])):  # fmt: skip
+    from_current = ["--torque-from", "current", "--gains", ",".join(f"{g:.17g}" for g in gains)]
+    for name, path, extra in (("torque", torque, []), ("current", current, from_current)):
         out = tmp_path / name
         assert main(["detect", str(path), "--robot", ROBOT, "--threshold", str(thr), "--no-figure", "--out", str(out),
                      *extra]) == 0  # fmt: skip
