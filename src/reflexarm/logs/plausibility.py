@@ -7,7 +7,8 @@ Two layers of bounds, each a documented constant:
   catch overflowing sensors, uninitialised memory (1e300), wrong units by orders of magnitude and
   corrupt files. A cell beyond its bound raises :class:`~reflexarm.errors.ImplausibleDataError` naming
   the column, the row, the value and the bound.
-* **relative to the robot** (:func:`check_log_against_robot`, applied by
+* **relative to the robot** (:func:`check_log_against_robot`, with the unit checks of
+  :mod:`reflexarm.logs.units`, applied by
   :func:`~reflexarm.ident.identify_dynamics` and, as :func:`check_samples_against_robot`, by
   :func:`~reflexarm.ident.identify_joint_friction`): a measured torque beyond :data:`TORQUE_LIMIT_FACTOR` times
   the joint's effort limit, a velocity beyond :data:`VELOCITY_LIMIT_FACTOR` times its velocity limit,
@@ -130,15 +131,25 @@ def check_log_against_robot(log: RobotLog, robot: RobotModel) -> None:
     docstring: torque beyond :data:`TORQUE_LIMIT_FACTOR` x effort limit, velocity beyond
     :data:`VELOCITY_LIMIT_FACTOR` x velocity limit, position :data:`POSITION_MARGIN` outside the range).
     Limits that are not finite and positive (a file without them, continuous joints) are not checked."""
-    check_samples_against_robot(log.source, log.t, log.q, log.dq, log.measured_torque, robot)
+    check_samples_against_robot(log.source, log.t, log.q, log.dq, log.measured_torque, robot, ddq=log.ddq)
 
 
 def check_samples_against_robot(
-    source: str, t: npt.ArrayLike, q: npt.ArrayLike, dq: npt.ArrayLike, tau: npt.ArrayLike, robot: RobotModel
+    source: str,
+    t: npt.ArrayLike,
+    q: npt.ArrayLike,
+    dq: npt.ArrayLike,
+    tau: npt.ArrayLike,
+    robot: RobotModel,
+    *,
+    ddq: npt.ArrayLike | None = None,
+    units: bool = True,
 ) -> None:
     """:func:`check_log_against_robot` for plain (N,) time and (N, n) position, velocity and measured
     torque arrays (e.g. the constant-velocity runs of :func:`~reflexarm.ident.identify_joint_friction`);
-    ``source`` names them in the message."""
+    ``source`` names them in the message. After the limits, the unit checks of
+    :mod:`reflexarm.logs.units` (``units``): positions against velocities, continuous joints in degrees,
+    the torque's scale against the robot's model (``ddq``, if given, is used there)."""
 
     def usable(limit: np.ndarray) -> np.ndarray:
         return np.isfinite(limit) & (limit > 0) & (limit < 1e30)
@@ -181,6 +192,10 @@ def check_samples_against_robot(
             f"upper {hi.tolist()} rad; degrees instead of radians?"
         )
         raise _error(source, "q", found, int(bad.any(axis=1).sum()), rule)
+    if units:
+        from reflexarm.logs.units import check_units  # units imports BadSample from here
+
+        check_units(source, tt, Q, DQ, torque, robot, None if ddq is None else np.asarray(ddq, dtype=float))
 
 
 #: A cell stands out when its magnitude is at least this many times its column's 99th percentile of
