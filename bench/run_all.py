@@ -20,6 +20,7 @@ BENCHES = (
     "bench_isolation",
     "bench_realtime_loop",
     "bench_closed_loop",
+    "bench_long_runs",
     "bench_ident",
     "bench_sweeps",
 )
