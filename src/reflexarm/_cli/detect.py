@@ -103,7 +103,8 @@ def _settings(args: argparse.Namespace, doc: dict[str, Any]) -> Any:
     from reflexarm.detect.defaults import DEFAULT_DETECTION_GAIN
     from reflexarm.tuning.replay import ObserverSettings
 
-    observer = doc.get("observer") if isinstance(doc.get("observer"), dict) else {}
+    found = doc.get("observer")
+    observer: dict[str, Any] = found if isinstance(found, dict) else {}
     tuned = observer.get("detection_observer_gain") or observer.get("observer_gain")
 
     def pick(given: Any, key: str, default: Any) -> Any:
