@@ -37,7 +37,7 @@ PACKAGE_DIRS := $(shell find src/reflexarm -type d -not -name __pycache__ 2>/dev
 $(STAMP): $(DEPS_STAMP) $(CORE_SOURCES) $(PACKAGE_DIRS)
 	@$(CHECK_TOOLCHAIN)
 	rm -f src/reflexarm/_core*.so # a module copied there by an old cpp/build.sh: the installed one is the only one
-	$(BIN)/python -m pip install --quiet --no-build-isolation -e ".[dev,video]"
+	$(BIN)/python -m pip install --quiet --no-build-isolation -e ".[dev,video,ros]"
 	touch $(STAMP)
 
 install: $(STAMP)

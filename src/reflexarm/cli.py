@@ -27,6 +27,7 @@ _COMMAND_MODULES = (
     "detection",
     "detect",
     "pfl",
+    "ros",
 )
 
 
