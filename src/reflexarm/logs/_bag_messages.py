@@ -5,16 +5,16 @@
 checksums) MCAP chunks and queries the sqlite3 database. Two of its per-message layers are skipped
 where the result is the same:
 
-* **MCAP** (chunked, indexed, chunks in time order as rosbag2 writes them): the messages of a chunk
-  are found through the chunk's message index records (log time and offset per message, read with
-  numpy), each record checked against its index entry (opcode, channel, log time, length) before its
-  bytes are used; a chunk whose records do not match goes through rosbags' own chunk reader (``msgsrc``).
+* **MCAP** (chunked): the messages of a chunk are found through the chunk's message index records (log
+  time and offset per message, read with numpy), each record checked against its index entry (opcode,
+  channel, log time, length) before its bytes are used; a chunk whose records do not match goes through
+  rosbags' own chunk reader (``msgsrc``). Chunks are merged by log time as rosbags merges them.
 * **sqlite3** (without per-message compression): each storage file's rows are read with rosbags' own
   query on the database connection rosbags opened, in blocks, without its per-message generator,
   connection remapping and merge layers.
 
-Anything else (per-message compression, overlapping or unindexed MCAP chunks, several bags) is read
-through ``AnyReader.messages`` itself.
+Anything else (per-message compression, unchunked MCAP files, several bags) is read through
+``AnyReader.messages`` itself.
 """
 
 from __future__ import annotations
@@ -99,27 +99,38 @@ def _storages(reader: Any) -> list[Any] | None:
 
 
 def _mcap_chunks(storage: Any, conns: list[Any]) -> list[Any] | None:
-    """The chunks holding ``conns``, if each is indexed and they follow each other in time (then reading
-    them one after the other gives rosbags' merged order), else None."""
-    ids = {c.id for c in conns}
-    chunks = [x for x in storage.chunks if any(x.channel_count.get(i, 0) for i in ids)]
+    """The chunks holding ``conns`` in file order (rosbags' order for equal log times), None if unchunked."""
     if not storage.chunks:
         return None
-    for a, b in zip(chunks, chunks[1:], strict=False):
-        if b.message_start_time < a.message_end_time:
-            return None
-    return chunks
+    ids = {c.id for c in conns}
+    return sorted((x for x in storage.chunks if any(x.channel_count.get(i, 0) for i in ids)),
+                  key=lambda x: x.chunk_start_offset)  # fmt: skip
 
 
 def _mcap_blocks(storage: Any, conns: list[Any], chunks: list[Any]) -> Iterator[RawBlock]:
-    parts: list[RawBlock] = []
-    for chunk in chunks:
-        parts.append(_chunk_messages(storage, conns, chunk))
-        if sum(p.size.size for p in parts) >= BLOCK:
-            yield _join(parts)
-            parts = []
-    if parts:
-        yield _join(parts)
+    """The chunks' messages merged by log time as rosbags' ``heapq.merge`` does (ties: the earlier chunk
+    in the file first): a message is given out once no later chunk can start before it."""
+    later = np.minimum.accumulate(np.array([c.message_start_time for c in chunks], dtype=np.uint64)[::-1])[::-1]
+    pending: list[RawBlock] = []
+    for i, chunk in enumerate(chunks):
+        pending.append(_chunk_messages(storage, conns, chunk))
+        if sum(p.size.size for p in pending) < BLOCK and i + 1 < len(chunks):
+            continue
+        block = _join(pending)
+        order = np.argsort(block.received, kind="stable")
+        ready = order if i + 1 == len(chunks) else order[block.received[order] <= int(later[i + 1])]
+        rest = np.setdiff1d(order, ready, assume_unique=True)
+        rest = rest[np.argsort(block.received[rest], kind="stable")] if rest.size else rest
+        yield RawBlock(block.data, block.start[ready], block.size[ready], block.received[ready])
+        pending = [_take(block, rest)] if rest.size else []
+
+
+def _take(block: RawBlock, idx: np.ndarray) -> RawBlock:
+    """Messages ``idx`` of ``block`` with their bytes copied out (the rest of the buffer released)."""
+    starts, sizes = block.start[idx].tolist(), block.size[idx].tolist()
+    data = np.concatenate([block.data[s : s + n] for s, n in zip(starts, sizes, strict=True)])
+    size = block.size[idx]
+    return RawBlock(data, np.cumsum(size) - size, size, block.received[idx])
 
 
 def _join(parts: list[RawBlock]) -> RawBlock:
