@@ -192,6 +192,116 @@ def _run_held(
         noise, rec.q_d, rec.dq_d, ddq_d, rec.t, rec.q, rec.dq, rec.q_meas, rec.tau, rec.tau_m,
         rec.residual, rec.wrench, rec.tau_ext, rec.f_ext_ee, collision, collided, mode, fault_code, fault_info,
     )  # fmt: skip
+    plays, plans, consts = _scene_data(plant, loop, rec, N)
+    loop.set_forces(_forces(plant))
+    loop.set_applied_torque(np.array(plant._tau))
+
+    run = _EventRun(plant, loop, rec, times, plays, plans, consts, int(cl.STEP_DIVERGED))
+    try:
+        run.run()
+    except BaseException as e:
+        run.sync()
+        _texts(rec, mode, fault_code, fault_info, core)
+        try:
+            e.trace = rec.trace(meta | {"loop": "compiled", "error": f"{type(e).__name__}: {e}"})  # type: ignore[attr-defined]
+            if still is not None:
+                _hand_over_still(loop, rec, fault_code, still)
+        except Exception:  # pragma: no cover - never mask the original error
+            pass
+        raise
+    run.sync()
+    _texts(rec, mode, fault_code, fault_info, core)
+    if still is not None:
+        _hand_over_still(loop, rec, fault_code, still)
+    _check_clock(rec, times)
+    return rec.trace(meta | {"loop": "compiled", "collision_event": _event(loop.event, ctrl)})
+
+
+class _EventRun:
+    """A compiled run played in C++ from scene event to scene event: at an event tick the loop stops, the scene's
+    Python ``update`` runs (and a HandPush is handed to C++), and the loop goes on."""
+
+    def __init__(
+        self,
+        plant: Plant,
+        loop: Any,
+        rec: _Recorder,
+        times: np.ndarray,
+        plays: list[ScenePlay],
+        plans: dict[int, Any],
+        consts: list[Any],
+        diverged: int,
+    ) -> None:
+        self.plant, self.loop, self.rec, self.times = plant, loop, rec, times
+        self.plans, self.consts, self.diverged = plans, consts, diverged
+        self.events = event_ticks(plays, times)
+        self.pushes: list[ScenePlay] = []  # HandPush scenes handed to C++ (in the order of their index there)
+        self.owned: set[int] = set()  # handles of plant._forces that a C++ push evaluates now
+        self.keep: list[np.ndarray] = []  # arrays the loop reads through raw pointers
+        self.tick0 = plant._tick
+        self.done = self.acted = 0  # rows recorded, physics periods stepped
+
+    def hold_constants(self, k_from: int) -> None:
+        """Values of the scenes' observe() from row k_from on."""
+        N = self.times.size
+        for p in self.consts:
+            if p in self.pushes:
+                continue  # recorded by C++
+            for key, value in p.scene.observe(self.plant).items():
+                v = np.asarray(value)
+                arr = self.rec.extras.setdefault(key, np.zeros((N, *v.shape), dtype=v.dtype))
+                arr[k_from:] = v
+
+    def fail(self, status: int) -> None:
+        """The plant's SimulationError of the Python loop, with the plant in the same state."""
+        self.sync()
+        self.plant._fail(float(np.sum(self.plant.data.qvel**2)) if status == self.diverged else np.inf)
+
+    def sync(self) -> None:
+        """The plant's own bookkeeping, as Plant.step keeps it."""
+        plant = self.plant
+        plant._tau[:] = self.loop.applied_torque
+        plant._tick = self.tick0 + self.acted
+        for i, p in enumerate(self.pushes):
+            hand_push_back(plant, p.scene, self.loop.push_state(i), self.owned)
+
+    def run(self) -> None:
+        plant, loop, rec, times, events = self.plant, self.loop, self.rec, self.times, self.events
+        N = times.size
+        self.hold_constants(0)
+        for k_event in [*sorted(events), N]:
+            status = _advance(loop, self.done, k_event, rec)
+            self.done = self.acted = rec.done
+            if status:
+                self.fail(status)
+            if k_event == N:
+                break
+            loop.sense(k_event)
+            rec.done = self.done = k_event + 1
+            for p in events[k_event]:
+                p.scene.update(plant)
+                p.plan_after_update(plant, k_event, times, self.plans.get(id(p)))
+            self.hold_constants(k_event + 1)
+            loop.set_forces(_forces(plant))
+            status = loop.act(k_event)
+            self.acted = k_event + 1
+            if status:
+                self.fail(status)
+            for p in events[k_event]:
+                if p.push and p not in self.pushes:
+                    self.keep.extend(hand_push_to(loop, plant, p.scene, k_event, times, rec, self.owned))
+                    self.pushes.append(p)
+            loop.set_forces(_forces(plant, self.owned))
+
+
+def _check_clock(rec: _Recorder, times: np.ndarray) -> None:
+    if not np.array_equal(rec.t[: rec.done], times[: rec.done]):
+        raise SimulationError("the compiled loop's clock differs from the sampled reference times; not returning it")
+
+
+def _scene_data(plant: Plant, loop: Any, rec: _Recorder, N: int) -> tuple[list[ScenePlay], dict[int, Any], list[Any]]:
+    """The scenes' data handed to the loop (mocap plans, recorded qpos and mocap slices in ``rec.extras``):
+    (the scenes' plays, their mocap plans by play id, the plays with constant observed values)."""
     plays = [p for p in (playback(s, plant) for s in plant.scenes) if isinstance(p, ScenePlay)]
     plans: dict[int, np.ndarray] = {}
     qrec, mrec, consts = [], [], []
@@ -207,79 +317,7 @@ def _run_held(
         if p.constant_keys:
             consts.append(p)
     loop.set_scene_data([(p.mocap_id, plans[id(p)]) for p in plays if p.mocap_id is not None], qrec, mrec)
-    loop.set_forces(_forces(plant))
-    loop.set_applied_torque(np.array(plant._tau))
-
-    pushes: list[ScenePlay] = []  # HandPush scenes handed to C++ (in the order of their index there)
-    owned: set[int] = set()  # handles of plant._forces that a C++ push evaluates now
-    keep: list[np.ndarray] = []  # arrays the loop reads through raw pointers
-
-    def hold_constants(k_from: int) -> None:  # values of observe() from row k_from on
-        for p in consts:
-            if p in pushes:
-                continue  # recorded by C++
-            for key, value in p.scene.observe(plant).items():
-                v = np.asarray(value)
-                arr = rec.extras.setdefault(key, np.zeros((N, *v.shape), dtype=v.dtype))
-                arr[k_from:] = v
-
-    events = event_ticks(plays, times)
-    tick0 = plant._tick
-    done = acted = 0  # rows recorded, physics periods stepped
-
-    def fail(status: int) -> None:
-        """The plant's SimulationError of the Python loop, with the plant in the same state."""
-        sync(acted)
-        plant._fail(float(np.sum(plant.data.qvel**2)) if status == cl.STEP_DIVERGED else np.inf)
-
-    def sync(periods: int) -> None:  # the plant's own bookkeeping, as Plant.step keeps it
-        plant._tau[:] = loop.applied_torque
-        plant._tick = tick0 + periods
-        for i, p in enumerate(pushes):
-            hand_push_back(plant, p.scene, loop.push_state(i), owned)
-
-    try:
-        hold_constants(0)
-        for k_event in [*sorted(events), N]:
-            status = _advance(loop, done, k_event, rec)
-            done = acted = rec.done
-            if status:
-                fail(status)
-            if k_event == N:
-                break
-            loop.sense(k_event)
-            rec.done = done = k_event + 1
-            for p in events[k_event]:
-                p.scene.update(plant)
-                p.plan_after_update(plant, k_event, times, plans.get(id(p)))
-            hold_constants(k_event + 1)
-            loop.set_forces(_forces(plant))
-            status = loop.act(k_event)
-            acted = k_event + 1
-            if status:
-                fail(status)
-            for p in events[k_event]:
-                if p.push and p not in pushes:
-                    keep.extend(hand_push_to(loop, plant, p.scene, k_event, times, rec, owned))
-                    pushes.append(p)
-            loop.set_forces(_forces(plant, owned))
-    except BaseException as e:
-        sync(acted)
-        _texts(rec, mode, fault_code, fault_info, core)
-        try:
-            e.trace = rec.trace(meta | {"loop": "compiled", "error": f"{type(e).__name__}: {e}"})  # type: ignore[attr-defined]
-            if still is not None:
-                _hand_over_still(loop, rec, fault_code, still)
-        except Exception:  # pragma: no cover - never mask the original error
-            pass
-        raise
-    sync(acted)
-    _texts(rec, mode, fault_code, fault_info, core)
-    if still is not None:
-        _hand_over_still(loop, rec, fault_code, still)
-    if not np.array_equal(rec.t[: rec.done], times[: rec.done]):
-        raise SimulationError("the compiled loop's clock differs from the sampled reference times; not returning it")
-    return rec.trace(meta | {"loop": "compiled", "collision_event": _event(loop.event, ctrl)})
+    return plays, plans, consts
 
 
 def _make_loop(plant: Plant, ctrl: Any, core: ModuleType, cl: ModuleType) -> Any:
