@@ -158,7 +158,7 @@ def test_run_fast_refuses_a_run_that_cannot_fit_in_memory(atlas, model):
 def test_recorded_measurements_are_the_python_loops(atlas, model):
     """record_measurements (what tune-thresholds' simulated logs hold): the compiled loop keeps the measured q, dq,
     tau_m and wrench of every tick, as a callback on the Python loop records them from Plant.measure."""
-    from reflexarm.sim.compiled_stream import _record_in_python, record_measurements
+    from reflexarm.sim.measurement_log import _record_in_python, record_measurements
 
     traj = C.free_motion_trajectory(1.2, "demo", atlas)
     plant_a, ctrl_a = _setup(atlas, model, traj)

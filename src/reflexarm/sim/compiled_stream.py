@@ -26,7 +26,6 @@ import numpy as np
 from reflexarm._progress import show_progress
 from reflexarm.errors import ConfigError, SimulationError
 from reflexarm.sim._compiled_inputs import _draw_noise, _forces, _sample_reference, _tick_times
-from reflexarm.sim._run_memory import check_log_memory
 from reflexarm.sim._trace_rows import check_every
 from reflexarm.sim.compiled_loop import _MODES, _STILL_SPEC, _make_loop, _modules, compiled_reason
 from reflexarm.sim.plant import Plant
@@ -48,7 +47,7 @@ from reflexarm.sim.runner import (
 )
 from reflexarm.sim.trace import TraceWriter
 
-__all__ = ["record_measurements", "stream_compiled", "stream_fast", "stream_reason"]
+__all__ = ["stream_compiled", "stream_fast", "stream_reason"]
 
 
 def stream_reason(
@@ -132,56 +131,6 @@ def stream_compiled(
         plant, controller, trajectory, duration, path=path, block_size=block_size, trace_every=trace_every,
         progress=progress, still=None,
     )  # fmt: skip
-
-
-def record_measurements(
-    plant: Plant,
-    controller: ControllerLike,
-    trajectory: TrajectoryLike,
-    duration: float,
-    *,
-    block_size: int = DEFAULT_BLOCK_SIZE,
-    progress: bool = False,
-) -> tuple[RunStatistics, dict[str, np.ndarray]]:
-    """A streamed run (no trace file) that keeps what the controller measured on every tick, a robot's log:
-    ``t`` (N,), ``q``, ``dq``, ``tau_m`` (N, n) and ``wrench`` (N, 6), as :meth:`Plant.measure` returned them
-    (with their noise). The compiled loop when :func:`stream_reason` allows it, else the Python loop with a
-    callback; the same numbers either way (tests/test_long_runs.py).
-
-    Raises:
-        ConfigError: the log's rows cannot fit in the memory available (checked before allocating).
-    """
-    N, _ = _check(plant, controller, trajectory, duration)
-    n = plant.n
-    check_log_memory(N, n, "record_measurements")
-    if stream_reason(plant, controller) is not None or observers_active():
-        return _record_in_python(plant, controller, trajectory, duration, N, block_size, progress)
-    mods = _modules()
-    assert not isinstance(mods, str)
-    with plant.in_use("a compiled recording run"):
-        run = _BlockRun(plant, controller, mods, min(block_size, N), {}, None, 1, False, log_rows=N)
-        try:
-            run.run(trajectory, N, progress)
-        finally:
-            run.finish(None)
-    assert run.log is not None
-    return run.stats, {k: v[: run.done] for k, v in run.log.items()}
-
-
-def _record_in_python(
-    plant: Plant, controller: ControllerLike, trajectory: TrajectoryLike, duration: float, N: int, B: int, p: bool
-) -> tuple[RunStatistics, dict[str, np.ndarray]]:
-    n = plant.n
-    log = {"t": np.zeros(N), "q": np.zeros((N, n)), "dq": np.zeros((N, n)), "tau_m": np.zeros((N, n)),
-           "wrench": np.zeros((N, 6))}  # fmt: skip
-    count = [0]
-
-    def record(k: int, _plant: Plant, m: Any, _cmd: Any) -> None:
-        log["t"][k], log["q"][k], log["dq"][k], log["tau_m"][k], log["wrench"][k] = m.t, m.q, m.dq, m.tau_m, m.wrench
-        count[0] = k + 1
-
-    stats = stream_closed_loop(plant, controller, trajectory, duration, block_size=B, progress=p, callback=record)
-    return stats, {k: v[: count[0]] for k, v in log.items()}
 
 
 def _stream(

@@ -94,7 +94,7 @@ def record_free_motion_log(
     ctrl = Controller(ctrl_model, stiffness=300.0, observer_gain=observer_gain, threshold=threshold, reaction="none")
     n = robot.n
     # the compiled loop keeps what the controller measured on every tick (the Python loop if it cannot)
-    from reflexarm.sim.compiled_stream import record_measurements
+    from reflexarm.sim.measurement_log import record_measurements
 
     stats, m = record_measurements(plant, ctrl, traj, duration, progress=progress)
     source = f"free-motion {motion} {duration:g} s (noise seed {seed}, model {info})"
