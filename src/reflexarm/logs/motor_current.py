@@ -44,7 +44,9 @@ def check_gains(gains: npt.ArrayLike | None, n: int | None, where: str) -> np.nd
     bad = np.flatnonzero(~np.isfinite(k) | (k == 0.0))
     if bad.size:
         j = int(bad[0])
-        raise ConfigError(f"{where}: the gain of joint {j + 1} is {k[j]!r}; gains must be finite and non-zero [Nm/A]")
+        raise ConfigError(
+            f"{where}: the gain of joint {j + 1} is {float(k[j])!r}; gains must be finite and non-zero [Nm/A]"
+        )
     return k
 
 
