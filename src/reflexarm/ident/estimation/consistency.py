@@ -131,16 +131,15 @@ def project_physically_consistent(
         ) from e
 
 
-def _project(
-    result: DynamicsIdentification, robot: RobotModel, max_nfev: int, fixed: np.ndarray | None
-) -> DynamicsIdentification:
+def _metric(result: DynamicsIdentification) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    """(H_eff, K, R): the information of beta_b with the friction (and offset) parameters eliminated (Schur
+    complement; d(friction) = -K d(beta), K None without them) and its scaled Cholesky factor R^T R = H_eff."""
     assert result.information is not None  # checked by the caller
-    base = result.base
-    nb, n = base.n_base, base.n_joints
+    nb = result.base.n_base
     H = np.asarray(result.information, dtype=float)
-    if nb < H.shape[0]:  # eliminate the friction (and offset) parameters: Schur complement
+    if nb < H.shape[0]:
         Hbb, Hbf, Hff = H[:nb, :nb], H[:nb, nb:], H[nb:, nb:]
-        K = np.linalg.solve(Hff, Hbf.T)  # d(friction) = -K d(beta)
+        K = np.linalg.solve(Hff, Hbf.T)
         H_eff = Hbb - Hbf @ K
     else:
         K = None
@@ -148,14 +147,17 @@ def _project(
     H_eff = 0.5 * (H_eff + H_eff.T)
     scale = np.sqrt(np.maximum(np.diag(H_eff), 1e-300))
     R = np.linalg.cholesky(H_eff / np.outer(scale, scale) + 1e-14 * np.eye(nb)).T * scale[None, :]
-    A = base.matrix()
-    beta_hat = result.beta_b
+    return H_eff, K, R
 
-    # J_k = L_k L_k^T + eps_k 1, eps_k = MIN_EIGENVALUE_FRACTION * lambda_min(nominal J_k): every link keeps
-    # a strictly positive definite pseudo-inertia, so M(q) stays positive definite (a link may not
-    # collapse to a point or a rod on a joint axis)
+
+def _start(robot: RobotModel, fixed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(x0, pi_eps): the nominal links' Cholesky factors and the parameters of the eigenvalue floors.
+
+    J_k = L_k L_k^T + eps_k 1, eps_k = MIN_EIGENVALUE_FRACTION * lambda_min(nominal J_k): every link keeps a
+    strictly positive definite pseudo-inertia, so M(q) stays positive definite (a link may not collapse to a
+    point or a rod on a joint axis)."""
+    n = robot.n
     x0 = np.empty(10 * n)
-    fixed = np.zeros(10 * n) if fixed is None else np.asarray(fixed, dtype=float).reshape(10 * n)
     pi0 = robot.inertial_parameters() - fixed
     eps = np.empty(n)
     for k in range(n):
@@ -168,6 +170,36 @@ def _project(
         eps[k] = MIN_EIGENVALUE_FRACTION * ev[0]
         x0[10 * k : 10 * k + 10] = np.linalg.cholesky(J - eps[k] * np.eye(4))[_TRIL]
     pi_eps = standard_from_pseudo_inertia(eps[:, None, None] * np.eye(4)[None]).reshape(-1) + fixed
+    return x0, pi_eps
+
+
+def _follow_friction(result: DynamicsIdentification, K: np.ndarray | None, d_beta: np.ndarray) -> FrictionParameters:
+    """The estimated friction (and offsets) moved with beta_b: d(friction) = -K d(beta)."""
+    friction = result.friction
+    if K is None:
+        return friction
+    n = result.base.n_joints
+    fe = list(result.estimated_friction_joints)
+    m = len(fe)
+    f = np.r_[friction.viscous[fe], friction.coulomb[fe]]
+    estimated_offset = friction.offset is not None and K.shape[0] == 2 * m + n
+    if estimated_offset:
+        f = np.r_[f, friction.offset]
+    f = f - K @ d_beta
+    viscous, coulomb = friction.viscous.copy(), friction.coulomb.copy()
+    viscous[fe], coulomb[fe] = f[:m], f[m : 2 * m]
+    return FrictionParameters(viscous, coulomb, f[2 * m : 2 * m + n] if estimated_offset else friction.offset)
+
+
+def _project(
+    result: DynamicsIdentification, robot: RobotModel, max_nfev: int, fixed: np.ndarray | None
+) -> DynamicsIdentification:
+    n = result.base.n_joints
+    H_eff, K, R = _metric(result)
+    A = result.base.matrix()
+    beta_hat = result.beta_b
+    fixed = np.zeros(10 * n) if fixed is None else np.asarray(fixed, dtype=float).reshape(10 * n)
+    x0, pi_eps = _start(robot, fixed)
     RA = R @ A
     target = R @ beta_hat - RA @ pi_eps
 
@@ -196,22 +228,10 @@ def _project(
     cost = float(d_beta @ H_eff @ d_beta)
     rel_change = float(np.linalg.norm(d_beta)) / max(float(np.linalg.norm(beta_hat)), 1e-300)
     rss = float(np.sum(result.residual_rms**2 / np.maximum(result.noise_variance, 1e-300))) * result.n_samples
-    friction = result.friction
-    if K is not None:  # the estimated friction (and offsets) follow beta_b: d(friction) = -K d(beta)
-        fe = list(result.estimated_friction_joints)
-        m = len(fe)
-        f = np.r_[friction.viscous[fe], friction.coulomb[fe]]
-        estimated_offset = friction.offset is not None and K.shape[0] == 2 * m + n
-        if estimated_offset:
-            f = np.r_[f, friction.offset]
-        f = f - K @ d_beta
-        viscous, coulomb = friction.viscous.copy(), friction.coulomb.copy()
-        viscous[fe], coulomb[fe] = f[:m], f[m : 2 * m]
-        friction = FrictionParameters(viscous, coulomb, f[2 * m : 2 * m + n] if estimated_offset else friction.offset)
-    projected = replace(
+    return replace(
         result,
         beta_b=beta,
-        friction=friction,
+        friction=_follow_friction(result, K, d_beta),
         physical_parameters=pi,
         notes=result.notes
         + (
@@ -220,7 +240,6 @@ def _project(
             f"|delta beta_b| / |beta_b| = {rel_change:.3g}",
         ),
     )
-    return projected
 
 
 def is_physically_consistent(result: DynamicsIdentification, robot: RobotModel) -> bool:
