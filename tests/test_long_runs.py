@@ -171,3 +171,28 @@ def test_recorded_measurements_are_the_python_loops(atlas, model):
         np.testing.assert_array_equal(b[k], a[k], err_msg=k)
     _assert_same_statistics(stats_a, stats_b)
     assert np.abs(b["dq"] - b["dq"].mean(axis=0)).max() > 0  # measured, i.e. noisy, not the true velocities
+
+
+def test_the_still_of_a_compiled_stream_is_the_python_streams(atlas, model):
+    """The CLI's stills (StillCapture through observing_runs) keep the compiled stream: the start and the tick of
+    the largest true external torque (a push applied before the run) are the Python stream's, across blocks."""
+    from reflexarm.sim.run_observers import observing_runs
+    from reflexarm.sim.video import StillCapture
+
+    traj = C.free_motion_trajectory(1.5, "demo", atlas)
+    caps = []
+    for run in (stream_closed_loop, stream_fast):
+        plant, ctrl = _setup(atlas, model, traj, threshold=11.0)
+        plant.apply_external_force([0.0, 0.0, -15.0])  # on the end effector, constant: tau_ext moves with the pose
+        cap = StillCapture()
+        with observing_runs(lambda _plant, c=cap: c):
+            stats = run(plant, ctrl, traj, 1.5, block_size=400)
+        caps.append((stats, cap))
+    (sa, a), (sb, b) = caps
+    assert (sa.loop, sb.loop) == ("python", "compiled")
+    assert a.peak_time is not None and a.peak_time > 0.4  # in a later block than the first
+    assert b.peak_time == a.peak_time and b.peak_torque == a.peak_torque
+    np.testing.assert_array_equal(b._start, a._start)
+    np.testing.assert_array_equal(b._peak, a._peak)
+    np.testing.assert_array_equal(b._peak_cmd.tau, a._peak_cmd.tau)
+    assert b._peak_cmd.mode == a._peak_cmd.mode and b._start_cmd.mode == a._start_cmd.mode
