@@ -139,7 +139,9 @@ in its direction of travel at contact. Simulated: the demo swing of each arm int
 region's spring k and mass m_H; clamped: a wall behind the spring), the arm's own controller, detection and
 reaction. Speeds [m/s], forces [N], masses [kg], times [s]. Skull and face: Table A.2 gives no transient limit;
 F_QS stands in (this package's choice). "v_sim" is the speed at which the simulated peak reaches F_T
-(proportional scaling of the tested runs); a reaction can only lower it if detection comes before the peak.</p>
+(proportional scaling of the tested runs); a reaction can only lower it if detection comes before the peak.
+"transient_detection_delay_s": the longest time from first contact to detection over the transient runs ("-":
+not detected in the run); "sim_over_analytic_max": the largest simulated/analytic peak ratio, detection off.</p>
 <h3>Transient contact: permissible speed [m/s]</h3>{_table_html(table, transient)}
 <h3>Clamped contact (wall behind the region): largest force [N], largest force from {QS_WINDOW_S:g} s after
 detection [N], time after detection until the force stays below F_QS [s]</h3>{_table_html(table, clamped)}
