@@ -196,3 +196,24 @@ def test_the_still_of_a_compiled_stream_is_the_python_streams(atlas, model):
     np.testing.assert_array_equal(b._peak, a._peak)
     np.testing.assert_array_equal(b._peak_cmd.tau, a._peak_cmd.tau)
     assert b._peak_cmd.mode == a._peak_cmd.mode and b._start_cmd.mode == a._start_cmd.mode
+
+
+def test_tuning_refuses_a_decimated_trace(atlas, model, tmp_path):
+    """A long run's default trace keeps every 100th tick: tune-thresholds (recorded residual or a replay of the
+    trace) needs every tick and says so instead of fitting the tail of a 10 Hz residual."""
+    from reflexarm.errors import DataError
+    from reflexarm.tuning.replay import load_free_motion_log, recorded_residual
+
+    traj = C.free_motion_trajectory(0.5, "demo", atlas)
+    for run in (stream_fast, stream_closed_loop):
+        plant, ctrl = _setup(atlas, model, traj)
+        path = tmp_path / f"{run.__name__}.parquet"
+        run(plant, ctrl, traj, 0.5, path=path, trace_every=100)
+        with pytest.raises(DataError, match=r"is a decimated trace \(every 100th tick, --trace-every\): the residual's "
+                           r"tail needs every tick; write the run's trace with --trace-every 1"):  # fmt: skip
+            recorded_residual(path, atlas.n)
+        with pytest.raises(DataError, match="is a decimated trace"):
+            load_free_motion_log(path, atlas)
+    plant, ctrl = _setup(atlas, model, traj)
+    stream_fast(plant, ctrl, traj, 0.5, path=tmp_path / "full.parquet")
+    assert recorded_residual(tmp_path / "full.parquet", atlas.n).t.size == 500

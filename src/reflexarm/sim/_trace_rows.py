@@ -32,4 +32,5 @@ def every_nth(block: Trace, first_tick: int, every: int) -> Trace:
         elif f.name != "meta" and getattr(v, "shape", (0,))[:1] == (N,):
             v = v[rows]
         values[f.name] = v
+    values["meta"] = block.meta | {"trace_every": every}  # readers that need every tick refuse the file
     return Trace(**values)

@@ -197,6 +197,7 @@ class _BlockRun:
         self.stats = RunStatistics(n, path=None if path is None else Path(path))
         self.stats.loop = "compiled"
         self.writer = None if path is None else TraceWriter(path)
+        self.meta_out = meta | {"loop": "compiled"} | ({"trace_every": every} if every > 1 else {})
         self.tick0, self.done, self.acted = plant._tick, 0, 0
         self.still_rows: dict[str, tuple[int, float, Any]] = {}  # "start"/"peak": (tick, time, Command)
         self.peak2 = 0.0
@@ -297,7 +298,7 @@ class _BlockRun:
             t=rec.t[sel], q=rec.q[sel], dq=rec.dq[sel], q_meas=rec.q_meas[sel], q_d=rec.q_d[sel], dq_d=rec.dq_d[sel],
             tau=rec.tau[sel], tau_m=rec.tau_m[sel], residual=rec.residual[sel], collision=rec.collision[sel],
             collided=rec.collided[sel], mode=_MODES[self.mode[sel]], fault=fault, wrench=rec.wrench[sel],
-            f_ext_ee=rec.f_ext_ee[sel], tau_ext=rec.tau_ext[sel], meta=self.meta | {"loop": "compiled"},
+            f_ext_ee=rec.f_ext_ee[sel], tau_ext=rec.tau_ext[sel], meta=self.meta_out,
         )  # fmt: skip
         assert self.writer is not None
         self.writer.write(block)

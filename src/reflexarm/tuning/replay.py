@@ -199,9 +199,31 @@ def is_trace_file(path: str | os.PathLike[str]) -> bool:
     return b"reflexarm.layout" in md
 
 
+def _check_every_tick(p: Path) -> None:
+    """DataError for a decimated trace (written with ``trace_every`` > 1): tuning needs every tick."""
+    import json
+
+    import pyarrow.parquet as pq
+
+    md = pq.read_schema(p).metadata or {}
+    try:
+        every = int(json.loads(md.get(b"reflexarm.meta", b"{}")).get("trace_every", 1))
+    except (ValueError, TypeError, AttributeError):
+        every = 1
+    if every > 1:
+        raise DataError(
+            f"{p.name} is a decimated trace (every {every}th tick, --trace-every): the residual's tail needs every "
+            "tick; write the run's trace with --trace-every 1",
+            source=p.name,
+            value=every,
+            expected=1,
+        )
+
+
 def _trace_log(p: Path, robot: RobotModel) -> RobotLog:
     import pyarrow.parquet as pq
 
+    _check_every_tick(p)
     n = robot.n
     cols = ["t"] + [f"{f}_{j}" for f in _TRACE_FIELDS[:3] for j in range(n)] + [f"wrench_{j}" for j in range(6)]
     try:
@@ -250,6 +272,7 @@ def recorded_residual(path: str | os.PathLike[str], n: int) -> ResidualReplay:
         raise DataError(
             f"{p.name}: a recorded residual is read from a reflexarm trace (.parquet); this file is not one"
         )
+    _check_every_tick(p)
     cols = ["t"] + [f"residual_{j}" for j in range(n)]
     try:
         table = pq.read_table(p, columns=cols)
