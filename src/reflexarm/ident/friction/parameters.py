@@ -214,6 +214,39 @@ ROUND_OFF = 1e-9
 VISCOUS_EFFORT_FRACTION = 1.0
 
 
+def _implausible(
+    friction: FrictionParameters, std: FrictionParameters | None, j: int, effort: float, vlim: float
+) -> list[tuple[str, float, str]]:
+    """(parameter, bound, why) of each implausible coefficient of joint ``j``."""
+    found = []
+    mu, dv = float(friction.coulomb[j]), float(friction.viscous[j])
+    for parameter, value in (("coulomb", mu), ("viscous", dv)):
+        sigma = 0.0 if std is None else float(getattr(std, parameter)[j])
+        if value < -max(ROUND_OFF, NEGATIVE_SIGMAS * sigma):
+            spread = f" ({-value / sigma:.1f} standard deviations below 0)" if sigma > 0 else ""
+            found.append((
+                parameter,
+                0.0,
+                f"is negative{spread}: friction cannot drive the joint (unmodelled effects, a torque offset or too "
+                "little motion in one direction?); the controller's model clips it to 0",
+            ))  # fmt: skip
+    ok_effort = np.isfinite(effort) and effort > 0
+    if ok_effort and mu > COULOMB_EFFORT_FRACTION * effort:
+        found.append((
+            "coulomb",
+            COULOMB_EFFORT_FRACTION * effort,
+            f"is implausibly large: above {COULOMB_EFFORT_FRACTION:g} x the effort limit {effort:.4g} Nm",
+        ))  # fmt: skip
+    if ok_effort and np.isfinite(vlim) and vlim > 0 and dv * vlim > VISCOUS_EFFORT_FRACTION * effort:
+        found.append((
+            "viscous",
+            VISCOUS_EFFORT_FRACTION * effort / vlim,
+            f"is implausibly large: at the velocity limit {vlim:.4g} rad/s it would take {dv * vlim:.4g} Nm, "
+            f"above the effort limit {effort:.4g} Nm",
+        ))  # fmt: skip
+    return found
+
+
 def check_friction_plausibility(
     friction: FrictionParameters,
     *,
@@ -264,37 +297,8 @@ def check_friction_plausibility(
         issued.append(w)
 
     for j in range(n) if joints is None else joints:
-        mu, dv = float(friction.coulomb[j]), float(friction.viscous[j])
-        for parameter, value in (("coulomb", mu), ("viscous", dv)):
-            sigma = 0.0 if std is None else float(getattr(std, parameter)[j])
-            if value < -max(ROUND_OFF, NEGATIVE_SIGMAS * sigma):
-                spread = f" ({-value / sigma:.1f} standard deviations below 0)" if sigma > 0 else ""
-                warn(
-                    j,
-                    parameter,
-                    value,
-                    0.0,
-                    f"is negative{spread}: friction cannot drive the joint (unmodelled effects, a torque offset or "
-                    "too little motion in one direction?); the controller's model clips it to 0",
-                )
-        ok_effort = np.isfinite(effort[j]) and effort[j] > 0
-        if ok_effort and mu > COULOMB_EFFORT_FRACTION * effort[j]:
-            warn(
-                j,
-                "coulomb",
-                mu,
-                COULOMB_EFFORT_FRACTION * effort[j],
-                f"is implausibly large: above {COULOMB_EFFORT_FRACTION:g} x the effort limit {effort[j]:.4g} Nm",
-            )
-        if ok_effort and np.isfinite(vlim[j]) and vlim[j] > 0 and dv * vlim[j] > VISCOUS_EFFORT_FRACTION * effort[j]:
-            warn(
-                j,
-                "viscous",
-                dv,
-                VISCOUS_EFFORT_FRACTION * effort[j] / vlim[j],
-                f"is implausibly large: at the velocity limit {vlim[j]:.4g} rad/s it would take "
-                f"{dv * vlim[j]:.4g} Nm, above the effort limit {effort[j]:.4g} Nm",
-            )
+        for parameter, bound, why in _implausible(friction, std, j, effort[j], vlim[j]):
+            warn(j, parameter, float(getattr(friction, parameter)[j]), bound, why)
     return issued
 
 
