@@ -213,3 +213,30 @@ def test_study_outputs_carry_units_and_name_failed_runs(tmp_path):
     page = paths["html"].read_text()
     assert "Speeds [m/s], forces [N], masses [kg]" in page and "reaches at most 0.79 m/s" in page
     assert paths["pfl_hand"].stat().st_size > 10_000
+
+
+#: A contact in the middle of the forearm (link 4 of the Panda, 0.1 m along its x axis): the free arm's peak
+#: against v sqrt(mu k) with m_R(q, u) of that point; same hold error as at the end effector.
+@pytest.mark.parametrize("region", ["chest", "upper_arm"])
+def test_free_arm_peak_at_a_link_point(region):
+    robot = _robot("panda")
+    link, local = "panda_link4", np.array([0.1, 0.0, 0.0])
+    q = robot.home
+    dq = np.zeros(robot.n)
+    dq[0] = 1.5  # [rad/s]: the first joint swings the forearm sideways
+    J, p = point_jacobian(robot, q, link, local)
+    v = J @ dq
+    u = v / np.linalg.norm(v)
+    scene = HumanContact(region, p + 0.001 * u, u, arm_body=link, arm_point=local)
+    plant = Plant(robot, scene=scene, noise=SensorNoise.none(), true_friction=CoulombViscousFriction.zeros(robot.n))
+    plant.reset(q, dq)
+    peak = 0.0
+    for _ in range(150):
+        plant.step(robot.compute_gravity(plant.q))
+        peak = max(peak, scene.observe(plant)["human_force"][0])
+    r = body_region(region)
+    mu = 1.0 / (1.0 / r.human_mass + 1.0 / effective_mass(robot, q, link, local, u))
+    np.testing.assert_allclose(peak, float(u @ v) * math.sqrt(mu * r.spring_constant_si), rtol=FREE_ARM_RTOL)
+    with pytest.raises(ConfigError, match="unknown body 'forearm'; bodies are: world, panda_link0"):
+        bad = Plant(robot, scene=HumanContact(region, p, u, arm_body="forearm"), noise=SensorNoise.none())
+        bad.step(np.zeros(robot.n))

@@ -37,7 +37,9 @@ def speed_table(study: PflStudy) -> list[dict[str, Any]]:
         row["effective_mass_kg"] = first["effective_mass_kg"] if first else None
         row["v_standard_m_s"] = first["standard_permissible_speed_m_s"] if first else None
         row["v_posture_m_s"] = first["permissible_speed_m_s"] if first else None
-        row["v_sim_detection_off_m_s"] = safe_speeds(off)["simulated_safe_speed_m_s"]
+        sim_off = safe_speeds(off)
+        row["v_sim_detection_off_m_s"] = sim_off["simulated_safe_speed_m_s"]
+        row["v_sim_extrapolated"] = sim_off["extrapolated"]
         ratios = [r["peak_force_N"] / r["analytic_force_N"] for r in off if r.get("analytic_force_N")]
         row["sim_over_analytic_max"] = max(ratios) if ratios else None
         for reaction in reactions:
@@ -139,7 +141,8 @@ in its direction of travel at contact. Simulated: the demo swing of each arm int
 region's spring k and mass m_H; clamped: a wall behind the spring), the arm's own controller, detection and
 reaction. Speeds [m/s], forces [N], masses [kg], times [s]. Skull and face: Table A.2 gives no transient limit;
 F_QS stands in (this package's choice). "v_sim" is the speed at which the simulated peak reaches F_T
-(proportional scaling of the tested runs); a reaction can only lower it if detection comes before the peak.
+(proportional scaling of the tested runs; "v_sim_extrapolated": beyond the fastest tested run); a reaction
+can only lower it if detection comes before the peak.
 "transient_detection_delay_s": the longest time from first contact to detection over the transient runs ("-":
 not detected in the run); "sim_over_analytic_max": the largest simulated/analytic peak ratio, detection off.</p>
 <h3>Transient contact: permissible speed [m/s]</h3>{_table_html(table, transient)}

@@ -52,9 +52,11 @@ class HumanContact(Scene):
             :data:`CONTACT_MODES`.
         damping: a viscous term c [Ns/m] in parallel with the spring (default 0: the standard's model is
             undamped); it only pushes, like the spring.
+        arm_body: the arm's body (MuJoCo name) that carries the contact point; None: the end-effector site.
+        arm_point: the contact point in ``arm_body``'s frame [m] (ignored without ``arm_body``).
         name: body name (unique per plant).
 
-    The arm's contact point is its end-effector site. Recorded extras: ``{name}_force`` (1,) the spring's
+    Recorded extras: ``{name}_force`` (1,) the spring's
     force [N], ``{name}_indentation`` (1,) [m], ``{name}_recoil`` (1,) the region's displacement [m].
     """
 
@@ -66,6 +68,8 @@ class HumanContact(Scene):
         *,
         mode: str = "transient",
         damping: float = 0.0,
+        arm_body: str | None = None,
+        arm_point: npt.ArrayLike = (0.0, 0.0, 0.0),
         name: str = "human",
     ) -> None:
         self.region = body_region(region)
@@ -81,6 +85,8 @@ class HumanContact(Scene):
         if not (math.isfinite(damping) and damping >= 0.0):
             raise ConfigError(f"damping must be a non-negative coefficient [Ns/m]; got {damping!r}")
         self.damping = float(damping)
+        self.arm_body = None if arm_body is None else str(arm_body)
+        self.arm_point = _vector(arm_point, "arm_point")
         self.name = str(name)
         self._reset_run()
 
@@ -145,7 +151,12 @@ class HumanContact(Scene):
         for h in self._handles:
             plant.clear_external_force(h)
         self._handles = []
-        p = plant.ee_position()
+        if self.arm_body is None:
+            p = plant.ee_position()
+        else:
+            bid = plant._body_id(self.arm_body)  # ConfigError naming the bodies if unknown
+            d = plant.data
+            p = d.xpos[bid] + d.xmat[bid].reshape(3, 3) @ self.arm_point
         y, ydot = self._recoil_state(plant)
         u = self.normal
         x = float(u @ (p - self.surface)) - y  # indentation [m]
@@ -157,7 +168,7 @@ class HumanContact(Scene):
             f = max(0.0, self.stiffness * x_mid + self.damping * xdot)
         self._force, self._indent, self._recoil = f, x, y
         if f > 0.0:
-            self._handles.append(plant.apply_external_force(-f * u, p))
+            self._handles.append(plant.apply_external_force(-f * u, p, body=self.arm_body))
             if self.mode == "transient":
                 self._handles.append(plant.apply_external_force(f * u, None, body=self.name))
 
@@ -177,6 +188,8 @@ class HumanContact(Scene):
             "k_N_per_mm": self.region.spring_constant,
             "m_H_kg": self.region.human_mass if self.mode == "transient" else None,
             "damping_Ns_per_m": self.damping,
+            "arm_body": self.arm_body,
+            "arm_point_m": self.arm_point.tolist(),
             "surface_m": self.surface.tolist(),
             "normal": self.normal.tolist(),
         }
