@@ -23,6 +23,7 @@ BENCHES = (
     "bench_long_runs",
     "bench_ident",
     "bench_sweeps",
+    "bench_bags",
 )
 
 

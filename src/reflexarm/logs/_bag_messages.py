@@ -19,8 +19,11 @@ Anything else (per-message compression, unchunked MCAP files, several bags) is r
 
 from __future__ import annotations
 
+import gc
 from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from itertools import islice
+from operator import itemgetter
 from typing import Any
 
 import numpy as np
@@ -70,13 +73,28 @@ def _sqlite_rows(storage: Any, conns: list[Any]) -> Iterable[tuple[Any, int, Any
 def _blocks(messages: Iterable[tuple[Any, int, Any]]) -> Iterator[RawBlock]:
     it = iter(messages)
     while True:
-        block = list(islice(it, BLOCK))
+        with _no_gc():
+            block = list(islice(it, BLOCK))
         if not block:
             return
-        _, received, raws = zip(*block, strict=True)
+        raws = list(map(itemgetter(2), block))
+        received = np.fromiter(map(itemgetter(1), block), dtype=np.int64, count=len(block))
         size = np.fromiter(map(len, raws), dtype=np.int64, count=len(raws))
         data = np.frombuffer(b"".join(raws), dtype=np.uint8)
-        yield RawBlock(data, np.cumsum(size) - size, size, np.fromiter(received, dtype=np.int64, count=len(block)))
+        yield RawBlock(data, np.cumsum(size) - size, size, received)
+
+
+@contextmanager
+def _no_gc() -> Iterator[None]:
+    """The cyclic garbage collector paused while a block of rows is built: each row is a new tuple, and
+    the collector's passes over them cost ~40 % of reading (none of them can be in a cycle)."""
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
 
 
 def _storages(reader: Any) -> list[Any] | None:

@@ -7,14 +7,22 @@
   first message's order is the model's (said so). Position, velocity and effort are required.
 * **Time**: the messages' header stamps (when the robot sampled), unless they are unset (zero), then the
   bag's receive times (when the recorder got the message; they carry transport jitter), said so in a
-  note. Messages recorded out of stamp order are sorted by stamp (counted in a note); equal stamps are
-  left to the log's repairs (exact repeats dropped, the rest re-timed). Times are relative to the first
-  joint sample, in seconds.
+  note. Messages recorded out of stamp order are sorted by stamp (counted in a note), as long as no
+  message is stamped more than :data:`MAX_LATE_PERIODS` sample periods before an earlier one: a clock
+  that jumps back or runs backwards is an error naming the topic, the message and its stamp (sorting
+  would interleave two stretches of motion). Equal stamps are left to the log's repairs (exact repeats
+  dropped, the rest re-timed). Times are relative to the first joint sample, in seconds.
 * **Wrist wrench** (optional, ``wrench_topic``: ``geometry_msgs/msg/WrenchStamped``, force [N] and
   torque [Nm] in the message's frame): interpolated linearly, per component, at the joint samples'
   times on the same clock (header stamps or receive times, as chosen for the joints). Joint samples
   outside the wrench's time span are dropped (counted in a note); the note also gives the wrench's
   rate and frame.
+* **Decoding**: ``rosbags`` reads the container (:mod:`._bag_messages`); the messages are decoded in
+  bulk with numpy, one CDR layout (frame id, joint names, array lengths) at a time, each layout checked
+  against rosbags' own deserialization of its first message (:mod:`._cdr`); ``bulk=False`` deserializes
+  every message with rosbags (the reference). A message that does not decode as its type (another
+  type's payload, a sequence length beyond the message, a zeroed or truncated blob) is an error naming
+  the topic, the message's index in the topic and its bag time.
 """
 
 from __future__ import annotations
