@@ -1,10 +1,10 @@
 """Generated robot logs with short impacts at known times, for the tests of ``reflexarm detect``.
 
-Independent of the detector: the arm follows a free periodic motion (two harmonics per joint, period 2 s);
-the logged motor torque is the robot file's inverse dynamics (Pinocchio RNEA, the "arm") plus a repeating
-model error (a friction-like and a position-like term per joint, the same function of the state for every
-seed: the error of one arm against its model) minus the external torque of short half-sine force pulses
-pushed into a link's collision surface along its inward normal (tau_ext = J_p(q)^T f), as a stiff
+Independent of the detector: the arm follows a free periodic motion (two harmonics per joint, period 4 s, within
+the velocity limits); the logged motor torque is the robot file's inverse dynamics (Pinocchio RNEA, the "arm")
+plus a repeating model error (a friction-like and a position-like term per joint, the same function of the state
+for every seed: the error of one arm against its model) minus the external torque of short half-sine force
+pulses pushed into a link's collision surface along its inward normal (tau_ext = J_p(q)^T f), as a stiff
 position-controlled arm shows a hit in its currents. Sensor noise on q, dq and tau; optional one-sample
 glitches at the joints' stops: a velocity sign flip or a current spike.
 
@@ -24,7 +24,7 @@ from reflexarm.logs import RobotLog
 from reflexarm.robots import RobotModel
 
 #: Period of the free motion [s].
-MOTION_PERIOD = 2.0
+MOTION_PERIOD = 4.0
 #: Sensor noise (standard deviations): q [rad], dq [rad/s], tau [Nm].
 NOISE = (1e-5, 2e-3, 0.1)
 
@@ -164,7 +164,7 @@ def _add_glitches(
     rng: np.random.Generator, dq: np.ndarray, tau: np.ndarray, count: int, dt: float
 ) -> list[tuple[int, int, str]]:
     """``count`` one-sample glitches at the joints' stops (where dq changes sign): alternately a velocity sign
-    flip (at the sample ~20 ms before the stop, where |dq| is still ~0.1 rad/s) and a current spike of 30-150 Nm."""
+    flip (at the last sample before the stop where |dq| is still >= 0.1 rad/s) and a current spike of 30-150 Nm."""
     marks: list[tuple[int, int, str]] = []
     n = dq.shape[1]
     for g in range(count):
@@ -174,8 +174,11 @@ def _add_glitches(
         if stops.size == 0:
             continue
         k = int(rng.choice(stops))
+        if any(jj == j and abs(kk - k) < int(round(0.1 / dt)) + 3 for kk, jj, _ in marks):
+            continue  # one glitch per stop and joint: each stays one sample
         if g % 2 == 0:
-            k = max(k - max(1, int(round(0.02 / dt))), 1)
+            while k > 1 and abs(dq[k, j]) < 0.1:  # back to the last sample still at >= 0.1 rad/s
+                k -= 1
             dq[k, j] = -dq[k, j]
             marks.append((k, j, "velocity"))
         else:

@@ -169,7 +169,7 @@ def _detect(args: argparse.Namespace) -> int:
     if coverage is None:
         print("warning: no coverage stored with the levels (a thresholds.json of tune-thresholds has it): "
               "motions outside what they were tuned on are not flagged", file=sys.stderr)  # fmt: skip
-    replay_how = "Controller.step per sample (the compiled tick, one call per sample)"
+    replay_how = "one call of the C++ core per log (reflexarm.control.replay: Controller.step on every sample)"
     results = []
     for path in args.logs:
         log = load_log_from_args(args, path, model)

@@ -4,20 +4,23 @@ Real free-motion logs carry single samples no motion can produce (issue 17: a ve
 motor-current spikes of up to 193 Nm at the stops of a 100 Hz log). Through a fast observer each becomes a
 residual spike as large as a hit: it would set the tuned levels and be an alarm. Two kinds are recognised:
 
-* **velocity glitch** (joint j, sample k): the logged dq_j[k] disagrees with the positions around it,
-  e_k = dq_j[k] - (q_j[k+1] - q_j[k-1]) / (2 dt), by more than :data:`OUTLIER_FACTOR` robust standard
-  deviations of e_j (1.4826 x its median absolute deviation) while its neighbours e_{k-1}, e_{k+1} agree within
-  half of that. No contact makes the velocity disagree with the position; this holds anywhere in the motion.
-* **torque glitch** (a current spike): tau_j[k] stands out of the straight line through its neighbours,
-  d_k = tau_j[k] - (tau_j[k-1] + tau_j[k+1]) / 2, by more than :data:`OUTLIER_FACTOR` robust standard deviations
-  of d_j, the neighbours agree with each other (|tau_j[k+1] - tau_j[k-1]| < |d_k| / 2: a single sample, not the
-  edge of a step), it is one joint's (every other joint's d at that sample stays within :data:`CALM_FACTOR`
-  robust standard deviations or below :data:`CALM_SHARE` of the spike: a contact's torque J^T f reaches several
-  joints at once), and the joint is *at a stop* (dq_j changes sign within k-1..k+1, or |dq_j| there stays below
-  :data:`STOP_SHARE` of the joint's largest |dq| in the log). A hit during motion can be one sample long at
-  100 Hz and is left alone; at a stop a one-sample torque spike is taken as a glitch. When the log's period is
-  below half the shortest impact (:data:`~reflexarm.detect.defaults.SHORTEST_IMPACT_S`), no impact fits in one
-  sample and a one-sample spike is a glitch anywhere.
+* **velocity glitch** (joint j, sample k): dq_j[k] stands out of the straight line through its neighbours,
+  d_k = dq_j[k] - (dq_j[k-1] + dq_j[k+1]) / 2, by more than :data:`OUTLIER_FACTOR` robust standard deviations of
+  d_j (1.4826 x its median absolute deviation) and by more than :data:`SPIKE_RATIO` times the neighbours' own
+  |d_{k-1}|, |d_{k+1}| (a spike of height h gives h there and h/2 beside; the edge of a step h/2 at both). No
+  force makes a velocity jump away and back in one sample (the arm's inertia integrates forces; a hit steps the
+  velocity or bends it), so this holds anywhere in the motion. (The positions cannot tell: at 1 kHz their
+  difference quotient is noisier than a sign flip of a slow joint.) A smaller glitch is not recognised: at
+  2 mrad/s velocity noise, one below ~0.025 rad/s, which still reaches a 1 kHz residual as a spike of about
+  (1 - exp(-k_o dt)) M_jj |d| / dt.
+* **torque glitch** (a current spike): tau_j[k] is such a one-sample outlier of the torque; it is one joint's
+  (every other joint's d at that sample stays within :data:`CALM_FACTOR` robust standard deviations or below
+  :data:`CALM_SHARE` of the spike: a contact's torque J^T f reaches several joints at once); and the joint is
+  *at a stop* (dq_j changes sign within k-1..k+1, or |dq_j| there stays below :data:`STOP_SHARE` of the joint's
+  largest |dq| in the log). A hit during motion can be one sample long at 100 Hz and is left alone; at a stop a
+  one-sample torque spike is taken as a glitch. When the log's period is below half the shortest impact
+  (:data:`~reflexarm.detect.defaults.SHORTEST_IMPACT_S`), no impact fits in one sample and a one-sample spike is a
+  glitch anywhere.
 
 A glitch is repaired by the mean of its two neighbours; the list says what was changed (sample, time, joint,
 kind, logged and repaired value). A contact that happens to be one sample long at a stop is taken for a glitch:
@@ -33,11 +36,23 @@ import numpy as np
 from reflexarm.detect.defaults import SHORTEST_IMPACT_S
 from reflexarm.logs.robot_log import RobotLog
 
-__all__ = ["CALM_FACTOR", "CALM_SHARE", "OUTLIER_FACTOR", "STOP_SHARE", "Glitch", "find_glitches", "repair_glitches"]
+__all__ = [
+    "CALM_FACTOR",
+    "CALM_SHARE",
+    "OUTLIER_FACTOR",
+    "SPIKE_RATIO",
+    "STOP_SHARE",
+    "Glitch",
+    "find_glitches",
+    "repair_glitches",
+]
 
 #: A sample is an outlier beyond this many robust standard deviations of its signal's one-sample inconsistency
 #: (10: a Gaussian sample goes that far about once in 10^23).
 OUTLIER_FACTOR = 10.0
+#: A one-sample spike of height h gives d = h at its sample and -h/2 at each neighbour; the edge of a step of
+#: height h gives h/2 and -h/2: a sample is a spike when its |d| exceeds this multiple of its neighbours'.
+SPIKE_RATIO = 1.5
 #: A torque spike is one joint's: at its sample every other joint's one-sample inconsistency stays below this many
 #: robust standard deviations (a contact's J^T f reaches several joints at once).
 CALM_FACTOR = 4.0
@@ -73,35 +88,33 @@ def _robust_std(x: np.ndarray, floor: float) -> np.ndarray:
     return np.maximum(1.4826 * np.median(np.abs(x - med), axis=0), floor)
 
 
-def _isolated(e: np.ndarray, level: np.ndarray) -> np.ndarray:
-    """(N-2, n) mask of interior samples whose |e| exceeds ``level`` while both neighbours stay below half of it
-    (``e`` is (N-2, n), one row per interior sample)."""
-    big = np.abs(e) > level
-    calm = np.abs(e) < level / 2
-    out = big.copy()
-    out[1:] &= calm[:-1]
-    out[:-1] &= calm[1:]
-    return out
+def _one_sample_outliers(x: np.ndarray, floor: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(mask, d, sigma) of the interior samples of ``x`` (N, n) that stand out of the line through their neighbours
+    by more than OUTLIER_FACTOR robust standard deviations and SPIKE_RATIO times the neighbours' own (rows 1..N-2
+    of ``x``)."""
+    d = x[1:-1] - 0.5 * (x[:-2] + x[2:])
+    sigma = _robust_std(d, floor)
+    a = np.abs(d)
+    beside = np.zeros_like(a)
+    beside[1:] = a[:-1]
+    beside[:-1] = np.maximum(beside[:-1], a[1:])
+    mask = (a > OUTLIER_FACTOR * sigma) & (a > SPIKE_RATIO * beside)
+    return mask, d, sigma
 
 
-def _velocity_glitches(log: RobotLog, dt: np.ndarray) -> np.ndarray:
-    e = log.dq[1:-1] - (log.q[2:] - log.q[:-2]) / dt[:, None]
-    return _isolated(e, OUTLIER_FACTOR * _robust_std(e, _FLOOR["velocity"]))
+def _velocity_glitches(log: RobotLog) -> np.ndarray:
+    return _one_sample_outliers(log.dq, _FLOOR["velocity"])[0]
 
 
 def _torque_glitches(log: RobotLog, period: float) -> np.ndarray:
-    tau = log.measured_torque
-    d = tau[1:-1] - 0.5 * (tau[:-2] + tau[2:])
-    sigma = _robust_std(d, _FLOOR["torque"])
-    spike = np.abs(d) > OUTLIER_FACTOR * sigma
-    spike &= np.abs(tau[2:] - tau[:-2]) < 0.5 * np.abs(d)
+    spike, d, sigma = _one_sample_outliers(log.measured_torque, _FLOOR["torque"])
     # a hit moves several joints' torques at once (J^T f); a friction switch elsewhere is far smaller than a spike
     stirred = (np.abs(d) > CALM_FACTOR * sigma) & (np.abs(d) > CALM_SHARE * np.max(np.abs(d), axis=1, keepdims=True))
     spike &= stirred.sum(axis=1, keepdims=True) == 1
     if period < 0.5 * SHORTEST_IMPACT_S:
         return spike
     dq = log.dq
-    slow = np.abs(dq) < STOP_SHARE * np.max(np.abs(dq), axis=0)
+    slow = np.abs(dq) <= STOP_SHARE * np.max(np.abs(dq), axis=0)
     sign = np.sign(dq)
     reverses = (sign[:-2] * sign[2:]) < 0
     at_stop = reverses | (slow[:-2] & slow[1:-1] & slow[2:])
@@ -112,11 +125,10 @@ def find_glitches(log: RobotLog) -> list[Glitch]:
     """The one-sample glitches of ``log`` (module docstring), in time order; velocity ones first at a sample."""
     if log.t.size < 5:
         return []
-    span = log.t[2:] - log.t[:-2]
     period = float(np.median(np.diff(log.t)))
     found: list[Glitch] = []
     for kind, mask, signal in (
-        ("velocity", _velocity_glitches(log, span), log.dq),
+        ("velocity", _velocity_glitches(log), log.dq),
         ("torque", _torque_glitches(log, period), log.measured_torque),
     ):
         for k, j in zip(*np.nonzero(mask), strict=True):
@@ -139,7 +151,7 @@ def repair_glitches(log: RobotLog) -> tuple[RobotLog, list[Glitch]]:
     kinds = {k: sum(g.kind == k for g in glitches) for k in ("velocity", "torque")}
     note = (
         f"{len(glitches)} one-sample glitch(es) repaired by their neighbours' mean: {kinds['velocity']} velocity "
-        f"sample(s) that disagree with the positions, {kinds['torque']} torque spike(s) at a stop"
+        f"spike(s), {kinds['torque']} one-joint torque spike(s) at a stop"
     )
     fixed = replace(log, dq=dq, tau=tau, tau_raw=None, notes=(*log.notes, note))
     return fixed, glitches

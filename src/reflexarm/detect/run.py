@@ -2,7 +2,8 @@
 
 read (``reflexarm.logs``) -> glitches (:mod:`~reflexarm.detect.glitches`, recognised and repaired) -> replay (the
 product's observer at the log's own period, exact discretization: :func:`~reflexarm.tuning.replay_residual`, the
-controller's tick per sample) -> events (:mod:`~reflexarm.detect.events`: detect, onset, isolate, identify) ->
+whole log in one call of the C++ core, :func:`reflexarm.control.replay`) -> events
+(:mod:`~reflexarm.detect.events`: detect, onset, isolate, identify) ->
 coverage (:mod:`~reflexarm.detect.coverage`: does the log stay inside what the levels were tuned on).
 """
 
