@@ -25,40 +25,52 @@ class BagRecorder:
     """
 
     def __init__(self, path: str | Path, topics: dict[str, str]) -> None:
-        from rosbags.rosbag2 import Writer
-        from rosbags.typesys import Stores, get_typestore
-
         self.path = Path(path)
         if self.path.exists():
             raise ConfigError(f"record_bag: {str(self.path)!r} exists already; name a new folder")
-        store = get_typestore(Stores.ROS2_JAZZY)
-        self._writer = Writer(self.path, version=9)
-        self._writer.open()
-        self._connections = {t: self._writer.add_connection(t, m, typestore=store) for t, m in topics.items()}
+        self.topics = dict(topics)
         self._queue: queue.SimpleQueue[tuple[str, bytes, int] | None] = queue.SimpleQueue()
         self.count = 0
         self.error = ""
+        self._ready = threading.Event()
+        # the writer lives in its thread from open to close (its SQLite connection belongs to one thread)
         self._thread = threading.Thread(target=self._run, name="bag-writer", daemon=True)
         self._thread.start()
+        self._ready.wait()
+        if self.error:
+            raise ConfigError(f"record_bag: cannot write a bag at {str(self.path)!r}: {self.error}")
 
     def put(self, topic: str, data: bytes, stamp_ns: int) -> None:
         """Queue one serialized message of ``topic`` received at ``stamp_ns`` [ns since the epoch]."""
         self._queue.put((topic, data, stamp_ns))
 
     def _run(self) -> None:
-        while True:
-            item = self._queue.get()
-            if item is None:
-                return
-            topic, data, stamp = item
-            try:
-                self._writer.write(self._connections[topic], stamp, data)
-                self.count += 1
-            except Exception as e:  # noqa: BLE001 - reported in the node's diagnostics, never a crash
-                self.error = f"{type(e).__name__}: {e}"
+        from rosbags.rosbag2 import Writer
+        from rosbags.typesys import Stores, get_typestore
+
+        try:
+            store = get_typestore(Stores.ROS2_JAZZY)
+            writer = Writer(self.path, version=9)
+            writer.open()
+            connections = {t: writer.add_connection(t, m, typestore=store) for t, m in self.topics.items()}
+        except Exception as e:  # noqa: BLE001 - raised as a ConfigError by the constructor
+            self.error = f"{type(e).__name__}: {e}"
+            self._ready.set()
+            return
+        self._ready.set()
+        try:
+            while (item := self._queue.get()) is not None:
+                topic, data, stamp = item
+                try:
+                    writer.write(connections[topic], stamp, data)
+                    self.count += 1
+                except Exception as e:  # noqa: BLE001 - reported in the summary, never a crash of the node
+                    self.error = f"{type(e).__name__}: {e}"
+        finally:
+            writer.close()
 
     def close(self) -> None:
         """Write what is queued and close the bag."""
-        self._queue.put(None)
-        self._thread.join()
-        self._writer.close()
+        if self._thread.is_alive():
+            self._queue.put(None)
+            self._thread.join()

@@ -138,6 +138,7 @@ class CollisionMonitor(Node):
         self._last_wrench: float | None = None
         self._start = time.monotonic()
         self._ticks = self._lost = 0
+        self.heard = 0  # JointState messages received
         self._last_type_check = 0.0
         self._last_diag = 0.0
         self.recorder = self._make_recorder()
@@ -240,6 +241,7 @@ class CollisionMonitor(Node):
 
     def _on_joint_state(self, msg: JointState, info: MessageInfo) -> None:
         self._last_js = now = time.monotonic()
+        self.heard += 1
         if self.recorder is not None:
             self.recorder.put(self.config.joint_states_topic, serialize_message(msg), info["received_timestamp"])
         if self._pending is not None:  # a newer JointState: the waiting one goes with the wrench there is
