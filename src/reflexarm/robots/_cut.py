@@ -64,6 +64,8 @@ def needs_cut(model: pin.Model) -> bool:
 
 
 def _body_frame(model: pin.Model, link: str, role: str, where: str) -> int:
+    if link == model.frames[0].name:  # the world (MJCF: when the first body already moves)
+        return 0
     if not model.existFrame(link, pin.FrameType.BODY):
         raise ModelError(f"unknown {role} link {link!r}{where}; links are: {', '.join(link_names(model))}")
     return int(model.getFrameId(link, pin.FrameType.BODY))
@@ -84,6 +86,8 @@ def _root_link(model: pin.Model, tip_fid: int) -> str:
     free = [j for j in model.supports[model.frames[tip_fid].parentJoint] if j > 0 and model.nvs[j] != 1]
     if free:
         bodies = [f for f in bodies if model.frames[f].parentJoint == free[-1]] or bodies
+    elif model.frames[bodies[-1]].parentJoint != 0:  # an MJCF whose first body moves: the arm starts at the world
+        return str(model.frames[0].name)
     return str(model.frames[bodies[-1]].name)
 
 
@@ -169,10 +173,11 @@ def cut_chain(
         )
     q_ref, values, notes = _lock_values(model, chain, locked or {}, defaults, where, couplings or {})
     notes += coupling_notes(couplings or {}, {names[j] for j in chain}, values, where)
-    base_joint = model.frames[model.getFrameId(base, pin.FrameType.BODY)].parentJoint
+    base_fid = _body_frame(model, base, "base", where)
+    base_joint = model.frames[base_fid].parentJoint
     below_root = [names[j] for j in model.supports[base_joint] if j > 0 and model.nvs[j] == 1]
     if below_root:
-        up = _frame_ancestors(model, model.getFrameId(base, pin.FrameType.BODY))
+        up = _frame_ancestors(model, base_fid)
         root = str(model.frames[[f for f in up if model.frames[f].type == pin.FrameType.BODY][-1]].name)
         notes.append(
             f"robot{where}: the arm's base link {base!r} is held fixed in the world (the world frame is the root "
@@ -329,18 +334,39 @@ def freeze_joints(spec: mujoco.MjSpec, values: Mapping[str, float], path: Path) 
         body.pos = p
         body.alt.type = mujoco.mjtOrientation.mjORIENTATION_QUAT
         body.quat = np.array([quat.w, quat.x, quat.y, quat.z])
-    joint_trn = (int(mujoco.mjtTrn.mjTRN_JOINT), int(mujoco.mjtTrn.mjTRN_JOINTINPARENT))
-    driven = [a for a in range(mj.nu) if int(mj.actuator_trntype[a]) in joint_trn and mj.actuator_trnid[a, 0] in frozen]
+    _drop_what_refers_to(spec, mj, frozen)
+
+
+def _drop_what_refers_to(spec: mujoco.MjSpec, mj: mujoco.MjModel, frozen: set[int]) -> None:
+    """Delete from ``spec`` what refers to the deleted joints ``frozen`` (compiled ids): their motors and
+    sensors, joint equalities (a URDF ``<mimic>``), fixed tendons over them (a gripper's coupling tendon)
+    with the actuators, sensors and equalities of those tendons; keyframes keep the rest."""
+    tendons = {
+        t
+        for t in range(mj.ntendon)
+        for w in range(int(mj.tendon_adr[t]), int(mj.tendon_adr[t] + mj.tendon_num[t]))
+        if int(mj.wrap_type[w]) == int(mujoco.mjtWrap.mjWRAP_JOINT) and int(mj.wrap_objid[w]) in frozen
+    }
+    moves = {int(mujoco.mjtTrn.mjTRN_JOINT): frozen, int(mujoco.mjtTrn.mjTRN_JOINTINPARENT): frozen}
+    moves[int(mujoco.mjtTrn.mjTRN_TENDON)] = tendons
+    driven = [a for a in range(mj.nu) if int(mj.actuator_trnid[a, 0]) in moves.get(int(mj.actuator_trntype[a]), ())]
     for actuator in [spec.actuators[a] for a in driven]:  # motors of locked joints go with them
         spec.delete(actuator)
     _remap_keys(spec, mj, [j for j in range(mj.njnt) if j not in frozen], [a for a in range(mj.nu) if a not in driven])
+    joint_names = {mj.joint(j).name for j in frozen}
+    tendon_names = {mj.tendon(t).name for t in tendons}
     for sensor in list(spec.sensors):
-        if sensor.objtype == mujoco.mjtObj.mjOBJ_JOINT and sensor.objname in named:
+        gone = joint_names if sensor.objtype == mujoco.mjtObj.mjOBJ_JOINT else set()
+        gone = tendon_names if sensor.objtype == mujoco.mjtObj.mjOBJ_TENDON else gone
+        if sensor.objname in gone:
             spec.delete(sensor)
-    frozen_names = {mj.joint(j).name for j in frozen}
     for eq in list(spec.equalities):  # a URDF <mimic> comes as a joint equality whose objtype is left unset
-        if eq.type == mujoco.mjtEq.mjEQ_JOINT and ({eq.name1, eq.name2} & frozen_names):
+        gone = joint_names if eq.type == mujoco.mjtEq.mjEQ_JOINT else set()
+        gone = tendon_names if eq.type == mujoco.mjtEq.mjEQ_TENDON else gone
+        if {eq.name1, eq.name2} & gone:
             spec.delete(eq)
+    for tendon in [spec.tendons[t] for t in sorted(tendons)]:
+        spec.delete(tendon)
 
 
 def _remap_keys(spec: mujoco.MjSpec, mj: mujoco.MjModel, kept: list[int], kept_actuators: list[int]) -> None:
