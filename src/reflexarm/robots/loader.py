@@ -41,14 +41,16 @@ def load_robot(
     Args:
         name_or_path: a name from :func:`builtin_robots` or a path to a ``.urdf`` or ``.xml`` (MJCF) file.
         ee_frame: end-effector frame (built-ins default to ``"ee"``, cut files to the ``tip`` link; other
-            files must name one).
+            files must name one). A frame past the tip (a finger of a cut-off gripper) moves rigidly with
+            the tip (a note says so); one fixed in the world is refused.
         sensor_frame: wrist force/torque sensor frame; defaults to ``ee_frame``.
         friction: the model's friction; defaults to the file's joint ``frictionloss``/``damping``
             (MJCF) or ``<dynamics friction damping>`` (URDF).
         base: link the arm starts from (default: the root link); fixed in the world.
         tip: last link of the arm (needed when the file is a tree).
         locked: joint name -> position [rad or m] of a joint off the chain. Default: the MJCF's "home"
-            keyframe, else 0; clipped to the joint's limits (with a note).
+            keyframe, else 0, and for a coupled joint (URDF ``<mimic>``) where its leader's lock puts it;
+            clipped to the joint's limits (with a note).
 
     Raises:
         ModelError: unknown robot name, unreadable or malformed file, missing frame or link, a tree

@@ -4,7 +4,10 @@ The MuJoCo model is compiled from the same URDF/MJCF file as the controller's Pi
 completed with what the simulation needs: sites for the end-effector and sensor frames when the file
 has none, the wrist force/torque sensors, the true joint friction and the scene's bodies. An arm cut
 out of a larger robot (``robot.cut``) has the other joints frozen exactly as in the controller's model
-(deleted, their bodies moved to the locked positions; see ``reflexarm.robots._cut``).
+(deleted, their bodies moved to the locked positions; see ``reflexarm.robots._cut``), and the joint
+couplings left between arm joints (a URDF ``<mimic>``, an MJCF joint equality) are removed: the controller's
+model drives every arm joint independently, and a note said so when the robot was loaded (see
+``reflexarm.robots._coupling``).
 
 Motors are ideal torque sources: the file's own actuators (position servos and the like, e.g. the
 Menagerie arms' ``<general>`` servos) are removed, with the sensors that read them and the keyframes'
