@@ -81,6 +81,8 @@ def _node_transform(node: ET.Element) -> np.ndarray:
             step = _rotation(r[:3], float(r[3]))
         elif tag == "scale":
             step[:3, :3] = np.diag(_floats(element, 3))
+        elif tag in ("lookat", "skew"):
+            raise ValueError(f"node {node.get('id')!r} has a <{tag}> transform, which is not read")
         out = out @ step
     return out
 
