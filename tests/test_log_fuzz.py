@@ -29,6 +29,8 @@ from reflexarm.ident.excitation.design import FourierTrajectory
 from reflexarm.ident.export.model_file import save_identified_model
 
 SEED = 20
+#: Samples of the exact log written to each bag (1 s at 1 kHz).
+BAG_SAMPLES = 1000
 EPOCH_NS = 1_795_435_200_000_000_000
 STORE = get_typestore(Stores.ROS2_HUMBLE)
 JS = "sensor_msgs/msg/JointState"
@@ -73,6 +75,11 @@ def _swap_rows(t: np.ndarray) -> np.ndarray:
     return t
 
 
+def _huge_once(t: np.ndarray) -> np.ndarray:
+    t[1500] = 1e300
+    return t
+
+
 def _nan_time(t: np.ndarray) -> np.ndarray:
     t[1234] = np.nan
     return t
@@ -112,6 +119,12 @@ def _csv_cases(df: pd.DataFrame, rng: np.random.Generator) -> dict[str, bytes]:
         "time huge": _text(_time(df, lambda t: t * 1e300)).encode(),
         "time NaN": _text(_time(df, _nan_time)).encode(),
         "ragged row": b"\n".join(ragged),
+        "header repeated mid-file": b"\n".join(lines[:900] + [lines[0]] + lines[900:]),
+        "1e999 literal": good.replace(
+            lines[600], b",".join([lines[600].split(b",")[0], b"1e999", *lines[600].split(b",")[2:]])
+        ),
+        "huge time in one row": _text(_time(df, _huge_once)).encode(),
+        "empty column": _text(df.assign(tau_3=np.nan)).encode(),
         "semicolons": good.replace(b",", b";"),
     }
 
@@ -141,7 +154,7 @@ def _bag(path: Path, log: RobotLog, names: list[str], storage: str = "mcap", *, 
     tau = log.tau if tau is None else tau
     with Writer(path, version=9, storage_plugin=plugin) as w:
         c = w.add_connection("/joint_states", JS, typestore=STORE)
-        for k in range(len(log) if n is None else n):
+        for k in range(BAG_SAMPLES if n is None else n):
             data = _joint_state(int(stamps[k]), names, q[k], log.dq[k], tau[k])
             w.write(c, EPOCH_NS + k * 1_000_000 + 300_000, data if raw is None else raw(k, data))
     return path
@@ -186,7 +199,7 @@ def _bag_cases(root: Path, log: RobotLog, names: list[str], rng: np.random.Gener
     tau_huge = log.tau.copy()
     tau_huge[800, 4] = 1e300
     back = EPOCH_NS + np.round(log.t * 1e9).astype(np.int64)
-    back[len(log) // 2 :] -= 5 * 10**9
+    back[BAG_SAMPLES // 2 :] -= 5 * 10**9
     wrench = _wrench_payload()
     garbage = rng.integers(0, 256, 5000, dtype=np.uint8).tobytes()
     (root / "garbage.mcap").write_bytes(garbage)
@@ -218,10 +231,8 @@ def _bag_cases(root: Path, log: RobotLog, names: list[str], rng: np.random.Gener
             names,
             raw=lambda k, d: d[:20] + (10**9).to_bytes(4, "little") + d[24:] if k == 9 else d,
         ),
-        "bag another type's payload": _bag(
-            root / "other_type", log, names, raw=lambda k, d: wrench if k == 1200 else d
-        ),
-        "bag truncated message": _bag(root / "cut", log, names, raw=lambda k, d: d[:30] if k == 1500 else d),
+        "bag another type's payload": _bag(root / "other_type", log, names, raw=lambda k, d: wrench if k == 600 else d),
+        "bag truncated message": _bag(root / "cut", log, names, raw=lambda k, d: d[:30] if k == 900 else d),
         "bag clock jumps back 5 s": _bag(root / "jump", log, names, stamps=back),
         "bag clock runs backwards": _bag(root / "backwards", log, names, stamps=EPOCH_NS - np.arange(len(log)) * 10**6),
         "bag NaN position": _bag(root / "nan", log, names, q=q_nan),
@@ -235,7 +246,7 @@ CSV_CASES = [
     "empty file", "header only", "one row", "truncated mid-row", "binary garbage", "NUL bytes in a row", "NaN cell",
     "inf cell", "huge torque 1e300", "huge position 1e300", "text in a number", "duplicated column",
     "missing column", "time swapped rows", "time jumps back", "time stands still", "time huge", "time NaN",
-    "ragged row", "semicolons",
+    "ragged row", "semicolons", "header repeated mid-file", "1e999 literal", "huge time in one row", "empty column",
 ]  # fmt: skip
 BAG_CASES = [
     "bag truncated mcap", "bag truncated db3", "bag flipped bytes in a chunk", "bag garbage mcap", "bag garbage db3",
