@@ -304,3 +304,33 @@ def test_identify_dynamics_on_a_bag_whose_clock_jumps_back_writes_no_model(tmp_p
     assert "jump: the /joint_states header stamps go back 4.999 s at message 1000 " in err, err
     assert not list(out.glob("*.json")) if out.exists() else True
     assert "Traceback" not in err
+
+
+def test_an_mcap_chunk_whose_index_disagrees_with_its_records_is_read_by_rosbags(tmp_path, monkeypatch):
+    """The message index entries of the first chunk point one byte off: the records' checks fail, that
+    chunk goes through rosbags' own chunk reader and the result is still the reference's."""
+    from rosbags.highlevel import AnyReader
+
+    from reflexarm.logs import _bag_messages
+
+    p = tmp_path / "bag"
+    write_arm_bag(p, "mcap", n=3000)
+    (f,) = p.glob("*.mcap")
+    with AnyReader([p]) as reader:
+        chunk = reader.readers[0].storage.storages[0].chunks[0]
+        arm = next(c.id for c in reader.connections if c.topic == "/joint_states")
+    data = bytearray(f.read_bytes())
+    at = chunk.message_index_offsets[arm] + 1 + 8 + 2 + 4  # the first (log time, offset) entry
+    offset = int.from_bytes(data[at + 8 : at + 16], "little")
+    data[at + 8 : at + 16] = (offset + 1).to_bytes(8, "little")
+    f.write_bytes(bytes(data))
+    by_rosbags = []
+    original = _bag_messages._chunk_by_rosbags
+    monkeypatch.setattr(_bag_messages, "_chunk_by_rosbags", lambda *a: by_rosbags.append(a[2]) or original(*a))
+    bulk, ref = _topic(p, "/joint_states", _cdr.JOINT_STATE, True), _topic(p, "/joint_states", _cdr.JOINT_STATE, False)
+    assert by_rosbags == [chunk]
+    _assert_same_bits(bulk.received, ref.received, "receive times")
+    for b, r in zip(bulk.batches, ref.batches, strict=True):
+        assert b.key == r.key
+        for x, y in zip((b.msg_index, b.stamp, *b.arrays), (r.msg_index, r.stamp, *r.arrays), strict=True):
+            _assert_same_bits(x, y, str(b.key))

@@ -37,9 +37,10 @@ BLOCK = 1 << 16
 _INDEX = np.dtype([("time", "<u8"), ("offset", "<u8")])
 
 
-def raw_blocks(reader: Any, topic: str) -> Iterator[RawBlock]:
-    """The raw messages of ``topic`` in blocks of about :data:`BLOCK` messages."""
-    storages = _storages(reader)
+def raw_blocks(reader: Any, topic: str, *, direct: bool = True) -> Iterator[RawBlock]:
+    """The raw messages of ``topic`` in blocks of about :data:`BLOCK` messages; ``direct=False`` takes
+    every message from ``AnyReader.messages`` (the reference)."""
+    storages = _storages(reader) if direct else None
     if storages is None:
         yield from _blocks(reader.messages(connections=[c for c in reader.connections if c.topic == topic]))
         return

@@ -19,10 +19,10 @@
   rate and frame.
 * **Decoding**: ``rosbags`` reads the container (:mod:`._bag_messages`); the messages are decoded in
   bulk with numpy, one CDR layout (frame id, joint names, array lengths) at a time, each layout checked
-  against rosbags' own deserialization of its first message (:mod:`._cdr`); ``bulk=False`` deserializes
-  every message with rosbags (the reference). A message that does not decode as its type (another
-  type's payload, a sequence length beyond the message, a zeroed or truncated blob) is an error naming
-  the topic, the message's index in the topic and its bag time.
+  against rosbags' own deserialization of its first message (:mod:`._cdr`); ``bulk=False`` takes every
+  message from rosbags' iterator and deserializes it with rosbags (the reference). A message that does
+  not decode as its type (another type's payload, a sequence length beyond the message, a zeroed or
+  truncated blob) is an error naming the topic, the message's index in the topic and its bag time.
 """
 
 from __future__ import annotations
@@ -88,8 +88,9 @@ def read_bag(
     bulk: bool = True,
 ) -> tuple[dict[str, np.ndarray], list[str]]:
     """The log's arrays (``t`` [s] from the first sample, ``q``, ``dq``, ``tau``, optional ``wrench``)
-    and notes saying what was read and how (see the module docstring). ``bulk=False`` deserializes
-    every message with rosbags (the reference the bulk decoding is tested against).
+    and notes saying what was read and how (see the module docstring). ``bulk=False`` reads every
+    message through ``AnyReader.messages`` and deserializes it with rosbags (the reference the bulk
+    reading is tested against).
 
     Raises:
         DataError: no or several JointState topics and none chosen, an unknown topic (the message lists
@@ -221,7 +222,7 @@ def _read_topic(reader: Any, topic: str, kind: Kind, where: str, bulk: bool) -> 
     batches: list[Batch] = []
     received: list[np.ndarray] = []
     count = n_bulk = 0
-    blocks = raw_blocks(reader, topic)
+    blocks = raw_blocks(reader, topic, direct=bulk)
     while True:
         try:
             block = next(blocks, None)
