@@ -209,7 +209,7 @@ def export_excitation_csv(args: argparse.Namespace, robot: Any, design: Any) -> 
 
     trajectory = design.trajectory.with_periods(args.periods)
     amax = design.bounds.get("max_acceleration", args.max_acceleration)
-    sampled = sample_excitation(trajectory, robot, rate=args.rate, max_acceleration=amax)
+    sampled = sample_excitation(trajectory, robot, rate=args.rate, max_acceleration=amax, limits=design.limits)
     path = write_excitation_csv(sampled, args.csv)
     print(
         f"\nexcitation sampled at {args.rate:g} Hz (base frequency {trajectory.base_frequency_hz:g} Hz, "
@@ -227,6 +227,7 @@ def export_excitation_csv(args: argparse.Namespace, robot: Any, design: Any) -> 
                 ("position_margin", "position [rad]", "{:.4f}"),
                 ("velocity_margin", "velocity [rad/s]", "{:.4f}"),
                 ("acceleration_margin", "acceleration [rad/s^2]", "{:.4f}"),
+                ("torque_margin", "torque [Nm]", "{:.4f}"),
             ],
         )
     )

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -46,6 +47,25 @@ def register(sub: argparse._SubParsersAction) -> None:
     e.add_argument("--max-acceleration", type=float, default=5.0, help="|ddq| bound [rad/s^2] (default 5)")
     e.add_argument("--margin", type=float, default=0.1, help="distance from the joint limits [rad] (default 0.1)")
     e.add_argument("--maxiter", type=int, default=100, help="optimizer iterations (default 100)")
+    e.add_argument(
+        "--torque-fraction",
+        type=float,
+        default=0.8,
+        help="the model's joint torques (inverse dynamics + friction along the trajectory) stay within this share "
+        "of the robot file's effort limits (default 0.8: room for the controller's feedback and the model's error)",
+    )
+    e.add_argument(
+        "--floor",
+        default="default",
+        metavar="Z",
+        help="height [m] in the base frame of a floor or table no point of the arm may go below (2 cm clearance); "
+        "'none': no workspace bound (default: the base plane z = 0 when the arm stands on it)",
+    )
+    e.add_argument(
+        "--no-self-collision",
+        action="store_true",
+        help="do not keep the links apart (default: capsules fitted to the file's collision geometry, 2 cm apart)",
+    )
     add_common(e, default_out="results/excite")
     e.add_argument(
         "--record",
@@ -210,6 +230,9 @@ def _excite(args: argparse.Namespace) -> int:
         max_velocity=args.max_velocity,
         max_acceleration=args.max_acceleration,
         position_margin=args.margin,
+        torque_fraction=args.torque_fraction,
+        floor=_floor_arg(args.floor),
+        self_collision=not args.no_self_collision,
         maxiter=args.maxiter,
         seed=args.seed,
         progress=not args.quiet,
@@ -230,11 +253,9 @@ def _excite(args: argparse.Namespace) -> int:
         f"condition number of the base regressor: {design.condition_initial:.4g} (start) -> "
         f"{design.condition_optimized:.4g} (optimized, {design.iterations} iterations)"
     )
-    lim = design.limits_optimized
-    print(
-        f"limit use at 1 kHz (<= 1 is within): position {lim['position']:.3f}, velocity {lim['velocity']:.3f}, "
-        f"acceleration {lim['acceleration']:.3f}"
-    )
+    if design.diagnosis:
+        print(f"WARNING: {design.diagnosis}")
+    _print_limits(design)
     recorded = ""
     if args.csv is not None:
         recorded += ", " + export_excitation_csv(args, robot, design).name
@@ -242,6 +263,43 @@ def _excite(args: argparse.Namespace) -> int:
         recorded += ", " + _record(args, robot, design.trajectory.with_periods(args.periods)).name
     print(f"\nwrote {out}/ (excitation.json, {fig.name}{recorded})")
     return 0
+
+
+def _floor_arg(value: str) -> float | None | str:
+    if value in ("default", "none"):
+        return None if value == "none" else "default"
+    try:
+        return float(value)
+    except ValueError:
+        raise ConfigError(f"--floor expects a height in metres, 'none' or 'default'; got {value!r}") from None
+
+
+def _print_limits(design: Any) -> None:
+    """The bounds the excitation respects and how close it comes to each (1 kHz)."""
+    lim = design.limits_optimized
+    print(
+        f"limit use at 1 kHz (<= 1 is within): position {lim['position']:.3f}, velocity {lim['velocity']:.3f}, "
+        f"acceleration {lim['acceleration']:.3f}" + (f", torque {lim['torque']:.3f}" if "torque" in lim else "")
+    )
+    for note in design.limits.notes if design.limits is not None else ():
+        print(f"  {note}")
+    rep = design.limit_report
+    if "torque" in rep:
+        r = rep["torque"]
+        print(
+            f"  largest torque: joint {r['joint'] + 1} {r['value']:.4g} Nm at t = {r['time']:.4g} s "
+            f"(bound {r['limit']:.4g})"
+        )
+    if "workspace" in rep:
+        r = rep["workspace"]
+        print(
+            f"  lowest point: {r['clearance_m']:.3f} m above the floor (link of joint {r['joint'] + 1}, "
+            f"t = {r['time']:.4g} s)"
+        )
+    if "self_collision" in rep:
+        r = rep["self_collision"]
+        i, j = r["pair"]
+        print(f"  closest links: joints {i + 1} and {j + 1}, {r['clearance_m']:.3f} m apart (t = {r['time']:.4g} s)")
 
 
 def _record(args: argparse.Namespace, robot: object, trajectory: object) -> Path:
@@ -264,6 +322,10 @@ def _record(args: argparse.Namespace, robot: object, trajectory: object) -> Path
     )
     path = save_log(log, args.record)
     print(f"recorded {len(log):,} samples ({duration:g} s) on the plant: {path}")
+    from reflexarm.experiments.identification import describe_tracking
+
+    for line in describe_tracking(robot, trajectory, log):  # type: ignore[arg-type]
+        print(line)
     return path
 
 

@@ -359,3 +359,53 @@ def run_identification_study(
         },
         plant_extra=extra,
     )
+
+
+#: A recorded run whose joints leave the designed trajectory by more than this [rad] is reported as
+#: deviating: 0.1 rad moves a 0.5 m link's tip by 5 cm, beyond the excitation's 2 cm clearances.
+DEVIATION_WARN = 0.1
+#: Share of a joint's effort limit at which a recorded torque counts as at the limit (saturating).
+TORQUE_AT_LIMIT = 0.97
+
+
+def describe_tracking(robot: RobotModel, trajectory: FourierTrajectory, log: RobotLog) -> list[str]:
+    """How a recorded run followed its excitation: the largest deviation from the trajectory per joint,
+    the share of samples at >= :data:`TORQUE_AT_LIMIT` of a joint's effort limit, and the lowest point of
+    the arm relative to the base plane; lines starting with ``WARNING`` when beyond a bound."""
+    from reflexarm.ident.excitation.design import excitation_limits
+    from reflexarm.ident.excitation.limits import LimitEvaluator, arm_geometry
+
+    q_ref, _, _ = trajectory.evaluate(log.t - log.t[0])
+    dev = np.abs(log.q - q_ref).max(axis=0)
+    j = int(np.argmax(dev))
+    warn = "WARNING: " if dev[j] > DEVIATION_WARN else ""
+    lines = [
+        f"{warn}recorded run vs the trajectory: largest deviation {dev[j]:.3g} rad on joint {j + 1} "
+        f"({robot.joint_names[j]}); per joint " + ", ".join(f"{d:.3g}" for d in dev) + " rad"
+        + (f" (beyond {DEVIATION_WARN:g} rad: the logged motion is not the designed one)" if warn else "")
+    ]  # fmt: skip
+    effort = robot.effort_limit
+    ok = np.isfinite(effort) & (effort > 0)
+    if ok.any():
+        share = np.mean(np.abs(log.tau[:, ok]) >= TORQUE_AT_LIMIT * effort[ok], axis=0)
+        k = int(np.argmax(share))
+        jk = int(np.flatnonzero(ok)[k])
+        warn = "WARNING: " if share[k] > 0 else ""
+        lines.append(
+            f"{warn}measured torque at >= {100 * TORQUE_AT_LIMIT:g} % of the effort limit: {100 * share[k]:.3g} % "
+            f"of the samples on joint {jk + 1} ({robot.joint_names[jk]}, limit {effort[jk]:g} Nm)"
+        )
+    limits = excitation_limits(robot, position_margin=0.0, torque_fraction=None)[0]
+    if limits.floor is not None:
+        geometry = arm_geometry(robot, 0.5 * (limits.lower + limits.upper))
+        evaluator = LimitEvaluator(robot, limits, geometry)
+        step = max(1, len(log) // 5000)  # the floor check on <= 5000 samples of the run
+        zero = np.zeros_like(log.q[::step])
+        rep = evaluator.report(log.t[::step], log.q[::step], zero, zero)["workspace"]
+        below = rep["clearance_m"] < 0
+        lines.append(
+            f"{'WARNING: ' if below else ''}lowest point of the arm in the run: {abs(rep['clearance_m']):.3f} m "
+            f"{'below' if below else 'above'} the base plane (link of joint {rep['joint'] + 1}, "
+            f"t = {rep['time']:.4g} s)"
+        )
+    return lines

@@ -196,7 +196,8 @@ def _save(fig: Figure, path: str | Path) -> Path:
 
 
 def efc_step_figure(result: EfcStepResult) -> Figure:
-    """Fig. 12: q_1, tau_ext,1 and the residual tau_eps_hat,1 of the three runs."""
+    """Fig. 12: q_j, tau_ext,j and the residual tau_eps_hat,j of the three runs, j the loaded joint
+    (``result.joint``: joint 1 on the Atlas arm, as in the paper)."""
     fig = _figure(3, 1, (7.0, 7.5))
     axes = fig.axes
     colors = {"no DC": "C0", "DC": "C3", "DC+EFC": "C2", "DC, no cut-off": "0.6"}
@@ -208,12 +209,13 @@ def efc_step_figure(result: EfcStepResult) -> Figure:
     for name in CASES:
         tr = result.traces[name]
         kw: dict[str, Any] = {"color": colors[name], "lw": 1.2, "label": labels[name]}
-        axes[0].plot(tr.t, tr.q[:, 0], **kw)
-        axes[1].plot(tr.t, tr.tau_ext[:, 0], **kw)
-        axes[2].plot(tr.t, tr.residual[:, 0], **kw)
-    axes[0].set_ylabel("$q_1$ [rad]")
-    axes[1].set_ylabel("$\\tau_{ext,1}$ [Nm]")
-    axes[2].set_ylabel("$\\hat{\\tau}_{\\varepsilon,1}$ [Nm]")
+        axes[0].plot(tr.t, tr.q[:, result.joint], **kw)
+        axes[1].plot(tr.t, tr.tau_ext[:, result.joint], **kw)
+        axes[2].plot(tr.t, tr.residual[:, result.joint], **kw)
+    j = result.joint + 1
+    axes[0].set_ylabel(f"$q_{{{j}}}$ [rad] (loaded joint)")
+    axes[1].set_ylabel(f"$\\tau_{{ext,{j}}}$ [Nm]")
+    axes[2].set_ylabel(f"$\\hat{{\\tau}}_{{\\varepsilon,{j}}}$ [Nm]")
     axes[2].set_xlabel("t [s]")
     axes[0].legend(loc="best", fontsize=8)
     s = result.setup

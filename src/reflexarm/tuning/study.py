@@ -288,6 +288,94 @@ def _replay_logs(
     return replays, posture, coverage, notes
 
 
+def _check_arguments(
+    rate_per_hour: float, contact_rate_per_hour: float, step_torque: float, step_force: float | None
+) -> tuple[float, float]:
+    """The checked (collision, contact) rates [1/h]; a bad rate, step torque or step force is a ConfigError."""
+    rate = _check_rate(rate_per_hour, "rate_per_hour")
+    contact_rate = _check_rate(contact_rate_per_hour, "contact_rate_per_hour")
+    if contact_rate <= rate:
+        raise ConfigError(
+            f"the contact level needs a higher false-alarm rate than the collision level ({rate:g}/h); "
+            f"got contact_rate_per_hour={contact_rate:g}"
+        )
+    if not (isinstance(step_torque, (int, float)) and math.isfinite(step_torque) and step_torque > 0):
+        raise ConfigError(f"step_torque must be a positive torque [Nm]; got {step_torque!r}")
+    if step_force is not None and not (
+        isinstance(step_force, (int, float)) and math.isfinite(step_force) and step_force > 0
+    ):
+        raise ConfigError(f"step_force must be a positive force [N]; got {step_force!r}")
+    return rate, contact_rate
+
+
+def _check_duration(duration: float, n: int, rates: dict[str, float], allow: bool, notes: list[str]) -> None:
+    """Refuse (LogTooShortError) a level whose per-joint return period exceeds MAX_EXTRAPOLATION x the logs' span
+    ``duration`` [s], or with ``allow`` warn and note it (``rates``: the arm's rate per level [1/h])."""
+    for level, r_arm in rates.items():
+        minimum = n / r_arm * 3600.0 / MAX_EXTRAPOLATION
+        if duration < minimum:
+            err = LogTooShortError(duration, minimum, r_arm, level)
+            if not allow:
+                raise err
+            warnings.warn(f"{err} -- extrapolating as asked", ThresholdWarning, stacklevel=3)
+            notes.append(f"{level} level extrapolated: {err}")
+
+
+def _joint_thresholds(
+    j: int,
+    name: str,
+    parts: list[np.ndarray],
+    dt: float,
+    fit: TailFit,
+    rates: dict[str, float],
+    delay: tuple[float, float],
+    boot: tuple[int, int],
+    notes: list[str],
+) -> JointThresholds:
+    """One joint's two levels at their per-joint ``rates`` [1/h] from the fitted tail of its |residual| ``parts``
+    (period ``dt`` [s]), each raised when the logs
+    cross it more often than its rate allows (a warning, noted in ``notes``), with the delays of a step
+    (``delay``: step torque [Nm], time constant [s]) and ``boot``: (bootstrap draws, seed) of the intervals."""
+    step_torque, time_constant = delay
+    q95 = float(np.quantile(np.concatenate(parts), 0.95))
+    delays: dict[str, float | None] = {}
+    in_logs: dict[str, float] = {}
+    levels = {level: fit.level(r) for level, r in rates.items()}
+    for level, zeta in list(levels.items()):
+        counted, expected = count_crossings(parts, zeta, dt, fit)
+        if counted > poisson.ppf(CONSISTENCY_QUANTILE, expected):
+            raised = lowest_level_crossed_at_most(
+                parts, zeta, dt, fit, int(poisson.ppf(CONSISTENCY_QUANTILE, expected))
+            )
+            msg = (
+                f"joint {j + 1} ({name}): the logs cross the {level} level {zeta:.4g} Nm {counted} "
+                f"times where its rate predicts {expected:.2g}: the fitted tail misses the largest excursions; "
+                f"raised to {raised:.4g} Nm, the lowest level the logs cross no more often than that allows "
+                "(record more free motion for a fitted level)"
+            )
+            warnings.warn(msg, ThresholdWarning, stacklevel=3)
+            notes.append(msg)
+            in_logs[f"{level}_fitted_Nm"] = zeta
+            levels[level] = zeta = raised
+            counted = count_crossings(parts, zeta, dt, fit)[0]
+        in_logs[f"{level}_alarms_in_logs"], in_logs[f"{level}_alarms_expected"] = counted, expected
+        delays[f"{level}_delay_s"] = detection_delay(zeta, step_torque, time_constant)
+        delays[f"{level}_delay_unfavourable_s"] = detection_delay(zeta, step_torque, time_constant, -q95)
+    n_boot, seed = boot
+    return JointThresholds(
+        joint=j,
+        name=name,
+        collision=levels["collision"],
+        collision_interval=fit.level_interval(rates["collision"], n_boot=n_boot, seed=seed),
+        contact=levels["contact"],
+        contact_interval=fit.level_interval(rates["contact"], n_boot=n_boot, seed=seed),
+        fit=fit,
+        q95=q95,
+        delays=delays,
+        in_logs=in_logs,
+    )
+
+
 def tune_thresholds(
     logs: RobotLog | str | os.PathLike[str] | Sequence[RobotLog | ResidualReplay | str | os.PathLike[str]],
     robot: RobotModel,
@@ -330,22 +418,10 @@ def tune_thresholds(
         DataError: logs with different periods, or too few excursions to fit a tail.
     """
     s = settings or ObserverSettings()
-    rate = _check_rate(rate_per_hour, "rate_per_hour")
-    contact_rate = _check_rate(contact_rate_per_hour, "contact_rate_per_hour")
-    if contact_rate <= rate:
-        raise ConfigError(
-            f"the contact level needs a higher false-alarm rate than the collision level ({rate:g}/h); "
-            f"got contact_rate_per_hour={contact_rate:g}"
-        )
-    if not (isinstance(step_torque, (int, float)) and math.isfinite(step_torque) and step_torque > 0):
-        raise ConfigError(f"step_torque must be a positive torque [Nm]; got {step_torque!r}")
+    rate, contact_rate = _check_arguments(rate_per_hour, contact_rate_per_hour, step_torque, step_force)
     log_list = [logs] if isinstance(logs, (RobotLog, str, os.PathLike)) else list(logs)
     if not log_list:
         raise ConfigError("no free-motion log given")
-    if step_force is not None and not (
-        isinstance(step_force, (int, float)) and math.isfinite(step_force) and step_force > 0
-    ):
-        raise ConfigError(f"step_force must be a positive force [N]; got {step_force!r}")
     read = load or (lambda path: load_free_motion_log(path, robot))
     replays, posture, coverage, notes = _replay_logs(log_list, robot, s, read)
     dt = replays[0].dt
@@ -359,14 +435,7 @@ def tune_thresholds(
     gap = GAP_TIME_CONSTANTS / k_o if gap_s is None else float(gap_s)
     duration = sum(r.duration for r in replays)
     n = robot.n
-    for level, r_arm in (("collision", rate), ("contact", contact_rate)):
-        minimum = n / r_arm * 3600.0 / MAX_EXTRAPOLATION
-        if duration < minimum:
-            err = LogTooShortError(duration, minimum, r_arm, level)
-            if not allow_extrapolation:
-                raise err
-            warnings.warn(f"{err} -- extrapolating as asked", ThresholdWarning, stacklevel=2)
-            notes.append(f"{level} level extrapolated: {err}")
+    _check_duration(duration, n, {"collision": rate, "contact": contact_rate}, allow_extrapolation, notes)
     joints = []
     for j in range(n):
         parts = [np.abs(r.residual[:, j]) for r in replays]
@@ -374,46 +443,10 @@ def tune_thresholds(
             fit = fit_tail(parts, dt, gap_s=gap, method=method)
         except DataError as e:
             raise DataError(f"joint {j + 1} ({robot.joint_names[j]}): {e}") from e
-        q95 = float(np.quantile(np.concatenate(parts), 0.95))
-        coll, cont = fit.level(rate / n), fit.level(contact_rate / n)
-        delays: dict[str, float | None] = {}
-        in_logs: dict[str, float] = {}
-        levels = {"collision": coll, "contact": cont}
-        for name, zeta in list(levels.items()):
-            counted, expected = count_crossings(parts, zeta, dt, fit)
-            if counted > poisson.ppf(CONSISTENCY_QUANTILE, expected):
-                raised = lowest_level_crossed_at_most(
-                    parts, zeta, dt, fit, int(poisson.ppf(CONSISTENCY_QUANTILE, expected))
-                )
-                msg = (
-                    f"joint {j + 1} ({robot.joint_names[j]}): the logs cross the {name} level {zeta:.4g} Nm {counted} "
-                    f"times where its rate predicts {expected:.2g}: the fitted tail misses the largest excursions; "
-                    f"raised to {raised:.4g} Nm, the lowest level the logs cross no more often than that allows "
-                    "(record more free motion for a fitted level)"
-                )
-                warnings.warn(msg, ThresholdWarning, stacklevel=2)
-                notes.append(msg)
-                in_logs[f"{name}_fitted_Nm"] = zeta
-                levels[name] = zeta = raised
-                counted = count_crossings(parts, zeta, dt, fit)[0]
-            in_logs[f"{name}_alarms_in_logs"], in_logs[f"{name}_alarms_expected"] = counted, expected
-            delays[f"{name}_delay_s"] = detection_delay(zeta, step_torque, time_constant)
-            delays[f"{name}_delay_unfavourable_s"] = detection_delay(zeta, step_torque, time_constant, -q95)
-        coll, cont = levels["collision"], levels["contact"]
-        joints.append(
-            JointThresholds(
-                joint=j,
-                name=robot.joint_names[j],
-                collision=coll,
-                collision_interval=fit.level_interval(rate / n, n_boot=n_boot, seed=seed + j),
-                contact=cont,
-                contact_interval=fit.level_interval(contact_rate / n, n_boot=n_boot, seed=seed + j),
-                fit=fit,
-                q95=q95,
-                delays=delays,
-                in_logs=in_logs,
-            )
-        )
+        rates = {"collision": rate / n, "contact": contact_rate / n}
+        delay = (step_torque, time_constant)
+        boot = (n_boot, seed + j)
+        joints.append(_joint_thresholds(j, robot.joint_names[j], parts, dt, fit, rates, delay, boot, notes))
     proposal = ThresholdProposal(
         joints=joints,
         rate_per_hour=rate,

@@ -71,3 +71,10 @@ class _GramAccumulator:
         """sum over samples of (A_j x - b_j)^2 per joint."""
         y = np.r_[x, -1.0]
         return np.maximum(np.einsum("a,jab,b->j", y, self.G, y), 0.0)
+
+    def transformed(self, T: np.ndarray) -> _GramAccumulator:
+        """The accumulator of the rows ``[A_j b_j] T`` (T: (p + 1, p' + 1)), e.g. a column moved into b."""
+        out = _GramAccumulator(self.n, T.shape[1] - 1)
+        out.G = np.einsum("ai,jab,bk->jik", T, self.G, T)
+        out.rows = self.rows.copy()
+        return out

@@ -66,6 +66,7 @@ from reflexarm.ident.estimation.result import (
     save_identification,
 )
 from reflexarm.ident.estimation.validation import TorqueValidation, validate_model
+from reflexarm.ident.estimation.wrist_wrench import WristWrenchDecision, decide_wrist_wrench
 from reflexarm.ident.friction.parameters import FrictionParameters, check_friction_against_robot, format_joints
 from reflexarm.logs._measured_torque import _rhs
 from reflexarm.logs.plausibility import check_log_against_robot, likely_bad_rows
@@ -112,6 +113,7 @@ def identify_dynamics(
     check_limits: bool = True,
     threads: int | None = DEFAULT_BLAS_THREADS,
     filter_cutoff_hz: float | None = None,
+    wrench: Literal["auto", "include", "exclude"] = "auto",
 ) -> DynamicsIdentification:
     """Identify beta_b (and friction) from a log by weighted least squares, eq. (18).
 
@@ -141,6 +143,9 @@ def identify_dynamics(
         filter_cutoff_hz: the low-pass cutoff the logs were preprocessed with, if any: their rows' errors are
             then correlated, and the M(q) uncertainty scales its covariance (see
             :mod:`reflexarm.ident.estimation.inertia_determinacy`; the parameter std ``beta_std`` is not scaled).
+        wrench: the logs' wrist wrench: ``"auto"`` (default) includes it when the data say it explains the
+            torque and leaves it out when it carries only noise (:mod:`reflexarm.ident.estimation.wrist_wrench`;
+            the result's notes give the numbers); ``"include"`` or ``"exclude"`` decide without asking.
 
     Warns:
         IllConditionedWarning: the regressor is rank deficient or its condition number (column-
@@ -160,7 +165,7 @@ def identify_dynamics(
     with blas_threads(threads):
         return _identify_dynamics(
             robot, log, method, friction, offset, noise_variance, base, condition_limit, min_speed, progress,
-            check_limits, filter_cutoff_hz,
+            check_limits, filter_cutoff_hz, wrench,
         )  # fmt: skip
 
 
@@ -177,6 +182,7 @@ def _identify_dynamics(
     progress: bool,
     check_limits: bool,
     filter_cutoff_hz: float | None = None,
+    wrench: str = "auto",
 ) -> DynamicsIdentification:
     """:func:`identify_dynamics` with BLAS threads set."""
     if method not in METHODS:
@@ -220,15 +226,20 @@ def _identify_dynamics(
     nb = base.n_base
     est_offset = offset and (fixed is None or fixed.offset is None)
     p = nb + 2 * n_fe + (n if est_offset else 0)
+    if wrench not in ("auto", "include", "exclude"):
+        raise IdentificationError(f"wrench must be 'auto', 'include' or 'exclude'; got {wrench!r}")
+    # the wrist wrench's torque -J^T F is one more column while its use is decided (wrist_wrench)
+    has_wrench = any(lg.wrench is not None for lg in logs) and wrench != "exclude"
+    p_acc = p + int(has_wrench)
     if fixed is not None:  # eq. (16) on the joints with given friction; the others' friction is estimated
         given = ~np.isnan(fixed.viscous)
         fixed_viscous = np.where(given, fixed.viscous, 0.0)
         fixed_coulomb = np.where(given, fixed.coulomb, 0.0)
 
-    def rows(lg: RobotLog, b_all: np.ndarray, sl: slice, Y: np.ndarray) -> np.ndarray:
-        """Rows [Phi_b (Phi_f) (offsets) | b] of (19), per joint: (n, m, p + 1)."""
+    def rows(lg: RobotLog, b_all: np.ndarray, w_all: np.ndarray | None, sl: slice, Y: np.ndarray) -> np.ndarray:
+        """Rows [Phi_b (Phi_f) (offsets) (-J^T F) | b] of (19), per joint: (n, m, p_acc + 1)."""
         m = Y.shape[0]
-        M = np.zeros((n, m, p + 1))
+        M = np.zeros((n, m, p_acc + 1))
         M[:, :, :nb] = np.take(Y, base.independent, axis=2).transpose(1, 0, 2)
         b = b_all[sl]
         dq = lg.dq[sl]
@@ -245,7 +256,9 @@ def _identify_dynamics(
                 b = b - fixed.offset
         if est_offset:
             M[idx, :, k + idx] = 1.0
-        M[:, :, p] = b.T
+        if has_wrench and w_all is not None:
+            M[:, :, p] = -w_all[sl].T
+        M[:, :, p_acc] = b.T
         return M
 
     # weights: given, estimated from an unweighted pass, or none
@@ -265,12 +278,15 @@ def _identify_dynamics(
         if not np.all(np.isfinite(given)) or np.any(given <= 0):
             raise IdentificationError(f"noise_variance must be positive per joint; got {given.tolist()}")
     total = sum(len(lg) for lg in logs)
-    acc = _GramAccumulator(n, p)
+    acc = _GramAccumulator(n, p_acc)
     t_reg = t_solve = 0.0
     for lg in logs:
         assert lg.ddq is not None  # checked above
         clock = time.perf_counter()
-        b_all = _rhs(robot, lg)
+        b_all = lg.tau.copy()
+        w_all = None if lg.wrench is None else _rhs(robot, lg) - lg.tau  # J^T F per sample
+        if w_all is not None and wrench == "exclude":
+            w_all = None
         if not known.is_zero:  # the file's armature and springs are given, not identified
             b_all -= known.compute_torque(lg.q, lg.ddq)
         t_reg += time.perf_counter() - clock
@@ -281,7 +297,7 @@ def _identify_dynamics(
                 sl, Y = next(chunks)
             except StopIteration:
                 break
-            M = rows(lg, b_all, sl, Y)
+            M = rows(lg, b_all, w_all, sl, Y)
             keep = np.abs(lg.dq[sl]) >= min_speed if min_speed > 0 else None
             t_reg += time.perf_counter() - clock
             clock = time.perf_counter()
@@ -297,6 +313,12 @@ def _identify_dynamics(
         )
     clock = time.perf_counter()
     notes: list[str] = [] if known.is_zero else [known.describe()]
+    if has_wrench:
+        row_corr = filtered_rows_factor([float(np.median(np.diff(lg.t))) for lg in logs], filter_cutoff_hz)
+        acc, decision = _settle_wrench(acc, p, wrench, row_corr)
+        notes.append(decision.reason)
+    elif any(lg.wrench is not None for lg in logs):
+        notes.append("wrist wrench left out as asked (wrench='exclude')")
     if given is not None:
         sigma2 = given
         notes.append(
@@ -388,6 +410,32 @@ def _identify_dynamics(
         friction_estimated=fric_est,
         inertia_determinacy=determinacy,
     )
+
+
+def _settle_wrench(
+    acc: _GramAccumulator, p: int, wrench: str, row_correlation: float
+) -> tuple[_GramAccumulator, WristWrenchDecision]:
+    """Estimate alpha (the column p of ``acc``, two-step weighted), decide (:mod:`.wrist_wrench`) and return
+    the accumulator with the wrench moved into b (included: b = tau + J^T F) or dropped."""
+    x0 = acc.solve(np.ones(acc.n)).x
+    sigma2 = np.maximum(acc.residual_ss(x0) / np.maximum(acc.rows - (p + 1) / acc.n, 1.0), 1e-12)
+    sol = acc.solve(1.0 / np.sqrt(sigma2))
+    dof = max(int(acc.rows.sum()) - p - 1, 1)
+    alpha = float(sol.x[p])
+    alpha_std = float(np.sqrt(max(sol.residual_norm**2 / dof * sol.covariance[p, p] * row_correlation, 0.0)))
+    decision = decide_wrist_wrench(alpha, alpha_std)
+    if wrench != "auto":
+        included = wrench == "include"
+        decision = decision._replace(
+            included=included, reason=f"wrist wrench {'included' if included else 'left out'} as asked ({wrench=}; "
+            f"the data give alpha = {alpha:.3g} +- {alpha_std:.2g})",
+        )  # fmt: skip
+    # [A, -J^T F, tau] -> [A, tau + J^T F] (included) or [A, tau] (left out)
+    T = np.zeros((p + 2, p + 1))
+    T[:p, :p] = np.eye(p)
+    T[p + 1, p] = 1.0
+    T[p, p] = -1.0 if decision.included else 0.0
+    return acc.transformed(T), decision
 
 
 def _refuse_non_finite(values: dict[str, np.ndarray], logs: Sequence[RobotLog]) -> None:

@@ -13,8 +13,14 @@ candidate is at rest at both ends by construction.
 
 :func:`optimize_excitation` minimises the condition number of the base regressor stacked over samples
 of one period (``scipy.optimize.minimize``, SLSQP) subject to joint position (with a margin), velocity and
-acceleration limits evaluated on a dense time grid, and finally checks the limits on the trajectory
-sampled at 1 kHz (scaling the amplitudes down if a peak fell between grid points).
+acceleration limits evaluated on a dense time grid (linear in the coefficients), and to the model's joint
+torques, a workspace bound and self-collision (:mod:`.limits`: nonlinear, with exact derivatives) on a
+coarser grid; it finally checks every limit on the trajectory sampled at 1 kHz (scaling the amplitudes
+down if a peak fell between grid points). Its steps: :func:`excitation_limits` (the bounds), a start inside
+them (:func:`_start`), the linear and nonlinear constraints, the SLSQP run with its progress recorded
+(:func:`_minimise`), the 1 kHz check (:func:`_check_at_1khz`) and the diagnosis of a run that stalled
+(:func:`_diagnose`: the optimizer's own message, and which base-parameter combination the motion fails to
+excite).
 
 Repeatability: a seeded call gives the same trajectory bit for bit on one machine with the same BLAS
 library and thread count. On another CPU (OpenBLAS picks its kernels per CPU) or with another number
@@ -29,7 +35,9 @@ writes excitation.json) and pass it on (``identify dynamics --excitation``).
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -39,9 +47,24 @@ from reflexarm.errors import ConfigError, IdentificationError
 from reflexarm.ident.estimation.base_parameters import BaseParameters, compute_base_parameters, condition_number
 from reflexarm.ident.estimation.regressor import BatchRegressor
 from reflexarm.ident.excitation.fourier_trajectory import FourierTrajectory
+from reflexarm.ident.excitation.limits import (
+    DEFAULT_CLEARANCE,
+    DEFAULT_TORQUE_FRACTION,
+    ArmGeometry,
+    ExcitationLimits,
+    LimitEvaluator,
+    arm_geometry,
+    default_floor,
+)
 from reflexarm.robots.robot_model import RobotModel
 
-__all__ = ["ExcitationDesign", "FourierTrajectory", "optimize_excitation"]
+__all__ = [
+    "ExcitationDesign",
+    "ExcitationStalledWarning",
+    "FourierTrajectory",
+    "excitation_limits",
+    "optimize_excitation",
+]
 
 #: Default velocity bound of an excitation trajectory [rad/s] (tighter of this and the robot's limit).
 DEFAULT_MAX_VELOCITY = 1.5
@@ -49,6 +72,30 @@ DEFAULT_MAX_VELOCITY = 1.5
 DEFAULT_MAX_ACCELERATION = 5.0
 #: Default margin kept from the joint position limits [rad].
 DEFAULT_POSITION_MARGIN = 0.1
+#: An optimized condition number above this is reported as stalled. Measured optimized values: 28 on the
+#: Gen3-like arm (L = 5, 100 iterations), 48-153 on the Atlas arm (L = 4, 12 iterations, per CPU); a
+#: regressor at 1e3 amplifies a 1 % torque error into up to 10 x its share on some combination.
+STALLED_CONDITION = 1e3
+#: Over the last :data:`_STALL_WINDOW` iterations, an improvement of the condition number below this
+#: fraction means the optimizer has stopped making progress.
+STALL_PROGRESS = 0.01
+_STALL_WINDOW = 10
+#: Scaled constraint margin (O(1) units, see :func:`_linear_margins`) an iterate may miss and still count
+#: as feasible: the 1 kHz check that follows removes what is left.
+FEASIBILITY_TOLERANCE = 1e-6
+
+
+class ExcitationStalledWarning(UserWarning):
+    """The excitation optimization ended with a badly conditioned regressor; the message says why.
+
+    Attributes:
+        condition: the condition number reached; weakest: the base combinations of the weakest direction.
+    """
+
+    def __init__(self, message: str, *, condition: float, weakest: tuple[str, ...]) -> None:
+        super().__init__(message)
+        self.condition = condition
+        self.weakest = weakest
 
 
 @dataclass(frozen=True)
@@ -59,8 +106,15 @@ class ExcitationDesign:
         trajectory: the optimized trajectory; initial: the unoptimized start.
         condition_initial, condition_optimized: condition number of the base regressor (stacked over
             ``n_samples`` samples of one period) before and after.
-        limits_initial, limits_optimized: :meth:`FourierTrajectory.check_limits` at 1 kHz (<= 1: within).
+        limits_initial, limits_optimized: the largest use of each limit at 1 kHz (<= 1: within): position,
+            velocity, acceleration (:meth:`FourierTrajectory.check_limits`) and torque (the model's).
         iterations: optimizer iterations; message: the optimizer's message.
+        bounds: the position, velocity and acceleration bounds (JSON form).
+        history: condition number after each iteration.
+        diagnosis: why the run ended where it did, when it stalled ("" otherwise).
+        limits: every bound the trajectory respects (None for a design read from an old file).
+        limit_report: the worst sample of the torque, workspace and self-collision bounds at 1 kHz
+            (:meth:`LimitEvaluator.report`).
     """
 
     trajectory: FourierTrajectory
@@ -72,6 +126,10 @@ class ExcitationDesign:
     iterations: int
     message: str
     bounds: dict[str, list[float]] = field(default_factory=dict)
+    history: tuple[float, ...] = ()
+    diagnosis: str = ""
+    limits: ExcitationLimits | None = None
+    limit_report: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, object]:
         return {
@@ -79,15 +137,21 @@ class ExcitationDesign:
             "initial": self.initial.to_dict(),
             "condition_initial": self.condition_initial,
             "condition_optimized": self.condition_optimized,
+            "condition_history": list(self.history),
+            "diagnosis": self.diagnosis,
             "limits_initial": self.limits_initial,
             "limits_optimized": self.limits_optimized,
+            "limit_report": self.limit_report,
             "iterations": self.iterations,
             "message": self.message,
             "bounds": self.bounds,
+            "excitation_limits": None if self.limits is None else self.limits.to_dict(),
             "units": {
                 "trajectory": "base_frequency_hz [Hz], period_s [s], a and b [rad/s], offset [rad]",
                 "bounds": "lower, upper [rad], max_velocity [rad/s], max_acceleration [rad/s^2]",
                 "limits": "largest use of each limit on the trajectory sampled at 1 kHz (<= 1: within)",
+                "limit_report": "torque: use (<= 1 within), value [Nm]; workspace, self_collision: clearance_m [m] "
+                "(>= 0 within), joints 0-based",
             },
         }
 
@@ -95,10 +159,11 @@ class ExcitationDesign:
 class _Parametrisation:
     """Free variables (a_i2..a_iL, b_i2..b_iL, q0_i per joint) <-> (a, b, q0) at rest at t = 0."""
 
-    def __init__(self, n: int, L: int) -> None:
+    def __init__(self, n: int, L: int, base_frequency: float) -> None:
         self.n, self.L = n, L
         self.size = n * (2 * (L - 1) + 1)
         self.l = np.arange(1, L + 1)
+        self.base_frequency = base_frequency
 
     def unpack(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         n, L = self.n, self.L
@@ -114,50 +179,39 @@ class _Parametrisation:
     def pack(self, a: np.ndarray, b: np.ndarray, q0: np.ndarray) -> np.ndarray:
         return np.column_stack([a[:, 1:], b[:, 1:], q0]).reshape(-1)
 
+    def trajectory(self, x: np.ndarray) -> FourierTrajectory:
+        a, b, q0 = self.unpack(x)
+        return FourierTrajectory(self.base_frequency, a, b, q0)
 
-def optimize_excitation(
+    def linear_maps(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(Gq, Gv, Ga), each (N, n, size): q(t_k) = Gq[k] x (and dq, ddq likewise); q, dq, ddq are linear in x."""
+        cols = [self.trajectory(e).evaluate(t) for e in np.eye(self.size)]
+        return tuple(np.stack([c[i] for c in cols], axis=-1) for i in range(3))  # type: ignore[return-value]
+
+    def scaled(self, x: np.ndarray, s: float) -> np.ndarray:
+        """The amplitudes times s about the same offsets q0."""
+        a, b, q0 = self.unpack(x)
+        return self.pack(a * s, b * s, q0)
+
+
+def excitation_limits(
     robot: RobotModel,
     *,
-    base: BaseParameters | None = None,
-    base_frequency: float = 2 * np.pi * 0.1,
-    n_harmonics: int = 5,
     max_velocity: npt.ArrayLike | None = None,
     max_acceleration: npt.ArrayLike = DEFAULT_MAX_ACCELERATION,
     position_margin: float = DEFAULT_POSITION_MARGIN,
-    center: npt.ArrayLike | None = None,
-    n_samples: int = 100,
-    n_grid: int = 200,
-    maxiter: int = 100,
-    seed: int = 0,
-    initial: FourierTrajectory | None = None,
-    progress: bool = False,
-) -> ExcitationDesign:
-    """Optimize a Fourier excitation trajectory for the condition number of the base regressor.
-
-    Args:
-        robot: the arm (kinematics and limits).
-        base: base-parameter map (default: computed from ``robot``).
-        base_frequency: w_f [rad/s] (default 2 pi 0.1: a 10 s period).
-        n_harmonics: L.
-        max_velocity: |dq| bound per joint [rad/s] (default: the robot's limit, at most
-            :data:`DEFAULT_MAX_VELOCITY`).
-        max_acceleration: |ddq| bound per joint [rad/s^2].
-        position_margin: distance kept from the joint limits [rad].
-        center: initial offsets q0 (default: the middle of each joint's range).
-        n_samples: samples per period stacked into the regressor whose condition number is minimised.
-        n_grid: samples per period on which the limits are imposed during the optimization.
-        maxiter: optimizer iterations.
-        seed: seed of the random initial coefficients (unless ``initial`` is given).
-        initial: start from this trajectory instead of a random one.
-        progress: show a progress bar over the optimizer iterations.
+    torque_fraction: float | None = DEFAULT_TORQUE_FRACTION,
+    floor: float | None | str = "default",
+    clearance: float = DEFAULT_CLEARANCE,
+    self_collision: bool = True,
+    center: np.ndarray | None = None,
+) -> tuple[ExcitationLimits, ArmGeometry | None]:
+    """The bounds of an excitation of ``robot`` and its collision geometry (see :func:`optimize_excitation`).
 
     Raises:
-        ConfigError: bad bounds (non-positive, margin larger than a joint's range).
+        ConfigError: non-positive bounds, a margin larger than a joint's range, a torque fraction outside (0, 1].
     """
     n = robot.n
-    L = int(n_harmonics)
-    if L < 2:
-        raise ConfigError(f"n_harmonics must be >= 2 (one is used up by the rest conditions); got {n_harmonics!r}")
     lo, hi = robot.lower_limit + position_margin, robot.upper_limit - position_margin
     unlimited = ~np.isfinite(robot.lower_limit) | ~np.isfinite(robot.upper_limit) | (robot.upper_limit > 1e6)
     lo = np.where(unlimited, -np.pi, lo)
@@ -172,129 +226,400 @@ def optimize_excitation(
     amax = np.broadcast_to(np.asarray(max_acceleration, dtype=float), (n,)).copy()
     if np.any(vmax <= 0) or np.any(amax <= 0):
         raise ConfigError(f"velocity and acceleration bounds must be positive; got {vmax.tolist()}, {amax.tolist()}")
-    base = base if base is not None else compute_base_parameters(robot)
-    reg = BatchRegressor(robot)
-    par = _Parametrisation(n, L)
-    period = 2 * np.pi / base_frequency
-    t_cost = np.arange(n_samples) * period / n_samples
-    t_grid = np.arange(n_grid) * period / n_grid
+    notes: list[str] = []
+    effort = np.asarray(robot.effort_limit, dtype=float)
+    tmax = np.full(n, np.inf)
+    if torque_fraction is not None:
+        if not 0.0 < torque_fraction <= 1.0:
+            raise ConfigError(f"torque_fraction must be in (0, 1]; got {torque_fraction!r}")
+        ok = np.isfinite(effort) & (effort > 0)
+        tmax = np.where(ok, torque_fraction * effort, np.inf)
+        notes.append(
+            f"torque: the model's joint torque (rigid body + friction) within {100 * torque_fraction:g} % of each "
+            "joint's effort limit"
+            + ("" if ok.all() else f" (joints {[int(j) + 1 for j in np.flatnonzero(~ok)]} have none: unbounded)")
+        )
     mid = 0.5 * (lo + hi) if center is None else np.asarray(center, dtype=float)
+    geometry = None
+    if floor is not None or self_collision:
+        geometry = arm_geometry(robot, mid, clearance=clearance)
+    if floor == "default":
+        assert geometry is not None
+        floor, why = default_floor(robot, geometry, mid)
+        notes.append(why)
+    elif floor is not None:
+        floor = float(floor)  # type: ignore[arg-type]
+        notes.append(f"workspace: no point of the arm below z = {floor:g} m of the base frame (+{clearance:g} m)")
+    if self_collision and geometry is not None:
+        notes.append(
+            f"self-collision: capsules fitted to the file's MuJoCo collision geometry, {len(geometry.pairs)} link "
+            f"pair(s) kept {clearance:g} m apart"
+            + (f"; not checked (overlapping at the centre pose): {[(i + 1, j + 1) for i, j in geometry.excluded]}"
+               if geometry.excluded else "")
+        )  # fmt: skip
+    limits = ExcitationLimits(lo, hi, vmax, amax, tmax, floor, clearance, self_collision, tuple(notes))  # type: ignore[arg-type]
+    return limits, geometry
+
+
+def optimize_excitation(
+    robot: RobotModel,
+    *,
+    base: BaseParameters | None = None,
+    base_frequency: float = 2 * np.pi * 0.1,
+    n_harmonics: int = 5,
+    max_velocity: npt.ArrayLike | None = None,
+    max_acceleration: npt.ArrayLike = DEFAULT_MAX_ACCELERATION,
+    position_margin: float = DEFAULT_POSITION_MARGIN,
+    torque_fraction: float | None = DEFAULT_TORQUE_FRACTION,
+    floor: float | None | str = "default",
+    self_collision: bool = True,
+    center: npt.ArrayLike | None = None,
+    n_samples: int = 100,
+    n_grid: int = 200,
+    n_grid_dynamics: int = 60,
+    maxiter: int = 100,
+    seed: int = 0,
+    initial: FourierTrajectory | None = None,
+    progress: bool = False,
+) -> ExcitationDesign:
+    """Optimize a Fourier excitation trajectory for the condition number of the base regressor.
+
+    Args:
+        robot: the arm (kinematics, dynamics, limits, collision geometry).
+        base: base-parameter map (default: computed from ``robot``).
+        base_frequency: w_f [rad/s] (default 2 pi 0.1: a 10 s period).
+        n_harmonics: L.
+        max_velocity: |dq| bound per joint [rad/s] (default: the robot's limit, at most
+            :data:`DEFAULT_MAX_VELOCITY`).
+        max_acceleration: |ddq| bound per joint [rad/s^2].
+        position_margin: distance kept from the joint limits [rad].
+        torque_fraction: the model's joint torques stay within this share of the effort limits (None: not
+            bounded; see :data:`~reflexarm.ident.excitation.limits.DEFAULT_TORQUE_FRACTION`).
+        floor: height [m] in the base frame no point of the arm may go below; ``"default"``: the base plane
+            when the arm stands on it (:func:`~reflexarm.ident.excitation.limits.default_floor`); None: none.
+        self_collision: keep the links apart (capsules fitted to the file's collision geometry).
+        center: initial offsets q0 (default: the middle of each joint's range).
+        n_samples: samples per period stacked into the regressor whose condition number is minimised.
+        n_grid: samples per period on which position, velocity and acceleration limits are imposed.
+        n_grid_dynamics: samples per period on which torque, workspace and self-collision are imposed.
+        maxiter: optimizer iterations.
+        seed: seed of the random initial coefficients (unless ``initial`` is given).
+        initial: start from this trajectory instead of a random one.
+        progress: show a progress bar over the optimizer iterations.
+
+    Raises:
+        ConfigError: bad bounds (non-positive, margin larger than a joint's range).
+        IdentificationError: no trajectory meets the limits (e.g. the torque at rest in the centre pose
+            already exceeds one), naming the bound.
+
+    Warns:
+        ExcitationStalledWarning: the condition number ended above :data:`STALLED_CONDITION`, with why.
+    """
+    n, L = robot.n, int(n_harmonics)
+    if L < 2:
+        raise ConfigError(f"n_harmonics must be >= 2 (one is used up by the rest conditions); got {n_harmonics!r}")
+    c = None if center is None else np.asarray(center, dtype=float)
+    limits, geometry = excitation_limits(
+        robot, max_velocity=max_velocity, max_acceleration=max_acceleration, position_margin=position_margin,
+        torque_fraction=torque_fraction, floor=floor, self_collision=self_collision, center=c,
+    )  # fmt: skip
+    lo, hi = limits.lower, limits.upper
+    mid = 0.5 * (lo + hi) if c is None else c
     if np.any(mid <= lo) or np.any(mid >= hi):
         raise ConfigError(f"center {np.asarray(mid).tolist()} must lie inside the joint limits minus the margin")
+    base = base if base is not None else compute_base_parameters(robot)
+    par = _Parametrisation(n, L, base_frequency)
+    period = 2 * np.pi / base_frequency
+    log_cond = _log_condition(robot, base, par, np.arange(n_samples) * period / n_samples)
+    linear = _linear_margins(par, limits, np.arange(n_grid) * period / n_grid)
+    evaluator = LimitEvaluator(robot, limits, geometry)
+    nonlinear = _nonlinear_margins(par, evaluator, np.arange(n_grid_dynamics) * period / n_grid_dynamics)
+    x0 = _start(par, limits, evaluator, mid, seed, initial, np.arange(n_grid) * period / n_grid)
+    start = par.trajectory(x0)
+    res, history, x = _minimise(log_cond, x0, linear, nonlinear, maxiter, progress)
+    x, report = _check_at_1khz(par, x, limits, evaluator)
+    best = par.trajectory(x)
+    cond1 = float(np.exp(log_cond(x)))
+    diagnosis = _diagnose(robot, base, best, cond1, history, res, n_samples)
+    return ExcitationDesign(
+        trajectory=best,
+        initial=start,
+        condition_initial=float(np.exp(log_cond(x0))),
+        condition_optimized=cond1,
+        limits_initial=_limit_uses(start, limits, evaluator),
+        limits_optimized=_limit_uses(best, limits, evaluator, report),
+        iterations=int(res.get("nit", 0)),
+        message=str(res.get("message", "")),
+        bounds={
+            "lower": lo.tolist(),
+            "upper": hi.tolist(),
+            "max_velocity": limits.max_velocity.tolist(),
+            "max_acceleration": limits.max_acceleration.tolist(),
+        },
+        history=tuple(history),
+        diagnosis=diagnosis,
+        limits=limits,
+        limit_report=report,
+    )
 
-    def traj(x: np.ndarray) -> FourierTrajectory:
-        a, b, q0 = par.unpack(x)
-        return FourierTrajectory(base_frequency, a, b, q0)
+
+def _log_condition(
+    robot: RobotModel, base: BaseParameters, par: _Parametrisation, t_cost: np.ndarray
+) -> Callable[[np.ndarray], float]:
+    """The cost: log of the condition number of the base regressor stacked over ``t_cost``."""
+    reg = BatchRegressor(robot)
 
     def log_cond(x: np.ndarray) -> float:
-        q, dq, ddq = traj(x).evaluate(t_cost)
+        q, dq, ddq = par.trajectory(x).evaluate(t_cost)
         W = base.select(reg.compute_regressor(q, dq, ddq)).reshape(-1, base.n_base)
         # cond(W) = sqrt(cond(W^T W)); eigvalsh of the small Gram matrix is ~10x cheaper than an SVD of W
         ev = np.linalg.eigvalsh(W.T @ W)
         return float(0.5 * np.log(ev[-1] / max(ev[0], 1e-300)))
 
-    # q, dq, ddq on the grid are linear in x: the limits are linear inequalities G x <= h
-    def signals(x: np.ndarray) -> np.ndarray:
-        q, dq, ddq = traj(x).evaluate(t_grid)
-        return np.concatenate([q.reshape(-1), dq.reshape(-1), ddq.reshape(-1)])
+    return log_cond
 
-    G = np.column_stack([signals(e) for e in np.eye(par.size)])
-    half = np.tile(0.5 * (hi - lo), n_grid)
+
+_Margins = tuple[Callable[[np.ndarray], np.ndarray], Callable[[np.ndarray], np.ndarray]]
+
+
+def _linear_margins(par: _Parametrisation, limits: ExcitationLimits, t_grid: np.ndarray) -> _Margins:
+    """Position, velocity and acceleration limits on the grid: linear in x, margins A x + b >= 0 scaled to O(1)."""
+    n_grid = t_grid.size
+    Gq, Gv, Ga = par.linear_maps(t_grid)
+    G = np.concatenate([Gq.reshape(-1, par.size), Gv.reshape(-1, par.size), Ga.reshape(-1, par.size)])
+    lo, hi, vmax, amax = limits.lower, limits.upper, limits.max_velocity, limits.max_acceleration
     rows_hi = np.concatenate([np.tile(hi, n_grid), np.tile(vmax, n_grid), np.tile(amax, n_grid)])
     rows_lo = np.concatenate([np.tile(lo, n_grid), -np.tile(vmax, n_grid), -np.tile(amax, n_grid)])
-    scale = np.concatenate([half, np.tile(vmax, n_grid), np.tile(amax, n_grid)])
+    scale = np.concatenate([np.tile(0.5 * (hi - lo), n_grid), np.tile(vmax, n_grid), np.tile(amax, n_grid)])
     # margins >= 0 inside the limits, scaled to O(1): (upper - s) / scale and (s - lower) / scale
-    A_in = np.vstack([-G / scale[:, None], G / scale[:, None]])
-    b_in = np.concatenate([rows_hi / scale, -rows_lo / scale])
+    A = np.vstack([-G / scale[:, None], G / scale[:, None]])
+    b = np.concatenate([rows_hi / scale, -rows_lo / scale])
+    return (lambda x: A @ x + b), (lambda x: A)
 
-    def margins(x: np.ndarray) -> np.ndarray:
-        return A_in @ x + b_in
 
+def _nonlinear_margins(par: _Parametrisation, evaluator: LimitEvaluator, t_grid: np.ndarray) -> _Margins | None:
+    """Torque, workspace and self-collision margins on the (coarser) grid and their exact derivatives."""
+    if not evaluator.active:
+        return None
+    Gq, Gv, Ga = par.linear_maps(t_grid)
+    cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+
+    def both(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        key = x.tobytes()
+        if key not in cache:
+            cache.clear()
+            q, dq, ddq = par.trajectory(x).evaluate(t_grid)
+            cache[key] = evaluator.margins(q, dq, ddq, Gq, Gv, Ga)
+        return cache[key]
+
+    return (lambda x: both(x)[0]), (lambda x: both(x)[1])
+
+
+def _start(
+    par: _Parametrisation,
+    limits: ExcitationLimits,
+    evaluator: LimitEvaluator,
+    mid: np.ndarray,
+    seed: int,
+    initial: FourierTrajectory | None,
+    t_grid: np.ndarray,
+) -> np.ndarray:
+    """The start x0: seeded random coefficients (or ``initial``) scaled into the linear limits (closed
+    form), then shrunk about q0 until the torque, workspace and self-collision bounds hold too."""
+    n, L = par.n, par.L
     if initial is None:
         rng = np.random.default_rng(seed)
         a = rng.normal(size=(n, L))
         b = rng.normal(size=(n, L))
-        x0 = par.pack(a, b, mid)
+        a, b, _ = par.unpack(par.pack(a, b, mid))
         # scale the amplitudes into the limits (q - q0, dq, ddq are all linear in (a, b))
-        a, b, _ = par.unpack(x0)
-        tr = FourierTrajectory(base_frequency, a, b, np.zeros(n))
-        q, dq, ddq = tr.evaluate(t_grid)
-        room = np.minimum(hi - mid, mid - lo)
+        q, dq, ddq = FourierTrajectory(par.base_frequency, a, b, np.zeros(n)).evaluate(t_grid)
+        room = np.minimum(limits.upper - mid, mid - limits.lower)
         s = 0.8 * min(
             np.min(room / np.maximum(np.abs(q).max(axis=0), 1e-12)),
-            np.min(vmax / np.maximum(np.abs(dq).max(axis=0), 1e-12)),
-            np.min(amax / np.maximum(np.abs(ddq).max(axis=0), 1e-12)),
+            np.min(limits.max_velocity / np.maximum(np.abs(dq).max(axis=0), 1e-12)),
+            np.min(limits.max_acceleration / np.maximum(np.abs(ddq).max(axis=0), 1e-12)),
         )
         x0 = par.pack(a * s, b * s, mid)
-        start = traj(x0)
     else:
         if initial.n != n or initial.n_harmonics != L:
             raise ConfigError(f"initial trajectory has n={initial.n}, L={initial.n_harmonics}; expected n={n}, L={L}")
-        start = FourierTrajectory(base_frequency, initial.a, initial.b, initial.offset)
-        x0 = par.pack(start.a, start.b, start.offset)
-    cond0 = float(np.exp(log_cond(x0)))
-    bar = None
+        x0 = par.pack(initial.a, initial.b, initial.offset)
+    return _shrink_into_limits(par, x0, evaluator, t_grid)
+
+
+def _within(report: dict[str, dict[str, Any]]) -> bool:
+    ok = True
+    if "torque" in report:
+        ok &= float(report["torque"]["use"]) <= 1.0  # type: ignore[arg-type]
+    for key in ("workspace", "self_collision"):
+        if key in report:
+            ok &= float(report[key]["clearance_m"]) >= 0.0  # type: ignore[arg-type]
+    return bool(ok)
+
+
+def _shrink_into_limits(
+    par: _Parametrisation, x: np.ndarray, evaluator: LimitEvaluator, t: np.ndarray
+) -> np.ndarray:
+    """x with its amplitudes scaled down (bisection on s in [0, 1], 10 steps: s to 1e-3) until the
+    nonlinear bounds hold at the times ``t``; the rest pose q0 (s = 0) must meet them."""
+    if not evaluator.active:
+        return x
+
+    def report(s: float) -> dict[str, dict[str, Any]]:
+        q, dq, ddq = par.trajectory(par.scaled(x, s)).evaluate(t)
+        return evaluator.report(t, q, dq, ddq)
+
+    if _within(report(1.0)):
+        return x
+    at_rest = report(0.0)
+    if not _within(at_rest):
+        raise IdentificationError(
+            f"no excitation can meet the limits: at rest in the centre pose {np.round(par.unpack(x)[2], 3).tolist()} "
+            f"already {at_rest} (choose another --floor, a larger --torque-fraction, or a centre pose)"
+        )
+    good, bad = 0.0, 1.0
+    for _ in range(10):
+        s = 0.5 * (good + bad)
+        good, bad = (s, bad) if _within(report(s)) else (good, s)
+    return par.scaled(x, good)
+
+
+def _minimise(
+    log_cond: Callable[[np.ndarray], float],
+    x0: np.ndarray,
+    linear: _Margins,
+    nonlinear: _Margins | None,
+    maxiter: int,
+    progress: bool,
+) -> tuple[scipy.optimize.OptimizeResult, list[float], np.ndarray]:
+    """SLSQP over the constraints, recording the condition number after each iteration. Returns the
+    result, the history and the best feasible iterate (SLSQP may end outside the nonlinear constraints)."""
     from reflexarm._progress import show_progress
 
+    def feasible(x: np.ndarray) -> bool:
+        if not np.all(np.isfinite(x)) or np.min(linear[0](x)) < -FEASIBILITY_TOLERANCE:
+            return False
+        return nonlinear is None or bool(np.min(nonlinear[0](x)) >= -FEASIBILITY_TOLERANCE)
+
+    history: list[float] = []
+    best: list[float | np.ndarray] = [float(log_cond(x0)), x0]
+    bar = None
     if show_progress(progress) and maxiter > 0:
         from tqdm import tqdm
 
         bar = tqdm(total=int(maxiter), desc="excitation", unit="it", leave=False)
 
     def step(x: np.ndarray) -> None:
+        value = float(log_cond(x))
+        history.append(float(np.exp(value)))
+        if value < float(best[0]) and feasible(x):  # type: ignore[arg-type]
+            best[:] = [value, x.copy()]
         if bar is not None:
             bar.update(1)
-            bar.set_postfix(cond=f"{np.exp(log_cond(x)):.3g}")
+            bar.set_postfix(cond=f"{history[-1]:.3g}")
 
+    constraints = [{"type": "ineq", "fun": linear[0], "jac": linear[1]}]
+    if nonlinear is not None:
+        constraints.append({"type": "ineq", "fun": nonlinear[0], "jac": nonlinear[1]})
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             res = scipy.optimize.minimize(
-                log_cond,
-                x0,
-                method="SLSQP",
-                constraints=[{"type": "ineq", "fun": margins, "jac": lambda x: A_in}],
-                options={"maxiter": int(maxiter), "ftol": 1e-6},
-                callback=step,
-            )
+                log_cond, x0, method="SLSQP", constraints=constraints,
+                options={"maxiter": int(maxiter), "ftol": 1e-6}, callback=step,
+            )  # fmt: skip
     finally:
         if bar is not None:
             bar.close()
-    x = res.x if np.all(np.isfinite(res.x)) else x0
-    if np.min(margins(x)) < -1e-6 or log_cond(x) > log_cond(x0):
-        # infeasible end point or no improvement: keep the better feasible one
-        x = x0 if np.min(margins(x)) < -1e-6 or log_cond(x) > log_cond(x0) else x
-    best = traj(x)
-    # final check at 1 kHz; shrink the amplitudes about q0 if a peak fell between grid points
-    limits = best.check_limits(lo, hi, vmax, amax)
-    worst = max(limits.values())
-    if worst > 1.0:
+    if np.all(np.isfinite(res.x)) and log_cond(res.x) < float(best[0]) and feasible(res.x):  # type: ignore[arg-type]
+        best[:] = [float(log_cond(res.x)), res.x]
+    return res, history, np.asarray(best[1])
+
+
+def _check_at_1khz(
+    par: _Parametrisation, x: np.ndarray, limits: ExcitationLimits, evaluator: LimitEvaluator
+) -> tuple[np.ndarray, dict[str, dict[str, Any]]]:
+    """Every limit on the trajectory sampled at 1 kHz; amplitudes shrunk about q0 if a peak fell between
+    grid points. Returns x and the nonlinear bounds' report."""
+    best = par.trajectory(x)
+    period = best.period
+    lo, hi = limits.lower, limits.upper
+    uses = best.check_limits(lo, hi, limits.max_velocity, limits.max_acceleration)
+    if max(uses.values()) > 1.0:
         a, b, q0 = par.unpack(x)
         q, _, _ = best.evaluate(np.arange(0.0, period, 1e-3))
         s_pos = np.min(np.minimum(hi - q0, q0 - lo) / np.maximum(np.abs(q - q0).max(axis=0), 1e-12))
-        s = min(1.0 / max(limits["velocity"], limits["acceleration"], 1e-12), s_pos) * 0.999
-        best = FourierTrajectory(base_frequency, a * s, b * s, q0)
-        limits = best.check_limits(lo, hi, vmax, amax)
-    cond1 = float(np.exp(log_cond(par.pack(best.a, best.b, best.offset))))
-    if max(limits.values()) > 1.0 + 1e-9:
-        raise IdentificationError(f"excitation optimization could not meet the limits: {limits}")
-    # the robot's full range for reporting (positions relative to range incl. margin)
-    return ExcitationDesign(
-        trajectory=best,
-        initial=start,
-        condition_initial=cond0,
-        condition_optimized=cond1,
-        limits_initial=start.check_limits(lo, hi, vmax, amax),
-        limits_optimized=limits,
-        iterations=int(res.get("nit", 0)),
-        message=str(res.get("message", "")),
-        bounds={
-            "lower": lo.tolist(),
-            "upper": hi.tolist(),
-            "max_velocity": vmax.tolist(),
-            "max_acceleration": amax.tolist(),
-        },
-    )
+        s = min(1.0 / max(uses["velocity"], uses["acceleration"], 1e-12), s_pos) * 0.999
+        x = par.scaled(x, min(s, 1.0))
+        uses = par.trajectory(x).check_limits(lo, hi, limits.max_velocity, limits.max_acceleration)
+    if max(uses.values()) > 1.0 + 1e-9:
+        raise IdentificationError(f"excitation optimization could not meet the limits: {uses}")
+    t = np.arange(0.0, period, 1e-3)
+    x = _shrink_into_limits(par, x, evaluator, t)
+    q, dq, ddq = par.trajectory(x).evaluate(t)
+    return x, evaluator.report(t, q, dq, ddq)
+
+
+def _limit_uses(
+    trajectory: FourierTrajectory,
+    limits: ExcitationLimits,
+    evaluator: LimitEvaluator,
+    report: dict[str, dict[str, Any]] | None = None,
+) -> dict[str, float]:
+    """Position, velocity, acceleration and torque use at 1 kHz (<= 1: within)."""
+    uses = trajectory.check_limits(limits.lower, limits.upper, limits.max_velocity, limits.max_acceleration)
+    if evaluator.torque_joints.size:
+        if report is None:
+            t = np.arange(0.0, trajectory.period, 1e-3)
+            q, dq, ddq = trajectory.evaluate(t)
+            tau = evaluator.torque(q, dq, ddq)
+            j = evaluator.torque_joints
+            uses["torque"] = float(np.max(np.abs(tau[:, j]) / limits.max_torque[j]))
+        else:
+            uses["torque"] = float(report["torque"]["use"])  # type: ignore[arg-type]
+    return uses
+
+
+def _diagnose(
+    robot: RobotModel,
+    base: BaseParameters,
+    trajectory: FourierTrajectory,
+    condition: float,
+    history: list[float],
+    res: scipy.optimize.OptimizeResult,
+    n_samples: int,
+) -> str:
+    """Why a run ended badly conditioned ("" if it did not): the optimizer's message, its progress over
+    the last iterations, and the base combinations of the regressor's weakest direction; warns."""
+    if condition <= STALLED_CONDITION:
+        return ""
+    t = np.arange(n_samples) * trajectory.period / n_samples
+    q, dq, ddq = trajectory.evaluate(t)
+    W = base.select(BatchRegressor(robot).compute_regressor(q, dq, ddq)).reshape(-1, base.n_base)
+    norms = np.linalg.norm(W, axis=0)
+    _, s, vt = np.linalg.svd(W / np.maximum(norms, 1e-300), full_matrices=False)
+    weak = vt[-1]
+    order = np.argsort(-np.abs(weak))[:3]
+    names = base.base_names(max_terms=2)
+    weakest = tuple(names[k] for k in order)
+    recent = history[-_STALL_WINDOW:]
+    progress = (recent[0] - recent[-1]) / recent[0] if len(recent) >= 2 else 0.0
+    ratio = float(norms.min() / norms.max())
+    stalled = len(recent) >= 2 and progress < STALL_PROGRESS
+    text = (
+        f"excitation optimization ended at condition number {condition:.4g} (> {STALLED_CONDITION:.0e}) after "
+        f"{len(history)} iteration(s) ({res.get('message', '')}"
+        + (f"; the last {len(recent)} improved it by {100 * progress:.2g} %: stalled" if stalled else "")
+        + "). The motion cannot excite the weakest direction of the base regressor, mostly "
+        + "; ".join(f"[{w}]" for w in weakest)
+        + f" (column-normalised singular values {s[0]:.3g} .. {s[-1]:.3g}; smallest column norm {ratio:.2g} of the "
+        "largest). "
+        + (base.note + "." if base.note else "Check the base parameters (reflexarm excite prints them) for "
+           "combinations that no motion within the limits can excite, or raise --maxiter.")
+    )  # fmt: skip
+    warnings.warn(ExcitationStalledWarning(text, condition=condition, weakest=weakest), stacklevel=3)
+    return text
 
 
 def regressor_condition(

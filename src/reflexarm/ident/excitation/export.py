@@ -11,6 +11,12 @@ period inclusive (the trajectory starts and ends at rest in the same pose). The 
 a ROS ``sensor_msgs/JointState`` export, so the file reads back with :func:`reflexarm.ident.load_log`'s
 column mapping.
 
+The samples are also checked against the model's joint torques (inverse dynamics plus friction along the
+samples, within the robot file's effort limits), the workspace (no point of the arm's collision surface
+below the floor) and self-collision (capsules fitted to the collision geometry), see
+:mod:`reflexarm.ident.excitation.limits`: the design's own bounds when given (``limits=design.limits``),
+else the robot file's effort limits themselves and the default floor.
+
 A sample beyond a limit is refused (:class:`ExcitationLimitError`, naming the joint 1-based, the quantity,
 the value, the limit and by how much it is exceeded); a position or velocity sample within
 ``1 - WARN_FRACTION`` of a robot limit warns (:class:`ExcitationMarginWarning`). Sampling below
@@ -23,15 +29,17 @@ from __future__ import annotations
 import csv
 import os
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from reflexarm.errors import ConfigError
-from reflexarm.ident.excitation.design import DEFAULT_MAX_ACCELERATION
+from reflexarm.ident.excitation.design import DEFAULT_MAX_ACCELERATION, excitation_limits
 from reflexarm.ident.excitation.fourier_trajectory import FourierTrajectory
+from reflexarm.ident.excitation.limits import ExcitationLimits, LimitEvaluator
 from reflexarm.robots.robot_model import RobotModel
 
 __all__ = [
@@ -53,15 +61,17 @@ MIN_SAMPLES_PER_PERIOD = 20
 #: bound, which an optimized trajectory touches by design: it is only enforced.)
 WARN_FRACTION = 0.98
 
-_UNITS = {"position": "rad", "velocity": "rad/s", "acceleration": "rad/s^2"}
+_UNITS = {"position": "rad", "velocity": "rad/s", "acceleration": "rad/s^2", "torque": "Nm"}
 
 
 class ExcitationLimitError(ConfigError):
     """A sample of the exported excitation is beyond a limit.
 
     Attributes:
-        joint: 0-based joint index (1-based with its name in the message).
-        quantity: ``"position"``, ``"velocity"`` or ``"acceleration"``.
+        joint: 0-based joint index (1-based with its name in the message); for ``"self-collision"`` the
+            first link of the pair.
+        quantity: ``"position"``, ``"velocity"``, ``"acceleration"``, ``"torque"``, ``"workspace"`` (height
+            above the floor [m]) or ``"self-collision"`` (distance between links [m]).
         value: the worst sample's value; time: its time [s].
         limit: the limit it exceeds (the bound on the side it exceeds).
         excess: by how much it exceeds it (positive).
@@ -94,6 +104,8 @@ class SampledExcitation:
         margins: per quantity, the smallest distance to the limit per joint (n,) (in the quantity's unit;
             negative: beyond).
         limits: per quantity, the (lower, upper) limits used per joint, each (n,).
+        report: the worst sample of the torque, workspace and self-collision bounds
+            (:meth:`~reflexarm.ident.excitation.limits.LimitEvaluator.report`).
     """
 
     t: np.ndarray
@@ -104,6 +116,7 @@ class SampledExcitation:
     rate: float
     margins: dict[str, np.ndarray]
     limits: dict[str, tuple[np.ndarray, np.ndarray]]
+    report: dict[str, dict[str, Any]] | None = None
 
     def margin_rows(self) -> list[dict[str, object]]:
         """Per joint (1-based), the smallest margin to each limit (for a printed table)."""
@@ -122,6 +135,7 @@ def sample_excitation(
     *,
     rate: float,
     max_acceleration: npt.ArrayLike = DEFAULT_MAX_ACCELERATION,
+    limits: ExcitationLimits | None = None,
 ) -> SampledExcitation:
     """Sample ``trajectory`` at ``rate`` [Hz] over its whole duration and check it against the limits.
 
@@ -131,6 +145,8 @@ def sample_excitation(
         rate: samples per second [Hz].
         max_acceleration: |ddq| bound per joint [rad/s^2] (robot files carry no acceleration limits;
             pass the excitation's own bound).
+        limits: the torque, workspace and self-collision bounds (``design.limits``; default: the robot
+            file's effort limits and the default floor, see the module docstring).
 
     Raises:
         ConfigError: a rate that is not positive or too low for the highest harmonic, or a trajectory of
@@ -156,16 +172,21 @@ def sample_excitation(
     q, dq, ddq = trajectory.evaluate(t)
     amax = np.broadcast_to(np.asarray(max_acceleration, dtype=float), (n,))
     vmax = robot.velocity_limit
-    limits = {
+    limits_used = {
         "position": (robot.lower_limit, robot.upper_limit),
         "velocity": (-vmax, vmax),
         "acceleration": (-amax, amax),
     }
-    signals = {"position": q, "velocity": dq, "acceleration": ddq}
-    margins: dict[str, np.ndarray] = {}
     names = tuple(robot.joint_names)
+    if limits is None:
+        limits = excitation_limits(robot, max_acceleration=amax, position_margin=0.0, torque_fraction=1.0)[0]
+    evaluator = LimitEvaluator(robot, limits, None)
+    tau = evaluator.torque(q, dq, ddq)
+    limits_used = dict(limits_used, torque=(-limits.max_torque, limits.max_torque))
+    signals = {"position": q, "velocity": dq, "acceleration": ddq, "torque": tau}
+    margins: dict[str, np.ndarray] = {}
     for quantity, x in signals.items():
-        lo, hi = (np.asarray(b, dtype=float) for b in limits[quantity])
+        lo, hi = (np.asarray(b, dtype=float) for b in limits_used[quantity])
         below, above = x - lo, hi - x  # distances inside the limits, (N, n)
         dist = np.minimum(below, above)
         margins[quantity] = np.where(np.isfinite(lo) & np.isfinite(hi), dist.min(axis=0), np.inf)
@@ -177,7 +198,8 @@ def sample_excitation(
             raise ExcitationLimitError(
                 f"joint {j + 1} ({names[j]}) {quantity} {x[k, j]:.4g} {_UNITS[quantity]} at t = {t[k]:.4g} s is beyond "
                 f"its {'upper' if upper else 'lower'} limit {limit:.4g} {_UNITS[quantity]} by {-dist[k, j]:.4g}; "
-                "re-run 'reflexarm excite' with a larger --margin or lower --max-velocity/--max-acceleration",
+                "re-run 'reflexarm excite' with a larger --margin, lower --max-velocity/--max-acceleration or a "
+                "lower --torque-fraction",
                 joint=int(j),
                 quantity=quantity,
                 value=float(x[k, j]),
@@ -186,7 +208,7 @@ def sample_excitation(
                 excess=float(-dist[k, j]),
             )
         half = 0.5 * (hi - lo)
-        close = finite & (margins[quantity] < (1.0 - WARN_FRACTION) * half) & (quantity != "acceleration")
+        close = finite & (margins[quantity] < (1.0 - WARN_FRACTION) * half) & (quantity in ("position", "velocity"))
         for j in np.flatnonzero(close):
             warnings.warn(
                 f"joint {j + 1} ({names[j]}) {quantity} comes within {margins[quantity][j]:.4g} {_UNITS[quantity]} "
@@ -194,7 +216,43 @@ def sample_excitation(
                 ExcitationMarginWarning,
                 stacklevel=2,
             )
-    return SampledExcitation(t, q, dq, ddq, names, float(rate), margins, limits)
+    report = _check_geometry(robot, limits, t, q, dq, ddq)
+    return SampledExcitation(t, q, dq, ddq, names, float(rate), margins, limits_used, report)
+
+
+def _check_geometry(
+    robot: RobotModel, limits: ExcitationLimits, t: np.ndarray, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray
+) -> dict[str, dict[str, Any]]:
+    """The workspace and self-collision bounds on every sample; raises at the worst one beyond them."""
+    from reflexarm.ident.excitation.limits import arm_geometry
+
+    if limits.floor is None and not limits.self_collision:
+        return {}
+    geometry = arm_geometry(robot, 0.5 * (limits.lower + limits.upper), clearance=limits.clearance)
+    report = LimitEvaluator(robot, replace(limits, max_torque=np.full(robot.n, np.inf)), geometry).report(t, q, dq, ddq)
+    names = robot.joint_names
+    ws = report.get("workspace")
+    if ws is not None and float(ws["clearance_m"]) < 0:  # type: ignore[arg-type]
+        j = int(ws["joint"])  # type: ignore[call-overload]
+        depth = -float(ws["clearance_m"])  # type: ignore[arg-type]
+        raise ExcitationLimitError(
+            f"the link of joint {j + 1} ({names[j]}) goes {depth:.4g} m below the floor z = {limits.floor:g} m at "
+            f"t = {float(ws['time']):.4g} s (workspace); re-run 'reflexarm excite' (it keeps the arm above the "
+            "floor it is given with --floor)",
+            joint=j, quantity="workspace", value=float(limits.floor) - depth,  # type: ignore[arg-type]
+            time=float(ws["time"]), limit=float(limits.floor), excess=depth,  # type: ignore[arg-type]
+        )  # fmt: skip
+    sc = report.get("self_collision")
+    if sc is not None and float(sc["clearance_m"]) < 0:  # type: ignore[arg-type]
+        i, j = sc["pair"]  # type: ignore[misc]
+        depth = -float(sc["clearance_m"])  # type: ignore[arg-type]
+        raise ExcitationLimitError(
+            f"the links of joints {i + 1} ({names[i]}) and {j + 1} ({names[j]}) overlap by {depth:.4g} m at "
+            f"t = {float(sc['time']):.4g} s (self-collision, capsules fitted to the collision geometry); re-run "
+            "'reflexarm excite', which keeps them apart",
+            joint=int(i), quantity="self-collision", value=-depth, time=float(sc["time"]), limit=0.0, excess=depth,
+        )  # fmt: skip
+    return report
 
 
 def write_excitation_csv(sampled: SampledExcitation, path: str | os.PathLike[str]) -> Path:

@@ -1,0 +1,125 @@
+"""Excitations stay within torque, joint and workspace limits, checked by an independent inverse-dynamics
+pass (Pinocchio's RNEA on a model built here from the URDF) and the URDF's own collision cylinders."""
+
+from __future__ import annotations
+
+import csv
+import warnings
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from gen3_like import GEN3_LINKS, GEN3_TIP, GEN3_VELOCITY, write_gen3_like_urdf
+from reflexarm.ident.excitation.design import excitation_limits, optimize_excitation
+from reflexarm.ident.excitation.export import ExcitationLimitError, sample_excitation, write_excitation_csv
+from reflexarm.ident.excitation.fourier_trajectory import FourierTrajectory
+from reflexarm.robots import load_robot
+
+#: The test file's joint friction (``<dynamics damping="0.1" friction="0.3"/>`` on every joint).
+VISCOUS, COULOMB = 0.1, 0.3
+#: Round-off allowance of the independent checks: the CSV holds 10 significant digits.
+ROUND_OFF = 1e-6
+TORQUE_FRACTION = 0.5
+
+
+@pytest.fixture(scope="module")
+def gen3(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("gen3")
+    path = write_gen3_like_urdf(folder, rounded_pi=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return path, load_robot(path, tip=GEN3_TIP)
+
+
+@pytest.fixture(scope="module")
+def exported(gen3, tmp_path_factory):
+    """A briefly optimized excitation (3 harmonics, 3 iterations: a short run, any result must be within)
+    with half the effort limits, exported at 200 Hz and read back from the CSV."""
+    _, robot = gen3
+    design = optimize_excitation(
+        robot, n_harmonics=3, maxiter=3, n_samples=40, n_grid=100, n_grid_dynamics=30, seed=1,
+        torque_fraction=TORQUE_FRACTION,
+    )  # fmt: skip
+    sampled = sample_excitation(design.trajectory.with_periods(1), robot, rate=200.0, limits=design.limits)
+    path = write_excitation_csv(sampled, tmp_path_factory.mktemp("csv") / "traj.csv")
+    with path.open() as fh:
+        rows = list(csv.reader(fh))
+    data = np.array(rows[1:], dtype=float)
+    n = robot.n
+    return design, data[:, 1 : 1 + n], data[:, 1 + n : 1 + 2 * n], data[:, 1 + 2 * n :]
+
+
+def _independent_torque(urdf, q, dq, ddq):
+    """RNEA of Pinocchio's own URDF parser (not reflexarm's loader) plus the file's friction law."""
+    model = pin.buildModelFromUrdf(str(urdf))
+    data = model.createData()
+    tau = np.array([pin.rnea(model, data, q[k], dq[k], ddq[k]) for k in range(q.shape[0])])
+    return tau + VISCOUS * dq + COULOMB * np.sign(dq)
+
+
+def _lowest_point(urdf, q):
+    """Lowest point over the samples of the URDF's collision cylinders (axis along each link's z)."""
+    model = pin.buildModelFromUrdf(str(urdf))
+    data = model.createData()
+    low = np.inf
+    for k in range(q.shape[0]):
+        pin.forwardKinematics(model, data, q[k])
+        for j, link in enumerate(GEN3_LINKS):
+            com, (radius, length) = np.array(link[8]), link[10]
+            M = data.oMi[j + 1]
+            centre = M.act(com)
+            axis = M.rotation[:, 2]
+            reach = 0.5 * length * abs(axis[2]) + radius * np.sqrt(max(1.0 - axis[2] ** 2, 0.0))
+            low = min(low, centre[2] - reach)
+    return low
+
+
+@pytest.mark.slow  # a short optimization with the nonlinear limits (~1 min)
+def test_exported_excitation_is_within_every_limit_by_an_independent_check(gen3, exported):
+    urdf, robot = gen3
+    design, q, dq, ddq = exported
+    effort = np.array([link[5] for link in GEN3_LINKS], dtype=float)
+    tau = _independent_torque(urdf, q, dq, ddq)
+    use = np.abs(tau) / (TORQUE_FRACTION * effort)
+    assert use.max() <= 1.0 + ROUND_OFF, (use.max(), np.unravel_index(np.argmax(use), use.shape))
+    lo, hi = robot.lower_limit, robot.upper_limit
+    assert np.all(q >= lo - ROUND_OFF) and np.all(q <= hi + ROUND_OFF)
+    assert np.abs(dq).max() <= GEN3_VELOCITY + ROUND_OFF
+    assert np.abs(ddq).max() <= max(design.limits.max_acceleration) + ROUND_OFF
+    # workspace: the arm stands on its base, so the default floor is the base plane (2 cm clearance)
+    assert design.limits.floor == 0.0
+    assert _lowest_point(urdf, q) >= 0.0, _lowest_point(urdf, q)
+    # the design's own report agrees with the independent torque within the CSV's rounding
+    assert design.limits_optimized["torque"] <= 1.0
+    assert design.limit_report["torque"]["use"] == pytest.approx(use.max(), abs=0.02)
+
+
+def test_a_csv_beyond_the_torque_limit_is_refused(gen3):
+    """A trajectory that asks more torque than the bound is refused, naming joint, value and limit."""
+    _, robot = gen3
+    limits, _ = excitation_limits(robot, torque_fraction=0.05, floor=None, self_collision=False)
+    rng = np.random.default_rng(0)
+    a = 0.1 * rng.normal(size=(7, 3))
+    a[:, 0] = -a[:, 1:].sum(axis=1)
+    b = np.zeros((7, 3))
+    q0 = np.array([0.0, 0.5, 0.0, 0.5, 0.0, 0.5, 0.0])
+    tr = FourierTrajectory(2 * np.pi * 0.2, a, b, q0)
+    with pytest.raises(ExcitationLimitError, match=r"joint \d \(joint_\d\) torque -?[\d.]+ Nm at t = .* beyond its "
+                       r"(upper|lower) limit") as err:  # fmt: skip
+        sample_excitation(tr, robot, rate=100.0, limits=limits)
+    assert err.value.quantity == "torque" and err.value.excess > 0
+
+
+def test_a_csv_below_the_floor_is_refused(gen3):
+    """Shoulder and elbow folding forward by up to 1.7 rad bring the hand below the base plane: refused,
+    naming the link and the depth."""
+    _, robot = gen3
+    limits, _ = excitation_limits(robot, torque_fraction=None, floor=0.0, self_collision=False)
+    a = np.zeros((7, 2))
+    a[1] = a[3] = [0.4, -0.4]
+    tr = FourierTrajectory(2 * np.pi * 0.05, a, np.zeros((7, 2)), np.zeros(7))
+    with pytest.raises(ExcitationLimitError, match=r"the link of joint \d \(joint_\d\) goes [\d.]+ m below the floor "
+                       r"z = 0 m at t = [\d.]+ s \(workspace\)") as err:  # fmt: skip
+        sample_excitation(tr, robot, rate=100.0, limits=limits)
+    assert err.value.quantity == "workspace" and err.value.excess > 0
