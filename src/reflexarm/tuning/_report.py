@@ -33,7 +33,10 @@ def format_report(proposal: ThresholdProposal) -> str:
             f"delays with k_o = {st.detection_gain:g} 1/s)"
         )
     else:
-        observer = f"observer k_o = {st.detection_gain:g} 1/s, kappa_f = {st.kappa_f}, EFC = {st.kappa_ext}"
+        observer = (
+            f"observer k_o = {st.detection_gain:g} 1/s ({st.observer_discretization} form), kappa_f = {st.kappa_f}, "
+            f"EFC = {st.kappa_ext}"
+        )
     head = (
         f"{len(proposal.sources)} log(s), {proposal.duration_s / 60:.1f} min; "
         f"{observer}; {proposal.fault_ticks} rejected samples\n"
