@@ -237,8 +237,9 @@ def decode_block(
     single: list[int] = [] if bulk else list(range(block.size.size))
     batches: list[Batch] = []
     n_bulk = 0
-    for size in np.unique(block.size) if bulk else ():
-        idx = np.flatnonzero(block.size == size)
+    one_size = bool(block.size.size) and bool(np.all(block.size == block.size[0]))
+    for size in (block.size[:1] if one_size else np.unique(block.size)) if bulk else ():
+        idx = np.arange(block.size.size) if one_size else np.flatnonzero(block.size == size)
         rows = _rows(block.data, block.start[idx], int(size))
         left = np.ones(idx.size, dtype=bool)
         known = templates.setdefault(int(size), [])
@@ -298,7 +299,7 @@ def concatenate(batches: list[Batch]) -> list[Batch]:
     out = []
     for key, parts in by_key.items():
         index = np.concatenate([p.msg_index for p in parts])
-        order = np.argsort(index, kind="stable")
+        order = slice(None) if bool(np.all(index[1:] > index[:-1])) else np.argsort(index, kind="stable")
         stamp = np.concatenate([p.stamp for p in parts])[order]
         arrays = tuple(np.concatenate([p.arrays[k] for p in parts])[order] for k in range(len(parts[0].arrays)))
         out.append(Batch(key, index[order], stamp, arrays))
