@@ -7,16 +7,19 @@ Recovery on the MuJoCo plant of the UR-like 6-DoF arm (``ident_arms``), whose jo
 
 from __future__ import annotations
 
+import json
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from ident_arms import SIX_DOF_LINKS, SIX_DOF_TOOL, write_six_dof_urdf
 from reflexarm import load_robot
+from reflexarm.cli import main
 from reflexarm.errors import IdentificationError
 from reflexarm.experiments.identification import simulate_log
-from reflexarm.ident import BatchRegressor, FrictionParameters, RobotLog, preprocess_log
+from reflexarm.ident import BatchRegressor, FrictionParameters, RobotLog, preprocess_log, save_log
 from reflexarm.ident.excitation.design import FourierTrajectory
 from reflexarm.ident.friction.from_motion import identify_friction_from_motion
 from reflexarm.robots.robot_model import RobotModel
@@ -51,10 +54,15 @@ def six_dof(tmp_path_factory: pytest.TempPathFactory) -> RobotModel:
 
 
 @pytest.fixture(scope="module")
-def plant_log(six_dof: RobotModel) -> RobotLog:
+def raw_log(six_dof: RobotModel) -> RobotLog:
     tr = ordinary_motion(six_dof.n, seed=1)
     raw, _ = simulate_log(six_dof, tr, tr.duration, seed=1)  # paper noise, controller with the true model
-    return preprocess_log(raw)
+    return raw
+
+
+@pytest.fixture(scope="module")
+def plant_log(raw_log: RobotLog) -> RobotLog:
+    return preprocess_log(raw_log)
 
 
 def test_the_generated_motion_has_no_constant_velocity_interval(six_dof: RobotModel, plant_log: RobotLog) -> None:
@@ -129,3 +137,42 @@ def test_unknown_method_is_refused_with_the_choices(six_dof: RobotModel) -> None
     log = _exact_log(six_dof, np.ones(6))
     with pytest.raises(IdentificationError, match=r"unknown friction method 'fast'; choose one of: combined, steady"):
         identify_friction_from_motion(six_dof, log, method="fast")
+
+
+def test_identify_friction_on_a_log_of_ordinary_motion_names_the_method(
+    six_dof: RobotModel, raw_log: RobotLog, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    log = save_log(raw_log, tmp_path / "ordinary.npz")
+    arm = ["--robot", str(six_dof.source), "--ee-frame", SIX_DOF_TOOL, "--quiet"]
+    # as constant-velocity runs it is refused, pointing to --log
+    assert main(["identify", "friction", *arm, "--run", f"1={log}", "--out", str(tmp_path / "runs")]) != 0
+    assert (
+        f"ordinary.npz: no constant-velocity interval of joint 1 found; for a log of ordinary motion give it as "
+        f"--log {log} (friction from the combined regression)" in capsys.readouterr().err
+    )
+    assert main(["identify", "friction", *arm, "--log", str(log), "--no-offset", "--out", str(tmp_path / "fr")]) == 0
+    text = capsys.readouterr().out
+    assert "friction from ordinary motion by method 'combined'" in text
+    doc = json.loads((tmp_path / "fr" / "friction.json").read_text())
+    assert doc["method"] == "from ordinary motion: combined"
+    j = RECOVERED_JOINTS
+    np.testing.assert_allclose(np.array(doc["coulomb"])[j], TRUE_COULOMB[j], rtol=RECOVERY_RTOL)
+
+
+@pytest.mark.slow  # ~40 s: two identifications with projection, validation and robot copies
+def test_identify_dynamics_both_says_when_sequential_cannot_run_and_runs_it_with_friction_from_motion(
+    six_dof: RobotModel, raw_log: RobotLog, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    log = save_log(raw_log, tmp_path / "ordinary.npz")
+    arm = ["--robot", str(six_dof.source), "--ee-frame", SIX_DOF_TOOL, "--quiet"]
+    assert main(["identify", "friction", *arm, "--log", str(log), "--no-offset", "--out", str(tmp_path / "fr")]) == 0
+    # the friction file is the sequential method's first step; without it 'both' says what it did
+    out = tmp_path / "id"
+    assert main(["identify", "dynamics", *arm, "--log", str(log), "--min-speed", "0.055", "--out", str(out)]) == 0
+    assert "--method both: only the combined model is written; sequential not run: it needs the friction" in (
+        capsys.readouterr().out
+    )
+    assert "sequential" in json.loads((out / "identification.json").read_text())["not_run"]
+    fr = str(tmp_path / "fr" / "friction.json")
+    assert main(["identify", "dynamics", *arm, "--log", str(log), "--friction", fr, "--out", str(out)]) == 0
+    assert (out / "model_sequential.json").exists() and (out / "model_combined.json").exists()

@@ -7,6 +7,8 @@ fixed to the tool frame in the plant's file and not in the model: the truth (mas
 
 from __future__ import annotations
 
+import json
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -131,3 +133,50 @@ def test_a_tool_frame_not_on_the_last_link_is_refused(tmp_path: Path) -> None:
     z = np.zeros((t.size, 6))
     with pytest.raises(IdentificationError, match=r"tool frame 'elbow_link' is not on the last link"):
         identify_payload(arm, RobotLog(t, z, z, z, ddq=z))
+
+
+def test_identify_payload_command_writes_the_payload_and_the_change_check(
+    arms, raw_logs, tmp_path: Path, capsys
+) -> None:
+    from reflexarm.cli import main
+    from reflexarm.ident import save_log
+
+    arm, _ = arms
+    log = save_log(raw_logs[1], tmp_path / "carrying.npz")
+    out = tmp_path / "payload"
+    assert main(["identify", "payload", str(log), "--robot", str(arm.source), "--ee-frame", SIX_DOF_TOOL, "--quiet",
+                 "--out", str(out)]) == 0  # fmt: skip
+    text = capsys.readouterr().out
+    assert "payload (point mass) at 'tool': mass 1.5" in text
+    assert "no change of load" in text
+    doc = json.loads((out / "payload.json").read_text())
+    np.testing.assert_allclose(doc["payload"]["mass"], PAYLOAD_MASS, rtol=MASS_RTOL)
+    assert doc["change"]["changed"] is False
+    # --write-model needs the model file it updates
+    assert main(["identify", "payload", str(log), "--robot", str(arm.source), "--ee-frame", SIX_DOF_TOOL, "--quiet",
+                 "--write-model", str(tmp_path / "m.json"), "--out", str(out)]) != 0  # fmt: skip
+    assert "--write-model needs --model" in capsys.readouterr().err
+
+
+def test_a_model_file_updated_with_the_payload_explains_the_load(arms, raw_logs, tmp_path: Path) -> None:
+    from reflexarm.ident import (
+        identify_dynamics,
+        load_identified_model,
+        project_physically_consistent,
+        save_identified_model,
+    )
+    from reflexarm.ident.payload import write_model_with_payload
+
+    arm, _ = arms
+    free, carrying = (preprocess_log(lg) for lg in raw_logs)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # conditioning of a 10 s log: not what is tested here
+        fit = project_physically_consistent(identify_dynamics(arm, free, method="combined", min_speed=0.055), arm)
+    path = save_identified_model(fit, arm, tmp_path / "model.json")
+    model = load_identified_model(path, arm)
+    p = identify_payload(arm, carrying, model=model)
+    np.testing.assert_allclose(p.mass, PAYLOAD_MASS, rtol=MASS_RTOL)  # against an identified model too
+    updated = load_identified_model(write_model_with_payload(path, p, tmp_path / "with_payload.json"), arm)
+    np.testing.assert_allclose(updated.inertial_parameters()[-10:] - model.inertial_parameters()[-10:], p.parameters,
+                               atol=1e-9)  # fmt: skip
+    assert abs(identify_payload(arm, carrying, model=updated).mass) < MASS_RTOL * PAYLOAD_MASS

@@ -101,12 +101,17 @@ def _identify_from_logs(args: argparse.Namespace) -> int:
         val_raw = load_log_from_args(args, args.validation_log, robot)
         states = preprocess_log(val_raw, cutoff_hz=args.cutoff)
     friction = load_friction(args.friction, robot)
+    not_run: dict[str, str] = {}  # a method --method asked for that cannot run, and why (said, and in the summary)
     methods = ["combined", "sequential"] if args.method == "both" else [args.method]
     if "sequential" in methods and friction is None:
         if args.method == "sequential":
             raise ConfigError("--method sequential needs --friction friction.json (from 'reflexarm identify friction')")
         methods = ["combined"]
-        say(args, "no --friction given: only the combined method is run")
+        not_run["sequential"] = (
+            "not run: it needs the friction identified first (--friction friction.json); from these logs: 'reflexarm "
+            "identify friction --log LOG' (ordinary motion) or '--run JOINT=LOG' (constant-velocity runs)"
+        )
+        print(f"--method both: only the combined model is written; sequential {not_run['sequential']}")
     if "sequential" in methods and friction.missing:
         print(_partial_friction_line(args.friction, friction, robot, base.n_base))
     results = {}  # the models as saved: what the validation below scores
@@ -134,7 +139,7 @@ def _identify_from_logs(args: argparse.Namespace) -> int:
         save_identified_model(r, robot, out / f"model_{m}.json")
         name, copy_notes[m] = write_robot_copy(r, robot, out, args)
         copies.append(name)
-    summary: dict[str, Any] = {"robot": robot.name, "n_base": base.n_base, "methods": {}}
+    summary: dict[str, Any] = {"robot": robot.name, "n_base": base.n_base, "methods": {}, "not_run": not_run}
     for (m, r), name in zip(results.items(), copies, strict=True):
         summary["methods"][m] = {
             "robot_copy": {"file": name, "notes": copy_notes[m]},

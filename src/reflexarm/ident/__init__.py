@@ -1,8 +1,9 @@
-"""Learning the model (Sec. II-D): logs in, single-joint friction, base parameters, Fourier excitation,
-weighted least squares (combined and sequential) with the file's armature and joint springs as known
-terms, validation, and what the user takes away: the identified model (model file, and a copy of the robot
-file with the identified inertias and friction, :func:`write_identified_robot`) and the excitation as a
-sampled trajectory (:func:`sample_excitation`, :func:`write_excitation_csv`).
+"""Learning the model (Sec. II-D): logs in, single-joint friction (or friction from ordinary motion), base
+parameters, Fourier excitation, weighted least squares (combined and sequential) with the file's armature and
+joint springs as known terms, validation, and what the user takes away: the identified model (model file, and
+a copy of the robot file with the identified inertias and friction, :func:`write_identified_robot`) and the
+excitation as a sampled trajectory (:func:`sample_excitation`, :func:`write_excitation_csv`); a payload at the
+tool (:func:`identify_payload`, :func:`detect_payload_change`).
 
 Never imports :mod:`reflexarm.control`; the experiments that run the plant with the controller live in
 :mod:`reflexarm.experiments.identification`. Figures are in :mod:`reflexarm.ident.plots`.
@@ -37,6 +38,7 @@ from reflexarm.ident.export.model_file import (
     save_identified_model,
 )
 from reflexarm.ident.export.write_back import with_consistent_links, write_identified_robot
+from reflexarm.ident.friction.from_motion import MotionFriction, identify_friction_from_motion
 from reflexarm.ident.friction.joint_friction import (
     ConstantVelocityTrajectory,
     FrictionFit,
@@ -53,6 +55,7 @@ from reflexarm.ident.friction.parameters import (
     MissingFrictionError,
     check_friction_plausibility,
 )
+from reflexarm.ident.payload import Payload, PayloadChange, detect_payload_change, identify_payload, with_payload
 from reflexarm.logs import DEFAULT_CUTOFF_HZ, LogRepairWarning, RobotLog, load_log, preprocess_log, save_log
 
 __all__ = [
@@ -74,6 +77,9 @@ __all__ = [
     "KnownJointTerms",
     "LogRepairWarning",
     "MissingFrictionError",
+    "MotionFriction",
+    "Payload",
+    "PayloadChange",
     "PhysicalConsistencyWarning",
     "RobotLog",
     "SampledExcitation",
@@ -81,11 +87,14 @@ __all__ = [
     "check_friction_plausibility",
     "compute_base_parameters",
     "compute_friction_regressor",
+    "detect_payload_change",
     "fit_friction",
     "friction_from_fits",
     "friction_points",
     "identify_dynamics",
+    "identify_friction_from_motion",
     "identify_joint_friction",
+    "identify_payload",
     "load_identified_model",
     "load_log",
     "load_model_robot",
@@ -101,6 +110,7 @@ __all__ = [
     "segment_constant_velocity",
     "validate_model",
     "with_consistent_links",
+    "with_payload",
     "write_excitation_csv",
     "write_identified_robot",
 ]

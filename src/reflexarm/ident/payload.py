@@ -19,7 +19,8 @@ previous link's columns, which are fixed here).
   split the point mass is fitted before and after (cumulative normal equations: one pass), the split with
   the smallest residual wins, and a change is flagged when the masses differ by more than ``min_mass`` and
   by more than ``sigmas`` standard errors. It reports the time and the mass that explains the change.
-* :func:`with_payload` adds a payload to a model (the last link's parameters), to update a model file.
+* :func:`with_payload` adds a payload to a model (the last link's parameters); :func:`write_model_with_payload`
+  to an identified-model file.
 
 Rows where |dq_j| < ``min_speed`` are left out of joint j's equations: there the model's Coulomb friction
 has an undetermined sign (the same rule as :func:`~reflexarm.ident.identify_dynamics`'s ``min_speed``).
@@ -27,8 +28,11 @@ has an undetermined sign (the same rule as :func:`~reflexarm.ident.identify_dyna
 
 from __future__ import annotations
 
+import json
+import os
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -49,6 +53,7 @@ __all__ = [
     "detect_payload_change",
     "identify_payload",
     "with_payload",
+    "write_model_with_payload",
 ]
 
 #: Rows with |dq_j| below this are left out of joint j's equations [rad/s] (the paper's velocity noise).
@@ -359,3 +364,34 @@ def with_payload(model: RobotModel, payload: Payload) -> RobotModel:
     pi = model.inertial_parameters().copy()
     pi[-10:] += payload.parameters
     return model.with_inertial_parameters(pi)
+
+
+def write_model_with_payload(
+    model_file: str | os.PathLike[str], payload: Payload, path: str | os.PathLike[str]
+) -> Path:
+    """A copy of an identified-model file (``identify dynamics``'s model.json) with ``payload`` added to the last
+    link: its standard and base parameters (the base ones through the file's own map), the payload recorded
+    under ``extra.payload``. :func:`~reflexarm.ident.load_identified_model` loads the copy.
+    """
+    from reflexarm.ident.export.model_file import read_identified_model
+
+    result, doc = read_identified_model(model_file)
+    pi = np.asarray(doc["standard_parameters"], dtype=float).copy()
+    if pi.size != 10 * result.n:
+        raise IdentificationError(
+            f"{Path(model_file).name}: expected {10 * result.n} standard parameters; found {pi.size}"
+        )
+    pi[-10:] += payload.parameters
+    physical = (
+        None
+        if result.physical_parameters is None
+        else np.asarray(result.physical_parameters) + np.r_[np.zeros(10 * (result.n - 1)), payload.parameters]
+    )
+    updated = replace(result, beta_b=result.base.base_from_standard(pi), physical_parameters=physical)
+    doc["identification"] = updated.to_dict()
+    doc["standard_parameters"] = pi.tolist()
+    doc.setdefault("extra", {})["payload"] = payload.to_dict()
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(doc, indent=1))
+    return out
