@@ -14,8 +14,9 @@ residual spike as large as a hit: it would set the tuned levels and be an alarm.
   2 mrad/s velocity noise, one below ~0.025 rad/s, which still reaches a 1 kHz residual as a spike of about
   (1 - exp(-k_o dt)) M_jj |d| / dt.
 * **torque glitch** (a current spike): tau_j[k] is such a one-sample outlier of the torque; it is one joint's
-  (every other joint's d at that sample stays within :data:`CALM_FACTOR` robust standard deviations or below
-  :data:`CALM_SHARE` of the spike: a contact's torque J^T f reaches several joints at once); and the joint is
+  (every other joint's d at that sample stays within :data:`CALM_FACTOR` robust standard deviations, below
+  :data:`CALM_SHARE` of the spike, or is no peak of its own |d|: a contact's torque J^T f reaches several joints
+  at once, each peaking at its sample); and the joint is
   *at a stop* (dq_j changes sign within k-1..k+1, or |dq_j| there stays below :data:`STOP_SHARE` of the joint's
   largest |dq| in the log). A hit during motion can be one sample long at 100 Hz and is left alone; at a stop a
   one-sample torque spike is taken as a glitch. When the log's period is below half the shortest impact
@@ -88,10 +89,10 @@ def _robust_std(x: np.ndarray, floor: float) -> np.ndarray:
     return np.maximum(1.4826 * np.median(np.abs(x - med), axis=0), floor)
 
 
-def _one_sample_outliers(x: np.ndarray, floor: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(mask, d, sigma) of the interior samples of ``x`` (N, n) that stand out of the line through their neighbours
-    by more than OUTLIER_FACTOR robust standard deviations and SPIKE_RATIO times the neighbours' own (rows 1..N-2
-    of ``x``)."""
+def _one_sample_outliers(x: np.ndarray, floor: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(mask, d, sigma, peak) over the interior samples of ``x`` (N, n) (rows 1..N-2): ``mask`` those that stand out
+    of the line through their neighbours by more than OUTLIER_FACTOR robust standard deviations and SPIKE_RATIO
+    times the neighbours' own; ``peak`` those whose |d| is at least their neighbours' (a local peak of |d|)."""
     d = x[1:-1] - 0.5 * (x[:-2] + x[2:])
     sigma = _robust_std(d, floor)
     a = np.abs(d)
@@ -99,7 +100,7 @@ def _one_sample_outliers(x: np.ndarray, floor: float) -> tuple[np.ndarray, np.nd
     beside[1:] = a[:-1]
     beside[:-1] = np.maximum(beside[:-1], a[1:])
     mask = (a > OUTLIER_FACTOR * sigma) & (a > SPIKE_RATIO * beside)
-    return mask, d, sigma
+    return mask, d, sigma, a >= beside
 
 
 def _velocity_glitches(log: RobotLog) -> np.ndarray:
@@ -107,9 +108,11 @@ def _velocity_glitches(log: RobotLog) -> np.ndarray:
 
 
 def _torque_glitches(log: RobotLog, period: float) -> np.ndarray:
-    spike, d, sigma = _one_sample_outliers(log.measured_torque, _FLOOR["torque"])
-    # a hit moves several joints' torques at once (J^T f); a friction switch elsewhere is far smaller than a spike
-    stirred = (np.abs(d) > CALM_FACTOR * sigma) & (np.abs(d) > CALM_SHARE * np.max(np.abs(d), axis=1, keepdims=True))
+    spike, d, sigma, peak = _one_sample_outliers(log.measured_torque, _FLOOR["torque"])
+    # a hit moves several joints' torques at once (J^T f), each peaking at its sample; a friction switch elsewhere
+    # is far smaller than a spike; another joint's spike one sample away only shoulders this one
+    a = np.abs(d)
+    stirred = (a > CALM_FACTOR * sigma) & (a > CALM_SHARE * np.max(a, axis=1, keepdims=True)) & peak
     spike &= stirred.sum(axis=1, keepdims=True) == 1
     if period < 0.5 * SHORTEST_IMPACT_S:
         return spike
