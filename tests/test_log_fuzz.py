@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from reflexarm.cli import main
@@ -191,6 +191,23 @@ def _flipped(bag: Path, out: Path, rng: np.random.Generator) -> Path:
     return out
 
 
+def _zstd_chunk_corrupted(log: RobotLog, names: list[str], root: Path) -> Path:
+    """An MCAP bag with zstd-compressed chunks, 64 bytes in the middle of the file zeroed."""
+    bag = root / "zstd"
+    w = Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP)
+    w.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+    with w:
+        c = w.add_connection("/joint_states", JS, typestore=STORE)
+        for k in range(BAG_SAMPLES):
+            s = EPOCH_NS + k * 1_000_000
+            w.write(c, s + 300_000, _joint_state(s, names, log.q[k], log.dq[k], log.tau[k]))
+    f = _storage_file(bag)
+    data = bytearray(f.read_bytes())
+    data[len(data) // 3 : len(data) // 3 + 64] = bytes(64)
+    f.write_bytes(bytes(data))
+    return bag
+
+
 def _bag_cases(root: Path, log: RobotLog, names: list[str], rng: np.random.Generator) -> dict[str, Path]:
     good = _bag(root / "good_mcap", log, names)
     good_db = _bag(root / "good_db3", log, names, "sqlite3")
@@ -218,6 +235,7 @@ def _bag_cases(root: Path, log: RobotLog, names: list[str], rng: np.random.Gener
         "bag truncated mcap": _truncated(good, root / "truncated.mcap", 0.6),
         "bag truncated db3": _truncated(good_db, root / "truncated.db3", 0.6),
         "bag flipped bytes in a chunk": _flipped(good, root / "flipped.mcap", rng),
+        "bag zstd chunk corrupted": _zstd_chunk_corrupted(log, names, root),
         "bag garbage mcap": root / "garbage.mcap",
         "bag garbage db3": root / "garbage.db3",
         "bag empty mcap": root / "empty.mcap",
@@ -249,7 +267,8 @@ CSV_CASES = [
     "ragged row", "semicolons", "header repeated mid-file", "1e999 literal", "huge time in one row", "empty column",
 ]  # fmt: skip
 BAG_CASES = [
-    "bag truncated mcap", "bag truncated db3", "bag flipped bytes in a chunk", "bag garbage mcap", "bag garbage db3",
+    "bag truncated mcap", "bag truncated db3", "bag flipped bytes in a chunk", "bag zstd chunk corrupted",
+    "bag garbage mcap", "bag garbage db3",
     "bag empty mcap", "bag broken folder", "bag without JointState", "bag without messages", "bag zeroed message",
     "bag sequence length 1e9", "bag another type's payload", "bag truncated message", "bag clock jumps back 5 s",
     "bag clock runs backwards", "bag NaN position", "bag huge effort", "bag foreign joints", "bag one message",

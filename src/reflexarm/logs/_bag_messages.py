@@ -30,7 +30,7 @@ import numpy as np
 
 from reflexarm.logs._cdr import RawBlock
 
-__all__ = ["BLOCK", "raw_blocks"]
+__all__ = ["BLOCK", "ChunkError", "raw_blocks"]
 
 #: Messages per block: bounds the memory of the raw bytes held at once.
 BLOCK = 1 << 16
@@ -98,6 +98,14 @@ def _no_gc() -> Iterator[None]:
             gc.enable()
 
 
+class ChunkError(Exception):
+    """An MCAP chunk (at byte ``offset``, log times ``start``..``end`` [ns]) that cannot be read."""
+
+    def __init__(self, offset: int, start: int, end: int, cause: Exception) -> None:
+        super().__init__(f"{type(cause).__name__}: {cause}")
+        self.offset, self.start, self.end = offset, start, end
+
+
 def _storages(reader: Any) -> list[Any] | None:
     """The storage files of a single rosbag2 bag read as the bag reader reads them, else None."""
     from rosbags.rosbag2 import Reader
@@ -132,7 +140,10 @@ def _mcap_blocks(storage: Any, conns: list[Any], chunks: list[Any]) -> Iterator[
     later = np.minimum.accumulate(np.array([c.message_start_time for c in chunks], dtype=np.uint64)[::-1])[::-1]
     pending: list[RawBlock] = []
     for i, chunk in enumerate(chunks):
-        pending.append(_chunk_messages(storage, conns, chunk))
+        try:
+            pending.append(_chunk_messages(storage, conns, chunk))
+        except Exception as e:  # rosbags' decompression and checksum errors, records beyond the chunk
+            raise ChunkError(chunk.chunk_start_offset, chunk.message_start_time, chunk.message_end_time, e) from e
         if sum(p.size.size for p in pending) < BLOCK and i + 1 < len(chunks):
             continue
         block = _join(pending)

@@ -35,7 +35,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from reflexarm.errors import DataError
-from reflexarm.logs._bag_messages import raw_blocks
+from reflexarm.logs._bag_messages import ChunkError, raw_blocks
 from reflexarm.logs._cdr import JOINT_STATE, WRENCH, Batch, Kind, UndecodableMessage, concatenate, decode_block
 from reflexarm.logs.timestamps import relative_seconds
 
@@ -226,11 +226,17 @@ def _read_topic(reader: Any, topic: str, kind: Kind, where: str, bulk: bool) -> 
     while True:
         try:
             block = next(blocks, None)
-        except Exception as e:  # rosbags' container errors (truncated chunk, checksum, database)
+        except ChunkError as e:
             raise DataError(
-                f"{where}: cannot read the {topic} messages after message {count - 1} "
-                f"(bag time {_ns_text(int(received[-1][-1])) + ' s' if received else 'none'}): {e}",
-                source=where, column=topic, row=count,
+                f"{where}: cannot read the {topic} messages of the MCAP chunk at byte {e.offset:,} (bag times "
+                f"{_ns_text(e.start)} s to {_ns_text(e.end)} s): {e}",
+                source=where, column=topic, row=count, value=str(e),
+            ) from e  # fmt: skip
+        except Exception as e:  # rosbags' container errors (truncated chunk, checksum, database)
+            after = f" after message {count - 1} (bag time {_ns_text(int(received[-1][-1]))} s)" if count else ""
+            raise DataError(
+                f"{where}: cannot read the {topic} messages{after}: {type(e).__name__}: {e}",
+                source=where, column=topic, row=count, value=str(e),
             ) from e  # fmt: skip
         if block is None:
             break
