@@ -232,7 +232,8 @@ def _tune() -> dict[str, Any]:
     paths = _hour_of_logs()
     out = Path(tempfile.mkdtemp())
     exe = Path(sys.executable).with_name("reflexarm")
-    cmd = [str(exe), "tune-thresholds", *map(str, paths), "--out", str(out), "--no-figure"]
+    # the hydraulic motion moves four of the seven joints: --allow-unmoved writes the other three marked
+    cmd = [str(exe), "tune-thresholds", *map(str, paths), "--out", str(out), "--no-figure", "--allow-unmoved"]
     t0, c0 = time.perf_counter(), _child_cpu()
     res = subprocess.run(cmd, capture_output=True, text=True, env=os.environ | {"MPLBACKEND": "Agg"})
     wall, cpu = time.perf_counter() - t0, _child_cpu() - c0
