@@ -11,12 +11,20 @@ such a log, both fitting ``tau_f(dq) = d_v dq + mu_C sgn(dq) [+ tau_off]`` per j
   ``max_acceleration``, |dq_j| above ``min_speed``), with the rigid-body torque of a given ``model``
   removed. Only as good as that model's rigid-body torque.
 
-Which to use (measured on the simulated UR-like 6-DoF arm of ``tests/ident_arms.py``, ordinary Fourier
-motion up to 1.2 rad/s, paper noise; ``tests/test_friction_from_motion.py``): with the nominal model off by
-+-10 % the steady fit is off by up to 40 % (Coulomb) and 150 % (viscous) on the gravity-loaded joints (the
-model's gravity error is read as friction); with the exact model it is within 6 % on joints 2-5. The combined
-regression needs no model and gives Coulomb within 5 % on joints 1-5 and viscous within 5-20 %. So the
-default is ``"combined"``; ``"steady"`` is for a model already identified (``--model``).
+Which to use (measured on the simulated UR-like 6-DoF arm of ``tests/ident_arms.py`` at 1 kHz, paper noise,
+10 s of random 5-harmonic Fourier motion, no constant-velocity interval; ``tests/test_friction_from_motion.py``):
+
+* with the nominal model off by +-10 % the steady fit is off by up to 55 % (Coulomb) and 150 % (viscous) on the
+  gravity-loaded joints 2-3: the model's gravity error is read as friction. With the exact model it is within
+  7 % on joints 2-5 (joint 1: up to 14 %).
+* the combined columns need no model. Every joint peaking at 2 rad/s (4 seeds): Coulomb within 3.2 %, viscous
+  within 8.3 % on joints 1-5. Peaking at 1.2 rad/s (3 seeds): Coulomb within 5 %, viscous up to 22 % (joint 2).
+  A joint peaking at 0.5 rad/s: viscous +76 %. These are biases (the fit's std is ~1 %), so the std does not
+  show them: slow motion gives a poorly separated d_v.
+* joint 6 of that arm is never within 10 %: its plant friction (MuJoCo's soft frictionloss constraint on a
+  2e-4 kg m^2 link) reaches mu_C only above ~0.5 rad/s, which is not the Coulomb + viscous law.
+
+So the default is ``"combined"``; ``"steady"`` is for a model already identified (``--model``).
 
 Rows with |dq_j| < ``min_speed`` are left out of joint j's fit (both methods): there the sign of the
 measured velocity is noise, and real (and MuJoCo's soft-constraint) friction is not Coulomb + viscous near
