@@ -334,3 +334,28 @@ def test_an_mcap_chunk_whose_index_disagrees_with_its_records_is_read_by_rosbags
         assert b.key == r.key
         for x, y in zip((b.msg_index, b.stamp, *b.arrays), (r.msg_index, r.stamp, *r.arrays), strict=True):
             _assert_same_bits(x, y, str(b.key))
+
+
+def test_a_bag_whose_own_joint_state_definition_differs_is_a_data_error(tmp_path):
+    """The reader prefers the definitions stored in the bag: a 'sensor_msgs/msg/JointState' without
+    effort deserializes, but is not the JointState the log needs."""
+    from rosbags.typesys import get_types_from_msg
+
+    store = get_typestore(Stores.EMPTY)
+    store.register(get_types_from_msg("int32 sec\nuint32 nanosec\n", "builtin_interfaces/msg/Time"))
+    store.register(get_types_from_msg("builtin_interfaces/Time stamp\nstring frame_id\n", "std_msgs/msg/Header"))
+    store.register(get_types_from_msg("std_msgs/Header header\nstring[] name\nfloat64[] position\n", JS))
+    p = tmp_path / "bag"
+    with Writer(p, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        c = w.add_connection("/joint_states", JS, typestore=store)
+        for k in range(50):
+            s = EPOCH_NS + k * PERIOD_NS
+            stamp = store.types["builtin_interfaces/msg/Time"](sec=s // 10**9, nanosec=s % 10**9)
+            header = store.types["std_msgs/msg/Header"](stamp=stamp, frame_id="")
+            msg = store.types[JS](header=header, name=ARM, position=np.zeros(7))
+            w.write(c, s, bytes(store.serialize_cdr(msg, JS)))
+    for bulk in (True, False):
+        with pytest.raises(DataError, match=r"bag: /joint_states message 0 \(bag time 1795435200\.000000000 s\) does "
+                           r"not decode as sensor_msgs/msg/JointState: not the standard sensor_msgs/msg/JointState "
+                           r"fields: .*velocity"):  # fmt: skip
+            read_bag(p, joint_names=tuple(ARM), n_joints=None, joint_topic=None, wrench_topic=None, bulk=bulk)

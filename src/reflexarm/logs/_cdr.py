@@ -190,7 +190,10 @@ def _template(kind: Kind, raw: bytes, msg: Any) -> _Layout | None:
     if end > start:
         fixed.append((start, end))
     layout = _Layout(key, np.frombuffer(raw, np.uint8, count=end), tuple(fixed), tuple(fields), bool(raw[1]))
-    ref_key, ref_stamp, ref_arrays = kind.values(msg)
+    try:
+        ref_key, ref_stamp, ref_arrays = kind.values(msg)
+    except (AttributeError, TypeError, ValueError):  # left to the one-by-one pass, which says why
+        return None
     stamp, arrays = _decode(np.frombuffer(raw, np.uint8).reshape(1, -1), layout)
     same = ref_key == key and int(stamp[0]) == ref_stamp and len(arrays) == len(ref_arrays)
     same = same and all(
@@ -279,7 +282,11 @@ def _one_by_one(
     """The reference path: each message deserialized by rosbags, grouped by layout key."""
     groups: dict[tuple[Any, ...], tuple[list[int], list[int], list[tuple[np.ndarray, ...]]]] = {}
     for i in which:
-        key, stamp, arrays = kind.values(_deserialize(deserialize, kind, block.raw(i), first + i))
+        msg = _deserialize(deserialize, kind, block.raw(i), first + i)
+        try:
+            key, stamp, arrays = kind.values(msg)
+        except (AttributeError, TypeError, ValueError) as e:  # the bag's own definition of the type differs
+            raise UndecodableMessage(first + i, f"not the standard {kind.msgtype} fields: {e}") from e
         index, stamps, values = groups.setdefault(key, ([], [], []))
         index.append(first + i)
         stamps.append(stamp)
