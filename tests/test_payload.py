@@ -187,3 +187,27 @@ def test_a_model_file_updated_with_the_payload_explains_the_load(arms, raw_logs,
     np.testing.assert_allclose(updated.inertial_parameters()[-10:] - model.inertial_parameters()[-10:], p.parameters,
                                atol=1e-9)  # fmt: skip
     assert abs(identify_payload(arm, carrying, model=updated).mass) < MASS_RTOL * PAYLOAD_MASS
+
+
+def test_identify_payload_command_on_a_log_where_the_load_changed_reports_the_load_after_it(
+    arms, raw_logs, tmp_path: Path, capsys
+) -> None:
+    from reflexarm.cli import main
+    from reflexarm.ident import save_log
+
+    arm, _ = arms
+    free, carrying = raw_logs
+    t_change = free.t[-1] + 1e-3
+    both = RobotLog(
+        np.r_[free.t, carrying.t + t_change], np.r_[free.q, carrying.q], np.r_[free.dq, carrying.dq],
+        np.r_[free.tau, carrying.tau], source="picked_up",
+    )  # fmt: skip
+    log = save_log(both, tmp_path / "picked_up.npz")
+    out = tmp_path / "payload"
+    assert main(["identify", "payload", str(log), "--robot", str(arm.source), "--ee-frame", SIX_DOF_TOOL, "--quiet",
+                 "--out", str(out)]) == 0  # fmt: skip
+    assert "the payload above averages the loads before and after the change; after it:" in capsys.readouterr().out
+    doc = json.loads((out / "payload.json").read_text())
+    assert doc["change"]["changed"] is True and doc["change"]["payload_is_after_the_change"] is True
+    assert abs(doc["change"]["time"] - t_change) < CHANGE_TIME_ATOL
+    np.testing.assert_allclose(doc["payload"]["mass"], PAYLOAD_MASS, rtol=MASS_RTOL)

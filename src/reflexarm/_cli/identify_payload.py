@@ -89,6 +89,10 @@ def friction_from_motion_command(args: argparse.Namespace) -> int:
     )
     for note in res.notes:
         print(note)
+    print(
+        "+-: the fit's standard errors; they do not hold the bias of slow motion (d_v off by 20-80 % on simulated "
+        "joints peaking below ~1 rad/s, see reflexarm.ident.friction.from_motion): log fast motion of every joint"
+    )
     print(f"\nwrote {out}/ (friction.json, friction.csv): 'identify dynamics --friction {out}/friction.json'")
     return 0
 
@@ -143,8 +147,11 @@ def payload_command(args: argparse.Namespace) -> int:
         change = detect_payload_change(robot, log, model=model)
         change_doc: dict[str, object] = change.to_dict()
         print(change.reason)
-        if change.changed:
-            print("the payload above is an average over the log: identify on the part after the change")
+        if change.changed:  # the whole-log payload mixes two loads: the one after the change is what is carried now
+            print("the payload above averages the loads before and after the change; after it:")
+            payload = identify_payload(robot, log.select(log.t >= change.time), model=model, inertia=args.inertia)
+            print(payload.describe())
+            change_doc["payload_is_after_the_change"] = True
     except IdentificationError as e:  # too short for two segments: the payload still stands
         change_doc = {"changed": None, "reason": str(e)}
         print(f"change of load not checked: {e}")
