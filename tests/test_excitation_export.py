@@ -14,7 +14,7 @@ from ident_arms import SIX_DOF_TOOL, write_six_dof_urdf
 from reflexarm import load_robot
 from reflexarm.cli import main
 from reflexarm.errors import ConfigError
-from reflexarm.ident.excitation.design import FourierTrajectory, optimize_excitation
+from reflexarm.ident.excitation.design import FourierTrajectory, excitation_limits, optimize_excitation
 from reflexarm.ident.excitation.export import (
     ExcitationLimitError,
     ExcitationMarginWarning,
@@ -73,10 +73,15 @@ def test_the_sampled_excitation_is_the_trajectory_at_the_rate(six_dof: RobotMode
 
 def test_a_sample_beyond_a_limit_is_refused_naming_joint_value_and_excess(six_dof: RobotModel,
                                                                          start: FourierTrajectory) -> None:  # fmt: skip
-    fast = FourierTrajectory(start.base_frequency, 4.0 * start.a, 4.0 * start.b, start.offset)
+    # twice the velocity limit (the start stays within the torque and workspace bounds, so 4 x it may not leave
+    # the joint ranges); only the joint limits are asked here (no floor, no self-collision, no torque bound)
+    _, dq, _ = start.evaluate(np.arange(0.0, start.period, 0.01))
+    k = 2.0 * float(np.max(six_dof.velocity_limit / np.abs(dq).max(axis=0).clip(1e-9)))
+    fast = FourierTrajectory(start.base_frequency, k * start.a, k * start.b, start.offset)
+    joints_only = excitation_limits(six_dof, torque_fraction=None, floor=None, self_collision=False)[0]
     beyond = r"joint \d \(\w+\) \w+ -?[\d.]+ rad(/s\^2)? at t = .* is beyond"
     with pytest.raises(ExcitationLimitError, match=beyond) as e:
-        sample_excitation(fast, six_dof, rate=100.0, max_acceleration=2.0)
+        sample_excitation(fast, six_dof, rate=100.0, max_acceleration=2.0, limits=joints_only)
     assert e.value.excess > 0 and abs(e.value.value) > abs(e.value.limit)
     assert 0 <= e.value.joint < 6 and e.value.quantity in ("position", "velocity", "acceleration")
 
@@ -85,8 +90,9 @@ def test_a_pose_close_to_a_limit_warns(six_dof: RobotModel, start: FourierTrajec
     near = six_dof.upper_limit - 0.01  # 0.01 rad from the upper limit of +-3.1 rad joints
     still = FourierTrajectory(start.base_frequency, 1e-6 * start.a, 1e-6 * start.b, near)
     close = r"joint 1 \(shoulder_pan_joint\) position comes within 0\.0(1|099\d*) rad of its limit"
-    with pytest.warns(ExcitationMarginWarning, match=close):
-        sample_excitation(still, six_dof, rate=100.0)
+    joints_only = excitation_limits(six_dof, torque_fraction=None, floor=None, self_collision=False)[0]
+    with pytest.warns(ExcitationMarginWarning, match=close):  # (at +3.09 rad the arm reaches below its base)
+        sample_excitation(still, six_dof, rate=100.0, limits=joints_only)
 
 
 def test_a_rate_too_low_for_the_highest_harmonic_is_refused(six_dof: RobotModel, start: FourierTrajectory) -> None:
