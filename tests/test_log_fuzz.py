@@ -3,7 +3,7 @@ that reads logs (``identify dynamics``, ``identify friction``, ``validate``, ``t
 in-process. Every case must end in a clear error (exit 2, the message naming the file) with nothing
 written to the output folder, or (the few benign variants) in a result; never in a traceback.
 
-The cases are generated from one exact 2 s Atlas log with a seeded generator, so they are the same on
+The cases are generated from one exact 1 s Atlas log with a seeded generator, so they are the same on
 every run: truncated files, binary garbage, empty files, NaN / inf / huge values, text in numbers,
 duplicated and missing columns, time running backwards or standing still, ragged rows, and bags with
 truncated containers, corrupt messages, clocks that jump back, foreign joints, no messages.
@@ -36,7 +36,7 @@ STORE = get_typestore(Stores.ROS2_HUMBLE)
 JS = "sensor_msgs/msg/JointState"
 
 
-def _exact(robot, duration: float = 2.0) -> RobotLog:
+def _exact(robot, duration: float = 1.0) -> RobotLog:
     rng = np.random.default_rng(SEED)
     tr = FourierTrajectory(2 * np.pi * 0.2, 0.1 * rng.normal(size=(7, 3)), 0.1 * rng.normal(size=(7, 3)), robot.home)
     t = np.arange(0.0, duration, 1e-3)
@@ -76,12 +76,12 @@ def _swap_rows(t: np.ndarray) -> np.ndarray:
 
 
 def _huge_once(t: np.ndarray) -> np.ndarray:
-    t[1500] = 1e300
+    t[850] = 1e300
     return t
 
 
 def _nan_time(t: np.ndarray) -> np.ndarray:
-    t[1234] = np.nan
+    t[734] = np.nan
     return t
 
 
