@@ -42,6 +42,7 @@ from reflexarm.ident.estimation.known_terms import KnownJointTerms
 from reflexarm.ident.estimation.regressor import BatchRegressor
 from reflexarm.ident.friction.parameters import FrictionParameters
 from reflexarm.logs._measured_torque import _rhs
+from reflexarm.logs.plausibility import check_log_against_robot
 from reflexarm.logs.robot_log import RobotLog
 from reflexarm.robots.robot_model import RobotModel
 
@@ -187,6 +188,7 @@ class _Residual:
                 raise IdentificationError(f"{lg.source}: log has {lg.n} joints; robot {robot.name!r} has {n}")
             if lg.ddq is None:
                 raise IdentificationError(f"{lg.source}: log has no ddq; run reflexarm.ident.preprocess_log first")
+            check_log_against_robot(lg, robot)  # far beyond the limits: a bad log, not a payload
             r = _rhs(model, lg) - friction.compute_torque(lg.dq) - known.compute_torque(lg.q, lg.ddq)
             for sl, Y in reg.iter_chunks(lg.q, lg.dq, lg.ddq):
                 r[sl] -= Y @ pi

@@ -47,6 +47,7 @@ from reflexarm.ident.estimation.known_terms import KnownJointTerms
 from reflexarm.ident.estimation.regressor import BatchRegressor
 from reflexarm.ident.friction.parameters import FrictionParameters, check_friction_against_robot, format_joints
 from reflexarm.logs._measured_torque import _rhs
+from reflexarm.logs.plausibility import check_log_against_robot
 from reflexarm.logs.robot_log import RobotLog
 from reflexarm.robots.robot_model import RobotModel
 
@@ -136,6 +137,7 @@ def identify_friction_from_motion(
 
     Raises:
         IdentificationError: unknown method, a log without ddq, joint count mismatch, no joint moving enough.
+        ImplausibleDataError: a log far outside the robot's limits (as :func:`~reflexarm.ident.identify_dynamics`).
     """
     if method not in FRICTION_METHODS:
         raise IdentificationError(f"unknown friction method {method!r}; choose one of: {', '.join(FRICTION_METHODS)}")
@@ -147,6 +149,7 @@ def identify_friction_from_motion(
             raise IdentificationError(f"{lg.source}: log has {lg.n} joints; robot {robot.name!r} has {robot.n}")
         if lg.ddq is None:
             raise IdentificationError(f"{lg.source}: log has no ddq; run reflexarm.ident.preprocess_log first")
+        check_log_against_robot(lg, robot)  # as identify_dynamics: far beyond the limits is a bad log, not friction
     dq = np.concatenate([lg.dq for lg in logs])
     moving = np.abs(dq) >= min_speed
     samples = moving.sum(axis=0)
