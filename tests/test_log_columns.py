@@ -231,3 +231,26 @@ def test_parquet_array_columns_of_a_bag_to_dataframe_export(tmp_path):
     text = "\n".join(back.notes)
     assert "df.parquet: array column(s) name, position, velocity, effort expanded to one column per element" in text
     assert "left out 6 row(s) that hold none of the arm's joints (joints finger: not in the arm)" in text
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+def test_positions_work_in_files_with_a_header_and_take_a_scale(tmp_path, suffix):
+    """Positions count the file's columns from 0 as they stand (header or not); the wrench by position; a
+    scale per entry; the current alias 'cur'."""
+    log = _log()
+    df = _frame(log, "a{i}", "b{i}", "c{i}", time="clock")  # t, a1, b1, c1, a2, b2, c2, ...
+    for k in range(6):
+        df[f"w{k}"] = 1e3 * log.wrench[:, k]  # in mN / mNm
+    p = tmp_path / f"pos{suffix}"
+    if suffix == ".csv":
+        df.to_csv(p, index=False, float_format="%.17g")
+    else:
+        df.to_parquet(p, index=False)
+    mapping = parse_column_mapping("t=0,q=1:10:3,dq=2:10:3,tau=3:10:3,wrench=10:16*0.001")
+    back = load_log(p, joint_names=NAMES, columns=mapping)
+    _same(back, log)
+    np.testing.assert_allclose(back.wrench, log.wrench, rtol=1e-15, atol=1e-15)
+    assert f"pos{suffix}: position from columns 1:10:3 by position (a1, a2, a3)" in back.notes
+    assert parse_column_mapping("cur=13:19") == {"current": "13:19"}
+    with pytest.raises(ConfigError, match=r"column mapping key 'q' given twice"):
+        parse_column_mapping("q=1:4,q=4:7")
