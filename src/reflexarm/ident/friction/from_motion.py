@@ -21,6 +21,9 @@ Which to use (measured on the simulated UR-like 6-DoF arm of ``tests/ident_arms.
   within 8.3 % on joints 1-5. Peaking at 1.2 rad/s (3 seeds): Coulomb within 5 %, viscous up to 22 % (joint 2).
   A joint peaking at 0.5 rad/s: viscous +76 %. These are biases (the fit's std is ~1 %), so the std does not
   show them: slow motion gives a poorly separated d_v.
+* at 100 Hz (the same logs, every 10th sample, the same noise per sample) the combined columns are worse:
+  d_v off by up to 36 % (10 Hz cutoff; 60 s of log no better, so a bias, not noise) or 23 % (5 Hz cutoff) on
+  joints 1-5: the differentiated, less filtered velocity noise enters the inertial columns.
 * joint 6 of that arm is never within 10 %: its plant friction (MuJoCo's soft frictionloss constraint on a
   2e-4 kg m^2 link) reaches mu_C only above ~0.5 rad/s, which is not the Coulomb + viscous law.
 
