@@ -24,6 +24,7 @@ BENCHES = (
     "bench_ident",
     "bench_sweeps",
     "bench_bags",
+    "bench_ros",
 )
 
 

@@ -48,7 +48,8 @@ def inside_private_network(request: pytest.FixtureRequest, timeout: float = 300.
     root = Path(__file__).resolve().parents[1]
     inner = (
         f"ip link set lo up && exec env {INSIDE}=1 ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST "
-        f"{sys.executable} -m pytest -q -x -p no:cacheprovider -p no:randomly --show-capture=no --tb=short '{request.node.nodeid}'"
+        f"{sys.executable} -m pytest -q -x -p no:cacheprovider -p no:randomly --show-capture=no --tb=short "
+        f"'{request.node.nodeid}'"
     )
     res = subprocess.run(["unshare", "-n", "bash", "-c", inner], cwd=root, capture_output=True, text=True,
                          timeout=timeout)  # fmt: skip
@@ -269,7 +270,8 @@ def test_control_mode_sends_the_safe_command_on_faults(request, tmp_path):
         assert all(c.shape == (7,) and np.all(np.isfinite(c)) for c in h.commands)
         h.send(names=h.names[::-1][:6])  # wrong names: the safe command, gravity at the last accepted posture
         h.spin_until(lambda: len(h.commands) >= 6, "the safe command")
-        expected = np.clip(h.robot.compute_gravity(h.q), -h.node.controller.torque_limit, h.node.controller.torque_limit)
+        limit = h.node.controller.torque_limit
+        expected = np.clip(h.robot.compute_gravity(h.q), -limit, limit)
         np.testing.assert_allclose(h.commands[-1], expected, atol=1e-12, err_msg="the safe command is g(q_last)")
         q = h.q.copy()
         q[0] = np.inf
@@ -297,8 +299,9 @@ def test_demo_collision_over_dds_is_detected_at_the_in_process_tick(request, tmp
     assert trace.collision[k_ref]
     cli = [sys.executable, "-m", "reflexarm.cli", "ros"]
     control = subprocess.Popen(
-        [*cli, "control", "-p", "reference:=demo", "-p", "model_error:=0.1", "-p", "wrench_topic:=/reflexarm_sim/wrench",
-         "-p", "joint_state_timeout:=30.0", "-p", "wrench_timeout:=30.0", "-p", f"summary_file:={tmp_path}/ctrl.json"],
+        [*cli, "control", "-p", "reference:=demo", "-p", "model_error:=0.1",
+         "-p", "wrench_topic:=/reflexarm_sim/wrench", "-p", "joint_state_timeout:=30.0",
+         "-p", "wrench_timeout:=30.0", "-p", f"summary_file:={tmp_path}/ctrl.json"],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
     )  # fmt: skip
     try:

@@ -419,6 +419,7 @@ class CollisionMonitor(Node):
         return {
             "mode": self.config.mode,
             "robot": self.robot.name,
+            "heard": self.heard,
             "joint_states": self._ticks,
             "lost_by_stamp": self._lost,
             "first_stamp_ns": self.stamps.first_ns,
