@@ -69,3 +69,35 @@ def test_rounded_pi_base_map_reproduces_torques_to_the_dropped_size(gen3):
     np.testing.assert_allclose(
         bp.select(Y) @ bp.base_from_standard(pi), full, atol=DEFAULT_RANK_TOLERANCE * np.abs(full).max()
     )
+
+
+def test_a_large_projection_change_is_explained(gen3):
+    """``identify dynamics`` prints |delta beta_b| / |beta_b| of the consistency projection; a large one comes
+    with the combinations that moved and by how many standard deviations (never a bare number)."""
+    from dataclasses import replace
+
+    from reflexarm.ident import identify_dynamics
+    from reflexarm.ident.estimation.identify import PROJECTION_EXPLAIN, explain_projection
+    from reflexarm.ident.excitation.fourier_trajectory import FourierTrajectory
+    from reflexarm.logs.robot_log import RobotLog
+
+    exact, _ = gen3
+    rng = np.random.default_rng(0)
+    a, b = 0.1 * rng.normal(size=(7, 4)), 0.1 * rng.normal(size=(7, 4))
+    a[:, 0] = -a[:, 1:].sum(axis=1)
+    b[:, 0] = -(b[:, 1:] * np.arange(2, 5)).sum(axis=1)
+    tr = FourierTrajectory(2 * np.pi * 0.1, a, b, np.zeros(7))
+    t = np.arange(1000) / 100.0
+    q, dq, ddq = tr.evaluate(t)
+    tau = np.array([exact.compute_motor_torque(q[k], dq[k], ddq[k]) for k in range(t.size)])
+    tau += rng.normal(0.0, 0.05, tau.shape)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = identify_dynamics(exact, RobotLog(t=t, q=q, dq=dq, tau=tau, ddq=ddq, source="gen"), method="combined")
+    assert explain_projection(res, res) == ""
+    moved = res.beta_b.copy()
+    moved[3] += 2.0 * np.linalg.norm(res.beta_b)  # a change far beyond PROJECTION_EXPLAIN
+    text = explain_projection(res, replace(res, beta_b=moved))
+    assert text.startswith("|delta beta_b| / |beta_b| = 2: the largest changes [")
+    assert "sigma)" in text and res.base.base_names(max_terms=1)[3] in text
+    assert PROJECTION_EXPLAIN < 2.0

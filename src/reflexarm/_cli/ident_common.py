@@ -171,6 +171,10 @@ def for_controller(result: Any, robot: Any, nominal: Any, args: argparse.Namespa
     consistent, how = with_consistent_links(result, nominal, threads=None)  # the command sets --threads
     if consistent.beta_b is not result.beta_b:
         print(f"{result.method}: the model file and robot copy hold {how}")
+        from reflexarm.ident.estimation.identify import explain_projection
+
+        if why := explain_projection(result, consistent):
+            print(f"{result.method}: {why}")
     return consistent
 
 

@@ -468,3 +468,35 @@ def _progress(it, progress: bool, lg: RobotLog):  # type: ignore[no-untyped-def]
         for sl, Y in it:
             yield sl, Y
             bar.update(sl.stop - sl.start)
+
+
+#: A projection that moves beta_b by more than this share of its norm is explained (which combinations
+#: moved, by how many of their standard deviations): beyond 10 %, the model a user loads is not the fit.
+PROJECTION_EXPLAIN = 0.1
+
+
+def explain_projection(before: DynamicsIdentification, after: DynamicsIdentification, *, top: int = 3) -> str:
+    """Why the physically consistent model ``after`` differs much from the least-squares ``before``: the base
+    combinations that moved most, their change in standard deviations of the estimate, and what that means;
+    "" when |delta beta_b| / |beta_b| <= :data:`PROJECTION_EXPLAIN`."""
+    d = after.beta_b - before.beta_b
+    rel = float(np.linalg.norm(d) / max(float(np.linalg.norm(before.beta_b)), 1e-300))
+    if rel <= PROJECTION_EXPLAIN:
+        return ""
+    nb = before.base.n_base
+    std = np.maximum(before.beta_std[:nb], 1e-300)
+    names = before.base.base_names(max_terms=1)
+    order = np.argsort(-np.abs(d))[:top]
+    moved = "; ".join(
+        f"[{names[i]}] {before.beta_b[i]:.4g} -> {after.beta_b[i]:.4g} ({abs(d[i]) / std[i]:.2g} sigma)" for i in order
+    )
+    loose = [i for i in order if abs(d[i]) <= 3.0 * std[i]]
+    why = (
+        "these moves are within 3 standard deviations of the estimate: the data do not determine these "
+        "combinations, and the projection picks physically consistent values for them"
+        if len(loose) == len(order)
+        else "some move by more than 3 standard deviations: the least-squares estimate is physically impossible "
+        "there (e.g. a negative mass or inertia); check the log (units, torque sign, friction) and the excitation"
+    )
+    note = f" ({before.base.note})" if before.base.note else ""
+    return f"|delta beta_b| / |beta_b| = {rel:.3g}: the largest changes {moved}; {why}{note}"
