@@ -29,6 +29,11 @@ from reflexarm._cli.ident_common import (
     write_json,
 )
 from reflexarm._cli.identify_dynamics import identify_dynamics_command, validate_command
+from reflexarm._cli.identify_payload import (
+    add_friction_from_motion_options,
+    friction_from_motion_command,
+    register_payload,
+)
 from reflexarm._cli.log_options import add_log_options, load_log_from_args
 from reflexarm.errors import ConfigError
 
@@ -124,6 +129,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "level (default 0.1: +-10 %%, the paper's)",
     )
     f.add_argument("--jobs", type=int, default=1, help="joints simulated in parallel (default 1)")
+    add_friction_from_motion_options(f)
     add_log_options(f)
     add_common(f, default_out="results/friction")
     f.set_defaults(func=_identify_friction)
@@ -187,6 +193,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_log_options(d)
     add_common(d, default_out="results/identify")
     d.set_defaults(func=identify_dynamics_command)
+    register_payload(isub)
 
     v = sub.add_parser(
         "validate",
@@ -340,6 +347,10 @@ def _identify_friction(args: argparse.Namespace) -> int:
     )
     from reflexarm.ident.plots import plot_friction
 
+    if args.log:  # ordinary motion: no constant-velocity runs needed
+        if args.run:
+            raise ConfigError("give --run JOINT=LOG (constant-velocity runs) or --log LOG (ordinary motion), not both")
+        return friction_from_motion_command(args)
     out = out_dir(args)
     robot = load_robot_arg(args)
     truth = None
@@ -363,7 +374,10 @@ def _identify_friction(args: argparse.Namespace) -> int:
             proc = preprocess_log(log)
             intervals = segment_constant_velocity(proc.t, proc.dq[:, j], q=proc.q[:, j])
             if not intervals:
-                raise ConfigError(f"{Path(path).name}: no constant-velocity interval of joint {j + 1} found")
+                raise ConfigError(
+                    f"{Path(path).name}: no constant-velocity interval of joint {j + 1} found; for a log of ordinary "
+                    f"motion give it as --log {path} (friction from the combined regression)"
+                )
             pts = friction_points(robot, j, proc.t, proc.q, proc.dq, proc.tau, intervals)
             fits.append(fit_friction(pts, offset=not args.no_offset, robot=robot))
         # friction_from_fits puts 0 for the joints without a run: mark them not identified instead
