@@ -24,9 +24,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "pfl",
         help="human contact limits (ISO/TS 15066): permissible speeds, simulated contacts per body region, clamping",
-        description="Swing each arm's end effector into ISO/TS 15066 body regions at several speeds (detection off "
-        "and each reaction), clamp the region against a wall, and compare with v sqrt(mu k); or check a trajectory "
-        "file (--trajectory) sample by sample. Writes pfl_runs.csv, pfl_table.csv, pfl.json, pfl_<region>.png, "
+        description="Swing each arm's end effector (and the links of --points) into ISO/TS 15066 body regions at "
+        "several speeds (detection off and each reaction), clamp the region against a wall, and compare with "
+        "v sqrt(mu k); or simulate your own motion (--trajectory, time-scaled to each speed) and check it sample "
+        "by sample. Writes pfl_runs.csv, pfl_table.csv, pfl.json, pfl_<region>.png, "
         "pfl_report.html.",
     )
     p.add_argument("--arms", default=",".join(PFL_ARMS), metavar="LIST", help=f"arms (default {','.join(PFL_ARMS)})")
@@ -52,12 +53,26 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--model-error", type=float, default=10.0, metavar="PCT", help="controller model error [%%]")
     p.add_argument("--seed", type=int, default=0, help="seed of the sensor noise and the model errors (default 0)")
     p.add_argument(
+        "--points",
+        default="ee",
+        metavar="LIST",
+        help="contact points per arm: ee and/or link1..link<n> (the link joint j moves; the point along it with the "
+        "largest speed along the motion) (default ee)",
+    )
+    p.add_argument(
         "--trajectory",
         type=Path,
         default=None,
         metavar="CSV",
-        help="check this motion instead (columns t, then one per joint [rad]; of the first arm of --arms): "
-        "per sample the speed of the end effector and the last joints vs the permissible speed per region",
+        help="simulate this motion instead of the demo swing (of the first arm of --arms): columns t, then one per "
+        "joint [rad], or the t, position_<joint>..., velocity_<joint>... of 'reflexarm excite --csv'; the region "
+        "where each point of --points moves fastest, the motion at its own timing and time-scaled (same path) so "
+        "that the point's speed there is each of --speeds; also checked sample by sample (pfl_trajectory.json)",
+    )
+    p.add_argument(
+        "--check-only",
+        action="store_true",
+        help="with --trajectory: only the sample-by-sample check against the permissible speeds (no simulation)",
     )
     p.add_argument("--out", type=Path, default=Path("results/pfl"), help="output folder (default results/pfl)")
     p.set_defaults(func=_pfl)
@@ -83,27 +98,16 @@ def _speeds(text: str) -> list[float]:
     return sorted(v)
 
 
-def _check_trajectory(args: argparse.Namespace, arm: str, regions: list[str]) -> int:
-    import numpy as np
-
-    from reflexarm.experiments.reaction_study import study_arm
-    from reflexarm.safety import check_trajectory_speed
-
-    robot = study_arm(arm).robot
-    try:
-        data = np.genfromtxt(args.trajectory, delimiter=",", names=True)
-    except OSError as e:
-        raise ConfigError(f"cannot read --trajectory {str(args.trajectory)!r}: {e}") from e
-    cols = list(data.dtype.names or ())
-    if len(cols) != robot.n + 1 or cols[0] != "t":
-        raise ConfigError(f"--trajectory needs columns t and {robot.n} joint positions [rad]; found {cols}")
-    t = np.asarray(data["t"], dtype=float)
-    q = np.column_stack([np.asarray(data[c], dtype=float) for c in cols[1:]])
-    dq = np.gradient(q, t, axis=0)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+def _check_trajectory(args: argparse.Namespace, arm: str, regions: list[str], motion: Any, robot: Any) -> None:
+    """The sample-by-sample check of the motion at its own timing (``pfl_trajectory.json``)."""
     import json
 
+    from reflexarm.safety import check_trajectory_speed
+
+    t = motion.t
+    q, dq, _ = motion.at_file_time(t)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
     report: dict[str, Any] = {"robot": arm, "file": str(args.trajectory), "regions": {}}
     for region in regions:
         check = check_trajectory_speed(robot, t, q, dq, region)
@@ -116,46 +120,68 @@ def _check_trajectory(args: argparse.Namespace, arm: str, regions: list[str]) ->
         )
     (out / "pfl_trajectory.json").write_text(json.dumps(report, indent=1))
     print(f"wrote {out / 'pfl_trajectory.json'}", file=sys.stderr)
-    return 0
+
+
+def _points(text: str, robots: list[tuple[str, Any]]) -> list[str]:
+    from reflexarm.experiments.pfl_placement import point_names
+
+    points = _names(text, "--points", None)
+    for arm, robot in robots:
+        valid = point_names(robot)
+        bad = [p for p in points if p not in valid]
+        if bad:
+            raise ConfigError(f"--points: {arm} has no contact point {bad[0]!r}; choose from: {', '.join(valid)}")
+    return points
 
 
 def _pfl(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
+    from reflexarm.experiments.pfl import PFL_SETTING
+    from reflexarm.experiments.pfl_report import speed_table, write_pfl_outputs
+    from reflexarm.experiments.pfl_study import run_pfl_motion_study, run_pfl_study
+    from reflexarm.experiments.reaction_study import study_arm
     from reflexarm.safety import region_names
 
     arms = _names(args.arms, "--arms", PFL_ARMS)
     regions = _names(args.regions, "--regions", region_names())
-    if args.trajectory is not None:
-        return _check_trajectory(args, arms[0], regions)
-    from reflexarm.experiments.pfl import PFL_SETTING
-    from reflexarm.experiments.pfl_report import speed_table, write_pfl_outputs
-    from reflexarm.experiments.pfl_study import run_pfl_study
-    from reflexarm.experiments.reaction_study import study_arm
-
     reactions = _names(args.reactions, "--reactions", PFL_REACTIONS)
     speeds = _speeds(args.speeds)
     if not 0.0 <= args.model_error < 100.0:
         raise ConfigError(f"--model-error must be a percentage in [0, 100); got {args.model_error:g}")
+    robots = [(a, study_arm(a).robot) for a in (arms[:1] if args.trajectory is not None else arms)]
+    points = _points(args.points, robots)
     setting = replace(PFL_SETTING, stiffness=args.stiffness, observer_gain=args.observer_gain)
     t0 = time.perf_counter()
-    study = run_pfl_study(
-        [(a, study_arm(a).robot) for a in arms],
-        regions,
-        speeds,
-        reactions,
-        clamp_speed=args.clamp_speed,
+    common: dict[str, Any] = dict(
         setting=setting,
-        clamp_stiffness=args.clamp_stiffness,
         model_error=args.model_error / 100.0,
         seed=args.seed,
         progress=lambda m: print(f"[{time.perf_counter() - t0:6.1f} s] {m}", file=sys.stderr, flush=True),
     )
+    if args.trajectory is not None:
+        from reflexarm.experiments.pfl_motion import read_motion_csv
+
+        arm, robot = robots[0]
+        motion = read_motion_csv(args.trajectory, robot)
+        _check_trajectory(args, arm, regions, motion, robot)
+        if args.check_only:
+            return 0
+        print(f"{arm}: simulating {motion.name} at its own timing and time-scaled to each of --speeds", file=sys.stderr)
+        study = run_pfl_motion_study(arm, robot, motion, regions, speeds, reactions, points, **common)
+    else:
+        study = run_pfl_study(
+            robots, regions, speeds, reactions, clamp_speed=args.clamp_speed, clamp_stiffness=args.clamp_stiffness,
+            points=points, **common,
+        )  # fmt: skip
     paths = write_pfl_outputs(study, args.out)
     for row in speed_table(study):
+        flag = " (extrapolated: that speed could not be simulated, see errors)" if row["v_sim_extrapolated"] else ""
         print(
-            f"{row['arm']:>18} {row['region']:>9}: v_max standard {_f(row['v_standard_m_s'])} m/s, posture "
-            f"{_f(row['v_posture_m_s'])} m/s, simulated (detection off) {_f(row['v_sim_detection_off_m_s'])} m/s"
+            f"{row['arm']:>18} {row['contact_point']:>6} {row['region']:>9}: v_max standard "
+            f"{_f(row['v_standard_m_s'])} m/s, posture {_f(row['v_posture_m_s'])} m/s, simulated (detection off) "
+            f"{_f(row['v_sim_detection_off_m_s'])} m/s{flag}; max simulated/analytic peak "
+            f"{_f(row['sim_over_analytic_max'])}"
         )
     print(f"wrote {', '.join(str(p) for p in paths.values())}", file=sys.stderr)
     return 0

@@ -28,9 +28,11 @@ import numpy as np
 
 from reflexarm.errors import ConfigError
 from reflexarm.experiments.collision import CollisionSetting, controller_model
-from reflexarm.experiments.pfl_placement import place_region, swing_at_speed
+from reflexarm.experiments.pfl_motion import SampledMotion, SpeedLimitError
+from reflexarm.experiments.pfl_placement import place_region, place_region_on_motion, swing_at_speed
 from reflexarm.robots import CoulombViscousFriction, RobotModel
 from reflexarm.safety import (
+    ContactPoint,
     body_region,
     effective_mass,
     permissible_speed_for_mass,
@@ -39,8 +41,17 @@ from reflexarm.safety import (
 )
 from reflexarm.sim import PAPER_NOISE, Plant, SensorNoise, Trace, run_fast
 from reflexarm.sim.human_contact import CONTACT_MODES, HumanContact
+from reflexarm.sim.runner import TrajectoryLike
 
-__all__ = ["PFL_REACTIONS", "PFL_SETTING", "QS_WINDOW_S", "ContactResult", "contact_result", "run_region_contact"]
+__all__ = [
+    "PFL_REACTIONS",
+    "PFL_SETTING",
+    "QS_WINDOW_S",
+    "ContactResult",
+    "contact_result",
+    "run_motion_contact",
+    "run_region_contact",
+]
 
 #: The controller of the study: the demo's "Compliant" joint stiffness (100 Nm/rad; the "Stiff" 300 Nm/rad
 #: pushes harder during an impact, see the README), the demo's detection (k_o = 5 1/s, zeta = 11 Nm).
@@ -85,6 +96,9 @@ class ContactResult:
     max_force_after_window_N: float | None
     F_T_N: float
     F_QS_N: float
+    contact_point: str = "ee"
+    motion: str = "swing"
+    time_scale: float | None = None
 
     @property
     def simulated_over_analytic(self) -> float | None:
@@ -106,11 +120,13 @@ def _first_peak(F: np.ndarray, on: int) -> int:
     return F.size - 1
 
 
-def _controller_force(robot: RobotModel, trace: Trace, before: int, peak: int, u: np.ndarray, m_r: float) -> float:
+def _controller_force(
+    robot: RobotModel, trace: Trace, before: int, peak: int, u: np.ndarray, m_r: float, point: ContactPoint
+) -> float:
     """The drive force the controller adds along u at the point between the last tick before contact and the
     peak: m_R u^T J M^-1 (tau[peak] - tau[before]) [N] (positive: into the body)."""
     q = trace.q[peak]
-    J, _ = point_jacobian(robot, q, robot.ee_frame)
+    J, _ = point_jacobian(robot, q, point.link, point.point)
     dtau = trace.tau[peak] - trace.tau[before]
     return float(m_r * (u @ J @ np.linalg.solve(robot.compute_mass_matrix(q), dtau)))
 
@@ -125,9 +141,16 @@ def _below_after(t: np.ndarray, F: np.ndarray, t_det: float, limit: float) -> fl
 
 
 def contact_result(
-    robot: RobotModel, trace: Trace, scene: HumanContact, reaction: str, detection: bool
+    robot: RobotModel,
+    trace: Trace,
+    scene: HumanContact,
+    reaction: str,
+    detection: bool,
+    point: ContactPoint | None = None,
 ) -> ContactResult:
-    """The measures of one run (module docstring) from its trace."""
+    """The measures of one run (module docstring) from its trace; ``point`` the arm's contact point (default the
+    end effector)."""
+    point = ContactPoint(robot.ee_frame) if point is None else point
     region = scene.region
     F = trace.extras[f"{scene.name}_force"][:, 0]
     m_std = standard_robot_mass(robot)
@@ -145,6 +168,9 @@ def contact_result(
         detected_before_contact=False,
         F_T_N=region.transient_force,
         F_QS_N=region.quasi_static_force,
+        contact_point=str(trace.meta.get("contact_point", "ee")),
+        motion=str(trace.meta.get("motion", "swing")),
+        time_scale=trace.meta.get("time_scale"),
     )
     t_det = trace.first_time(trace.collision) if detection else None
     hits = np.flatnonzero(F > 0.0)
@@ -156,14 +182,14 @@ def contact_result(
     on = int(hits[0])
     before = max(on - 1, 0)
     u = scene.normal
-    J, _ = point_jacobian(robot, trace.q[before], robot.ee_frame)
+    J, _ = point_jacobian(robot, trace.q[before], point.link, point.point)
     v = float(u @ J @ trace.dq[before])
-    m_r = effective_mass(robot, trace.q[before], robot.ee_frame, (0.0, 0.0, 0.0), u)
+    m_r = effective_mass(robot, trace.q[before], point.link, point.point, u)
     k = region.spring_constant_si
     mu = 1.0 / (1.0 / m_h + 1.0 / m_r)
     mu_std = 1.0 / (1.0 / m_h + 1.0 / m_std)
     peak = _first_peak(F, on)
-    f_ctrl = _controller_force(robot, trace, before, peak, u, m_r)
+    f_ctrl = _controller_force(robot, trace, before, peak, u, m_r, point)
     t_on = float(trace.t[on])
     after = None
     below = None
@@ -186,6 +212,45 @@ def contact_result(
         below_qs_after_detection_s=below,
         max_force_after_window_N=after,
     )
+
+
+def _check_choices(mode: str, reaction: str, plant_friction: str, region: str) -> None:
+    if mode not in CONTACT_MODES:
+        raise ConfigError(f"unknown contact mode {mode!r}; choose one of: {', '.join(CONTACT_MODES)}")
+    if reaction not in PFL_REACTIONS:
+        raise ConfigError(f"unknown reaction {reaction!r}; choose one of: {', '.join(PFL_REACTIONS)}")
+    if plant_friction not in ("file", "none"):
+        raise ConfigError(f"unknown plant_friction {plant_friction!r}; choose one of: file, none")
+    body_region(region)
+
+
+def _simulate(
+    robot: RobotModel,
+    scene: HumanContact,
+    trajectory: TrajectoryLike,
+    start: tuple[np.ndarray, np.ndarray | None],
+    duration: float,
+    kw: dict[str, Any],
+) -> Trace:
+    """Run the study's controller (``kw``: reaction, detection, model_error, model_seed, noise, seed,
+    plant_friction, setting) on the plant with ``scene`` from state ``start`` (q, dq) for ``duration`` [s]."""
+    friction = CoulombViscousFriction.zeros(robot.n) if kw["plant_friction"] == "none" else None
+    plant = Plant(robot, scene=scene, noise=kw["noise"], seed=kw["seed"], true_friction=friction)
+    plant.reset(*start)
+    ctrl_model, model_info = controller_model(robot, kw["model_error"], kw["model_seed"])
+    setting = kw["setting"]
+    chosen = replace(setting, reaction=kw["reaction"], threshold=setting.threshold if kw["detection"] else None)
+    trace = run_fast(plant, chosen.controller(ctrl_model), trajectory, duration)
+    trace.meta.update(
+        {
+            "experiment": "pfl",
+            "robot": robot.name,
+            "setting": asdict(chosen),
+            "controller_model": model_info,
+            "plant_friction": kw["plant_friction"],
+        }
+    )
+    return trace
 
 
 def run_region_contact(
@@ -213,32 +278,92 @@ def run_region_contact(
         ConfigError: an unknown region, mode, reaction or plant friction; a speed the swing cannot reach; a
             region the arm's path cannot take (another link would hit it first).
     """
-    if mode not in CONTACT_MODES:
-        raise ConfigError(f"unknown contact mode {mode!r}; choose one of: {', '.join(CONTACT_MODES)}")
-    if reaction not in PFL_REACTIONS:
-        raise ConfigError(f"unknown reaction {reaction!r}; choose one of: {', '.join(PFL_REACTIONS)}")
-    if plant_friction not in ("file", "none"):
-        raise ConfigError(f"unknown plant_friction {plant_friction!r}; choose one of: file, none")
-    body_region(region)
+    _check_choices(mode, reaction, plant_friction, region)
+    kw = dict(
+        reaction=reaction, detection=detection, model_error=model_error, model_seed=model_seed, noise=noise,
+        seed=seed, plant_friction=plant_friction, setting=setting,
+    )  # fmt: skip
     trajectory, _ = swing_at_speed(robot, speed)
     placement = place_region(robot, trajectory)
     scene = HumanContact(region, placement.surface, placement.normal, mode=mode)
-    friction = CoulombViscousFriction.zeros(robot.n) if plant_friction == "none" else None
-    plant = Plant(robot, scene=scene, noise=noise, seed=seed, true_friction=friction)
-    plant.reset(trajectory.sample(0.0).q_d)
-    ctrl_model, model_info = controller_model(robot, model_error, model_seed)
-    chosen = replace(setting, reaction=reaction, threshold=setting.threshold if detection else None)
-    duration = placement.contact_time + RUN_AFTER_CONTACT_S[mode]
-    trace = run_fast(plant, chosen.controller(ctrl_model), trajectory, duration)
+    start = (trajectory.sample(0.0).q_d, None)
+    trace = _simulate(robot, scene, trajectory, start, placement.contact_time + RUN_AFTER_CONTACT_S[mode], kw)
+    trace.meta.update({"placement": placement.describe(), "reference_speed_m_s": placement.reference_speed})
+    return contact_result(robot, trace, scene, reaction, detection), trace
+
+
+def run_motion_contact(
+    robot: RobotModel,
+    motion: SampledMotion,
+    region: str,
+    speed: float | None = None,
+    *,
+    point: str = "ee",
+    mode: str = "transient",
+    reaction: str = "none",
+    detection: bool = True,
+    model_error: float | None = None,
+    model_seed: int = 0,
+    noise: SensorNoise = PAPER_NOISE,
+    seed: int = 0,
+    plant_friction: str = "file",
+    setting: CollisionSetting = PFL_SETTING,
+) -> tuple[ContactResult, Trace]:
+    """One contact of ``region`` with the point ``point`` (``ee`` or ``link<j>``,
+    :func:`~reflexarm.experiments.pfl_placement.contact_point_on`) on a sampled motion (a trajectory file, an
+    excitation), the region placed where that point moves fastest
+    (:func:`~reflexarm.experiments.pfl_placement.place_region_on_motion`). ``speed`` [m/s]: the motion is
+    time-scaled so that the point's reference speed there is ``speed`` (None: the motion's own timing). The run
+    starts shortly before the contact from the motion's state there. Other arguments as
+    :func:`run_region_contact`.
+
+    Raises:
+        ConfigError: as :func:`run_region_contact`; a point the region cannot be placed for; a speed whose time
+            scaling needs a joint beyond its velocity limit (the message names the joint and the largest speed
+            the motion reaches within the limits).
+    """
+    _check_choices(mode, reaction, plant_friction, region)
+    kw = dict(
+        reaction=reaction, detection=detection, model_error=model_error, model_seed=model_seed, noise=noise,
+        seed=seed, plant_friction=plant_friction, setting=setting,
+    )  # fmt: skip
+    base = motion.played(1.0)
+    placement = place_region_on_motion(robot, base, point)
+    scale = 1.0 if speed is None else _time_scale(robot, base, placement.reference_speed, speed, point)
+    played = motion.played(scale, placement.start_time)
+    scene = HumanContact(
+        region, placement.surface, placement.normal, mode=mode, arm_body=placement.arm_body,
+        arm_point=placement.point.point,
+    )  # fmt: skip
+    start = played.sample(0.0)
+    t_contact = (placement.contact_time - placement.start_time) / scale
+    trace = _simulate(robot, scene, played, (start.q_d, start.dq_d), t_contact + RUN_AFTER_CONTACT_S[mode], kw)
     trace.meta.update(
         {
-            "experiment": "pfl",
-            "robot": robot.name,
             "placement": placement.describe(),
-            "reference_speed_m_s": placement.reference_speed,
-            "setting": asdict(chosen),
-            "controller_model": model_info,
-            "plant_friction": plant_friction,
+            "reference_speed_m_s": placement.reference_speed * scale,
+            "contact_point": point,
+            "motion": motion.name,
+            "time_scale": scale,
         }
     )
-    return contact_result(robot, trace, scene, reaction, detection), trace
+    return contact_result(robot, trace, scene, reaction, detection, placement.point), trace
+
+
+def _time_scale(robot: RobotModel, motion: SampledMotion, v_ref: float, speed: float, point: str) -> float:
+    """The time scale that brings the point's reference speed ``v_ref`` [m/s] to ``speed`` [m/s], or a ConfigError
+    if a joint would exceed its velocity limit."""
+    if not (math.isfinite(speed) and speed > 0.0):
+        raise ConfigError(f"speed must be a positive speed [m/s]; got {speed!r}")
+    scale = speed / v_ref
+    ratio, j = motion.velocity_ratio(robot)
+    if ratio * scale > 1.0 + 1e-9:
+        raise SpeedLimitError(
+            f"{robot.name}: {motion.name} time-scaled x{scale:.3g} to bring {point} to {speed:g} m/s needs joint "
+            f"{j + 1} at {ratio * scale:.3g} x its velocity limit {robot.velocity_limit[j]:.3g} rad/s; within the "
+            f"limits {point} reaches at most {v_ref / ratio:.3g} m/s on this motion",
+            speed=speed,
+            reachable_speed=v_ref / ratio,
+            joint=j,
+        )
+    return scale
