@@ -374,3 +374,20 @@ def test_a_bags_effort_read_as_motor_currents(arm, tmp_path):
     back = load_log(bag, joint_names=arm.joint_names, torque_from="current", gains=GAINS)
     np.testing.assert_allclose(back.tau, tau, rtol=4e-16, atol=1e-13)
     assert any("measured torque = gain x motor current, gains 0.95" in n for n in back.notes)
+
+
+def test_a_torque_on_another_scale_than_the_models_is_refused(arm):
+    """Where the effort limits cannot tell (a robot file without them), the model's torque does: mNm are 1000x."""
+    from reflexarm.logs.units import check_units
+
+    t, q, dq, ddq, tau = _motion(arm, 10.0, 200.0)
+    check_units("nm", t, q, dq, tau, arm, ddq)  # the exact torques: no refusal
+    expected = (
+        r"mnm: the measured torque is 1000 times the robot model's torque along the log \(least squares, 9\d % "
+        r"explained; expected about 1\): mNm instead of Nm\?"
+    )
+    with pytest.raises(ImplausibleDataError, match=expected):
+        check_units("mnm", t, q, dq, 1e3 * tau, arm, ddq)
+    # a current logged without its gain (0.1 Nm/A: the 'torque' is 10 x the model's)
+    with pytest.raises(ImplausibleDataError, match=r"cur: the measured torque is 10 times .* a current instead of a "):
+        check_units("cur", t, q, dq, tau / 0.1, arm, ddq)

@@ -59,7 +59,7 @@ RATIO_RANGE = (0.5, 2.0)
 #: better (RMS of the model's error) than read as radians.
 DEGREE_GAIN = 2.0
 #: The measured torque's scale against the model's torque must lie in this range [-].
-TORQUE_SCALE_RANGE = (0.05, 20.0)
+TORQUE_SCALE_RANGE = (0.2, 5.0)
 #: Samples (evenly spread) on which the model's torque is evaluated.
 _MODEL_SAMPLES = 2000
 _DEG = np.pi / 180.0
