@@ -11,7 +11,7 @@ import pytest
 
 from reflexarm.errors import DataError
 from reflexarm.ident import RobotLog, load_log, preprocess_log, save_log
-from reflexarm.logs import TimeUnitWarning
+from reflexarm.logs import LogRepairWarning, TimeUnitWarning
 from reflexarm.logs.timestamps import relative_seconds
 
 N = 400
@@ -113,3 +113,20 @@ def test_npz_and_parquet_times_are_relative_too(tmp_path):
         back = load_log(save_log(shifted, tmp_path / f"x{suffix}"))
         np.testing.assert_allclose(back.t, log.t, rtol=0, atol=1e-12)  # 100 + t - 100 in float64
         assert "subtracted 100 s = 100 s" in back.notes[0]
+
+
+def test_a_given_period_is_the_grid_and_the_notes_state_the_period():
+    """With the period given, host jitter goes onto that grid (only its offset is fitted) and the note says
+    'the period given'; without, the period stated is the median step."""
+    rng = np.random.default_rng(11)
+    t_true = np.arange(2000) * 2e-3  # 500 Hz
+    jitter = rng.uniform(-0.6e-3, 0.6e-3, t_true.size)  # +-0.3 periods
+    log = _log(period=2e-3, n=2000)
+    with pytest.warns(LogRepairWarning, match=r"period 2 ms, the period given\): host stamps jitter"):
+        given = RobotLog.from_arrays(t_true + jitter, log.q, log.dq, log.tau, period=2e-3)
+    np.testing.assert_allclose(np.diff(given.t), 2e-3, rtol=0, atol=1e-15)
+    assert np.abs(given.t - (t_true + jitter)).max() <= 1e-3  # at most half a period
+    with pytest.warns(LogRepairWarning, match=r"period [\d.]+ ms, the median step\): host stamps jitter"):
+        median = RobotLog.from_arrays(t_true + jitter, log.q, log.dq, log.tau)
+    step = float(np.median(np.diff(t_true + jitter)))
+    assert f"period {step * 1e3:.4g} ms, the median step" in median.notes[-1]
