@@ -9,9 +9,15 @@ Unix epoch, made relative to the log's first sample (:mod:`reflexarm.logs.timest
 (sqlite3) and MCAP bags (:mod:`reflexarm.logs.bags`). :func:`load_log` reports in the log's
 ``notes`` what it recognized, converted and left out.
 
+Header-less files are mapped by position (``t=0,q=1:7,...``), a column may carry a scale
+(:mod:`reflexarm.logs.column_mapping`), and motor currents times per-joint gains may stand for the torque
+(:mod:`reflexarm.logs.motor_current`).
+
 Validation is strict and every error names the file, the column or row and the problem; exact repeats
-and jittery host time stamps are repaired with a :class:`LogRepairWarning` (unless ``repair=False``).
-:mod:`reflexarm.logs.robot_log` describes each check and repair.
+are dropped and host time stamps that jitter by less than half a period are put on the robot's grid with
+a :class:`LogRepairWarning` (unless ``repair=False``); other irregular stamps are kept as the log's own.
+:mod:`reflexarm.logs.robot_log` describes each check and repair; :mod:`reflexarm.logs.plausibility` and
+:mod:`reflexarm.logs.units` hold a log against its robot (limits, units).
 
 :func:`preprocess_log` then resamples to a uniform grid (positions by cubic Hermite interpolation with
 the measured velocities as slopes, velocities by a cubic spline, the other signals linearly; only gaps
