@@ -108,3 +108,28 @@ def test_bad_settings_are_rejected():
         optimize_excitation(robot, position_margin=2.0)
     with pytest.raises(ConfigError, match=r"velocity and acceleration bounds must be positive"):
         optimize_excitation(robot, max_acceleration=-1.0)
+
+
+@pytest.mark.slow  # a 2-iteration optimization with the torque, floor and self-collision bounds
+def test_a_stalled_optimization_says_why(tmp_path):
+    """With the 45 base parameters that today's tolerance gave for a 3.1416 roll (two combinations whose
+    torques are 3e-6 of the largest), no motion can condition the regressor: the run ends above
+    STALLED_CONDITION and says which combinations the motion cannot excite (link 1's first moments)."""
+    import warnings
+
+    from gen3_like import GEN3_TIP, write_gen3_like_urdf
+    from reflexarm.ident.excitation.design import STALLED_CONDITION, ExcitationStalledWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        robot = load_robot(write_gen3_like_urdf(tmp_path, rounded_pi=True), tip=GEN3_TIP)
+        base = compute_base_parameters(robot, rank_tolerance=1e-12)  # count the near-dependent ones
+    assert base.n_base == 45
+    with pytest.warns(ExcitationStalledWarning, match=r"cannot excite the weakest direction") as rec:
+        design = optimize_excitation(
+            robot, base=base, n_harmonics=3, maxiter=2, n_samples=40, n_grid=60, n_grid_dynamics=20, seed=0
+        )
+    w = rec[0].message
+    assert isinstance(w, ExcitationStalledWarning) and w.condition == design.condition_optimized > STALLED_CONDITION
+    assert any("_joint_1" in name.split()[0] for name in w.weakest), w.weakest
+    assert design.diagnosis == str(w)

@@ -289,10 +289,8 @@ def optimize_excitation(
         base: base-parameter map (default: computed from ``robot``).
         base_frequency: w_f [rad/s] (default 2 pi 0.1: a 10 s period).
         n_harmonics: L.
-        max_velocity: |dq| bound per joint [rad/s] (default: the robot's limit, at most
-            :data:`DEFAULT_MAX_VELOCITY`).
-        max_acceleration: |ddq| bound per joint [rad/s^2].
-        position_margin: distance kept from the joint limits [rad].
+        max_velocity: |dq| bound per joint [rad/s] (default: the robot's, at most :data:`DEFAULT_MAX_VELOCITY`).
+        max_acceleration: |ddq| bound per joint [rad/s^2]; position_margin: kept from the joint limits [rad].
         torque_fraction: the model's joint torques stay within this share of the effort limits (None: not
             bounded; see :data:`~reflexarm.ident.excitation.limits.DEFAULT_TORQUE_FRACTION`).
         floor: height [m] in the base frame no point of the arm may go below; ``"default"``: the base plane
@@ -300,17 +298,14 @@ def optimize_excitation(
         self_collision: keep the links apart (capsules fitted to the file's collision geometry).
         center: initial offsets q0 (default: the middle of each joint's range).
         n_samples: samples per period stacked into the regressor whose condition number is minimised.
-        n_grid: samples per period on which position, velocity and acceleration limits are imposed.
-        n_grid_dynamics: samples per period on which torque, workspace and self-collision are imposed.
-        maxiter: optimizer iterations.
-        seed: seed of the random initial coefficients (unless ``initial`` is given).
-        initial: start from this trajectory instead of a random one.
+        n_grid, n_grid_dynamics: samples per period on which the position, velocity and acceleration
+            limits, and the torque, workspace and self-collision bounds are imposed.
+        maxiter: optimizer iterations; seed: of the random start; initial: start from this trajectory instead.
         progress: show a progress bar over the optimizer iterations.
 
     Raises:
         ConfigError: bad bounds (non-positive, margin larger than a joint's range).
-        IdentificationError: no trajectory meets the limits (e.g. the torque at rest in the centre pose
-            already exceeds one), naming the bound.
+        IdentificationError: no trajectory meets the limits (e.g. already at rest in the centre pose).
 
     Warns:
         ExcitationStalledWarning: the condition number ended above :data:`STALLED_CONDITION`, with why.
@@ -323,44 +318,39 @@ def optimize_excitation(
         robot, max_velocity=max_velocity, max_acceleration=max_acceleration, position_margin=position_margin,
         torque_fraction=torque_fraction, floor=floor, self_collision=self_collision, center=c,
     )  # fmt: skip
-    lo, hi = limits.lower, limits.upper
-    mid = 0.5 * (lo + hi) if c is None else c
-    if np.any(mid <= lo) or np.any(mid >= hi):
+    mid = 0.5 * (limits.lower + limits.upper) if c is None else c
+    if np.any(mid <= limits.lower) or np.any(mid >= limits.upper):
         raise ConfigError(f"center {np.asarray(mid).tolist()} must lie inside the joint limits minus the margin")
     base = base if base is not None else compute_base_parameters(robot)
     par = _Parametrisation(n, L, base_frequency)
     period = 2 * np.pi / base_frequency
-    log_cond = _log_condition(robot, base, par, np.arange(n_samples) * period / n_samples)
+    t_cost = np.arange(n_samples) * period / n_samples
+    log_cond = _log_condition(robot, base, par, t_cost)
     linear = _linear_margins(par, limits, np.arange(n_grid) * period / n_grid)
     evaluator = LimitEvaluator(robot, limits, geometry)
     nonlinear = _nonlinear_margins(par, evaluator, np.arange(n_grid_dynamics) * period / n_grid_dynamics)
     x0 = _start(par, limits, evaluator, mid, seed, initial, np.arange(n_grid) * period / n_grid)
     start = par.trajectory(x0)
-    res, history, x = _minimise(log_cond, x0, linear, nonlinear, maxiter, progress)
+    gradient = _log_condition_gradient(robot, base, par, t_cost)
+    res, history, x = _minimise(log_cond, gradient, x0, linear, nonlinear, maxiter, progress)
     x, report = _check_at_1khz(par, x, limits, evaluator)
     best = par.trajectory(x)
     cond1 = float(np.exp(log_cond(x)))
-    diagnosis = _diagnose(robot, base, best, cond1, history, res, n_samples)
     return ExcitationDesign(
-        trajectory=best,
-        initial=start,
-        condition_initial=float(np.exp(log_cond(x0))),
-        condition_optimized=cond1,
-        limits_initial=_limit_uses(start, limits, evaluator),
-        limits_optimized=_limit_uses(best, limits, evaluator, report),
-        iterations=int(res.get("nit", 0)),
-        message=str(res.get("message", "")),
-        bounds={
-            "lower": lo.tolist(),
-            "upper": hi.tolist(),
-            "max_velocity": limits.max_velocity.tolist(),
-            "max_acceleration": limits.max_acceleration.tolist(),
-        },
-        history=tuple(history),
-        diagnosis=diagnosis,
-        limits=limits,
-        limit_report=report,
-    )
+        best, start, float(np.exp(log_cond(x0))), cond1, _limit_uses(start, limits, evaluator),
+        _limit_uses(best, limits, evaluator, report), int(res.get("nit", 0)), str(res.get("message", "")),
+        _bounds(limits), tuple(history), _diagnose(robot, base, best, cond1, history, res, n_samples), limits, report,
+    )  # fmt: skip
+
+
+def _bounds(limits: ExcitationLimits) -> dict[str, list[float]]:
+    """The position, velocity and acceleration bounds in :attr:`ExcitationDesign.bounds`' JSON form."""
+    return {
+        "lower": limits.lower.tolist(),
+        "upper": limits.upper.tolist(),
+        "max_velocity": limits.max_velocity.tolist(),
+        "max_acceleration": limits.max_acceleration.tolist(),
+    }
 
 
 def _log_condition(
@@ -377,6 +367,57 @@ def _log_condition(
         return float(0.5 * np.log(ev[-1] / max(ev[0], 1e-300)))
 
     return log_cond
+
+
+def _log_condition_gradient(
+    robot: RobotModel, base: BaseParameters, par: _Parametrisation, t_cost: np.ndarray
+) -> Callable[[np.ndarray], np.ndarray]:
+    """d log cond / dx, exact: with G = W^T W and its extreme eigenpairs (lambda, v), d lambda = 2 (W v)^T
+    (dW v), and W v stacks the joint torques Y_b(q, dq, ddq) v, i.e. inverse dynamics with the inertial
+    parameters pi_v (v on the base columns): its derivatives come from Pinocchio's RNEA derivatives, taken
+    as the difference of a model with pi_0 + pi_v and one with pi_0 (pi_0 the file's parameters, so every
+    link keeps a positive mass; torques are linear in the parameters)."""
+    import pinocchio as pin
+
+    reg = BatchRegressor(robot)
+    Gq, Gv, Ga = par.linear_maps(t_cost)
+    model0 = robot.pin_model
+    pi0 = robot.inertial_parameters()
+    models = [pin.Model(model0), pin.Model(model0)]
+    datas = [m.createData() for m in models]
+    data0 = model0.createData()
+    n = robot.n
+
+    def torque_derivatives(model: pin.Model, data: pin.Data, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray):  # type: ignore[no-untyped-def]
+        pin.computeRNEADerivatives(model, data, q, dq, ddq)
+        M = np.triu(data.M) + np.triu(data.M, 1).T  # Pinocchio fills the upper triangle
+        return np.array(data.dtau_dq), np.array(data.dtau_dv), M
+
+    def gradient(x: np.ndarray) -> np.ndarray:
+        q, dq, ddq = par.trajectory(x).evaluate(t_cost)
+        W = base.select(reg.compute_regressor(q, dq, ddq)).reshape(-1, base.n_base)
+        ev, V = np.linalg.eigh(W.T @ W)
+        grad = np.zeros(par.size)
+        for sign, k, model, data in ((1.0, -1, models[0], datas[0]), (-1.0, 0, models[1], datas[1])):
+            v = V[:, k] / np.max(np.abs(V[:, k]))  # scaled to O(1) parameters (the derivative is linear in v)
+            pi_v = np.zeros(10 * n)
+            pi_v[base.independent] = v
+            scale = 1e-2 * max(float(np.max(np.abs(pi0))), 1.0) / max(float(np.max(np.abs(pi_v))), 1e-300)
+            pi = pi0 + scale * pi_v
+            for j in range(n):
+                model.inertias[j + 1] = pin.Inertia.FromDynamicParameters(pi[10 * j : 10 * j + 10])
+            Wv = (W @ v).reshape(-1, n)
+            g = np.zeros(par.size)
+            for s in range(t_cost.size):
+                a = torque_derivatives(model, data, q[s], dq[s], ddq[s])
+                b = torque_derivatives(model0, data0, q[s], dq[s], ddq[s])
+                dtau = ((a[0] - b[0]) @ Gq[s] + (a[1] - b[1]) @ Gv[s] + (a[2] - b[2]) @ Ga[s]) / scale
+                g += Wv[s] @ dtau
+            lam = max(float(ev[k]), 1e-300) * float(np.max(np.abs(V[:, k]))) ** -2  # lambda for the scaled v
+            grad += sign * 0.5 * 2.0 * g / lam
+        return grad
+
+    return gradient
 
 
 _Margins = tuple[Callable[[np.ndarray], np.ndarray], Callable[[np.ndarray], np.ndarray]]
@@ -458,9 +499,7 @@ def _within(report: dict[str, dict[str, Any]]) -> bool:
     return bool(ok)
 
 
-def _shrink_into_limits(
-    par: _Parametrisation, x: np.ndarray, evaluator: LimitEvaluator, t: np.ndarray
-) -> np.ndarray:
+def _shrink_into_limits(par: _Parametrisation, x: np.ndarray, evaluator: LimitEvaluator, t: np.ndarray) -> np.ndarray:
     """x with its amplitudes scaled down (bisection on s in [0, 1], 10 steps: s to 1e-3) until the
     nonlinear bounds hold at the times ``t``; the rest pose q0 (s = 0) must meet them."""
     if not evaluator.active:
@@ -487,6 +526,7 @@ def _shrink_into_limits(
 
 def _minimise(
     log_cond: Callable[[np.ndarray], float],
+    gradient: Callable[[np.ndarray], np.ndarray],
     x0: np.ndarray,
     linear: _Margins,
     nonlinear: _Margins | None,
@@ -526,7 +566,7 @@ def _minimise(
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             res = scipy.optimize.minimize(
-                log_cond, x0, method="SLSQP", constraints=constraints,
+                log_cond, x0, jac=gradient, method="SLSQP", constraints=constraints,
                 options={"maxiter": int(maxiter), "ftol": 1e-6}, callback=step,
             )  # fmt: skip
     finally:
@@ -598,14 +638,13 @@ def _diagnose(
     q, dq, ddq = trajectory.evaluate(t)
     W = base.select(BatchRegressor(robot).compute_regressor(q, dq, ddq)).reshape(-1, base.n_base)
     norms = np.linalg.norm(W, axis=0)
-    _, s, vt = np.linalg.svd(W / np.maximum(norms, 1e-300), full_matrices=False)
-    weak = vt[-1]
-    order = np.argsort(-np.abs(weak))[:3]
+    _, sv, vt = np.linalg.svd(W, full_matrices=False)  # the cost's own (unscaled) regressor
+    order = np.argsort(-np.abs(vt[-1]))[:3]
     names = base.base_names(max_terms=2)
     weakest = tuple(names[k] for k in order)
     recent = history[-_STALL_WINDOW:]
     progress = (recent[0] - recent[-1]) / recent[0] if len(recent) >= 2 else 0.0
-    ratio = float(norms.min() / norms.max())
+    small = int(np.argmin(norms))
     stalled = len(recent) >= 2 and progress < STALL_PROGRESS
     text = (
         f"excitation optimization ended at condition number {condition:.4g} (> {STALLED_CONDITION:.0e}) after "
@@ -613,10 +652,11 @@ def _diagnose(
         + (f"; the last {len(recent)} improved it by {100 * progress:.2g} %: stalled" if stalled else "")
         + "). The motion cannot excite the weakest direction of the base regressor, mostly "
         + "; ".join(f"[{w}]" for w in weakest)
-        + f" (column-normalised singular values {s[0]:.3g} .. {s[-1]:.3g}; smallest column norm {ratio:.2g} of the "
-        "largest). "
-        + (base.note + "." if base.note else "Check the base parameters (reflexarm excite prints them) for "
-           "combinations that no motion within the limits can excite, or raise --maxiter.")
+        + f" (singular values {sv[0]:.3g} .. {sv[-1]:.3g}; the smallest column, [{names[small]}], is "
+        f"{norms[small] / norms.max():.2g} of the largest). "
+        + (base.note + "." if base.note else "A column far smaller than the others is a combination no motion "
+           "excites (e.g. an axis nearly, not exactly, aligned: see the base parameters 'reflexarm excite' prints); "
+           "otherwise raise --maxiter.")
     )  # fmt: skip
     warnings.warn(ExcitationStalledWarning(text, condition=condition, weakest=weakest), stacklevel=3)
     return text

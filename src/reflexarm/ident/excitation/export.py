@@ -187,35 +187,7 @@ def sample_excitation(
     margins: dict[str, np.ndarray] = {}
     for quantity, x in signals.items():
         lo, hi = (np.asarray(b, dtype=float) for b in limits_used[quantity])
-        below, above = x - lo, hi - x  # distances inside the limits, (N, n)
-        dist = np.minimum(below, above)
-        margins[quantity] = np.where(np.isfinite(lo) & np.isfinite(hi), dist.min(axis=0), np.inf)
-        finite = np.isfinite(lo) & np.isfinite(hi) & (hi < 1e6)
-        for j in np.flatnonzero(finite & (margins[quantity] < 0)):
-            k = int(np.argmin(dist[:, j]))
-            upper = above[k, j] < below[k, j]
-            limit = float(hi[j] if upper else lo[j])
-            raise ExcitationLimitError(
-                f"joint {j + 1} ({names[j]}) {quantity} {x[k, j]:.4g} {_UNITS[quantity]} at t = {t[k]:.4g} s is beyond "
-                f"its {'upper' if upper else 'lower'} limit {limit:.4g} {_UNITS[quantity]} by {-dist[k, j]:.4g}; "
-                "re-run 'reflexarm excite' with a larger --margin, lower --max-velocity/--max-acceleration or a "
-                "lower --torque-fraction",
-                joint=int(j),
-                quantity=quantity,
-                value=float(x[k, j]),
-                time=float(t[k]),
-                limit=limit,
-                excess=float(-dist[k, j]),
-            )
-        half = 0.5 * (hi - lo)
-        close = finite & (margins[quantity] < (1.0 - WARN_FRACTION) * half) & (quantity in ("position", "velocity"))
-        for j in np.flatnonzero(close):
-            warnings.warn(
-                f"joint {j + 1} ({names[j]}) {quantity} comes within {margins[quantity][j]:.4g} {_UNITS[quantity]} "
-                f"of its limit (less than {100 * (1 - WARN_FRACTION):g} % of the half range {half[j]:.4g})",
-                ExcitationMarginWarning,
-                stacklevel=2,
-            )
+        margins[quantity] = _check_quantity(quantity, x, lo, hi, t, names)
     report = _check_geometry(robot, limits, t, q, dq, ddq)
     return SampledExcitation(t, q, dq, ddq, names, float(rate), margins, limits_used, report)
 
@@ -253,6 +225,43 @@ def _check_geometry(
             joint=int(i), quantity="self-collision", value=-depth, time=float(sc["time"]), limit=0.0, excess=depth,
         )  # fmt: skip
     return report
+
+
+def _check_quantity(
+    quantity: str, x: np.ndarray, lo: np.ndarray, hi: np.ndarray, t: np.ndarray, names: tuple[str, ...]
+) -> np.ndarray:
+    """The smallest margin per joint of samples ``x`` (N, n) to [lo, hi]; raises at the worst sample beyond a
+    finite limit and warns when a position or velocity comes within ``1 - WARN_FRACTION`` of it."""
+    below, above = x - lo, hi - x  # distances inside the limits, (N, n)
+    dist = np.minimum(below, above)
+    margin = np.where(np.isfinite(lo) & np.isfinite(hi), dist.min(axis=0), np.inf)
+    finite = np.isfinite(lo) & np.isfinite(hi) & (hi < 1e6)
+    for j in np.flatnonzero(finite & (margin < 0)):
+        k = int(np.argmin(dist[:, j]))
+        upper = above[k, j] < below[k, j]
+        limit = float(hi[j] if upper else lo[j])
+        raise ExcitationLimitError(
+            f"joint {j + 1} ({names[j]}) {quantity} {x[k, j]:.4g} {_UNITS[quantity]} at t = {t[k]:.4g} s is beyond "
+            f"its {'upper' if upper else 'lower'} limit {limit:.4g} {_UNITS[quantity]} by {-dist[k, j]:.4g}; "
+            "re-run 'reflexarm excite' with a larger --margin, lower --max-velocity/--max-acceleration or a "
+            "lower --torque-fraction",
+            joint=int(j),
+            quantity=quantity,
+            value=float(x[k, j]),
+            time=float(t[k]),
+            limit=limit,
+            excess=float(-dist[k, j]),
+        )
+    half = 0.5 * (hi - lo)
+    close = finite & (margin < (1.0 - WARN_FRACTION) * half) & (quantity in ("position", "velocity"))
+    for j in np.flatnonzero(close):
+        warnings.warn(
+            f"joint {j + 1} ({names[j]}) {quantity} comes within {margin[j]:.4g} {_UNITS[quantity]} "
+            f"of its limit (less than {100 * (1 - WARN_FRACTION):g} % of the half range {half[j]:.4g})",
+            ExcitationMarginWarning,
+            stacklevel=3,
+        )
+    return margin
 
 
 def write_excitation_csv(sampled: SampledExcitation, path: str | os.PathLike[str]) -> Path:
