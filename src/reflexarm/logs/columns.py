@@ -162,16 +162,7 @@ def plan_columns(
         ConfigError: a malformed ``mapping``, an unknown ``torque_from``, a ``current`` mapping without
             ``torque_from="current"``.
     """
-    mapping = dict(mapping or {})
-    check_column_mapping(mapping)
-    if torque_from not in TORQUE_SOURCES:
-        raise ConfigError(f"unknown torque source {torque_from!r}; choose one of: {', '.join(TORQUE_SOURCES)}")
-    if "current" in mapping and torque_from != "current":
-        raise ConfigError(
-            f"column mapping current={mapping['current']!r} names motor currents: read the torque from them with "
-            "torque_from='current' and per-joint gains (--torque-from current --gains G1,G2,.. [Nm/A])"
-        )
-    specs = {k: parse_column_spec(k, v) for k, v in mapping.items()}
+    specs = _specs(mapping or {}, torque_from)
     required = ("q", "dq", "current") if torque_from == "current" else _REQUIRED
     signals = ("q", "dq", "current", "ddq") if torque_from == "current" else JOINT_SIGNALS
     if joint_names is not None:
@@ -190,36 +181,13 @@ def plan_columns(
         n_joints = len(q_spec.positions)
     n = n_joints if n_joints is not None else _infer_n(columns, layout, where)
     count = _schema_count(columns)
-    if count is not None and count != n and "q" not in mapping:
+    if count is not None and count != n and "q" not in specs:
         _refuse_schema_count(idx, columns, count, n, required, where)
-    joints: dict[str, tuple[str, ...]] = {}
-    from_layout: list[str] = []
-    for s in signals:
-        found = _find_joint_signal(s, idx, n, joint_names, specs.get(s), where, notes)
-        if found is not None:
-            joints[s] = found
-        elif layout is not None and _layout_field(s) in layout.fields:
-            from_layout.append(s)
-        elif s in required and count is not None:
-            missing = next(f"{s}_{j}" for j in range(1, n + 1) if idx.full.get(f"{s}_{j}") is None)
-            raise DataError(
-                f"{where}: column {missing!r} missing; found: {', '.join(columns)}",
-                source=where,
-                column=missing,
-                expected=tuple(columns),
-            )
-        elif s in required:
-            looked, message = _missing(s, n, joint_names, columns, where)
-            raise DataError(message, source=where, column=looked, expected=tuple(columns))
+    joints, from_layout = _joint_signals(signals, required, idx, n, joint_names, specs, layout, count, where, notes)
     plan_layout = None
     if from_layout:
         assert layout is not None
-        plan_layout, note = _use_layout(layout, [_layout_field(s) for s in from_layout], n, joint_names, where)
-        if "current" in from_layout:
-            fields = {("current" if k == "tau" else k): v for k, v in plan_layout.fields.items()}
-            plan_layout = JointStateLayout(plan_layout.names, fields)
-            note += "; the effort field taken as motor currents"
-        notes.append(note)
+        plan_layout = _layout_plan(layout, from_layout, n, joint_names, where, notes)
         used.update(plan_layout.names)
         for cols in plan_layout.fields.values():
             used.update(cols)
@@ -245,6 +213,73 @@ def plan_columns(
         notes=tuple(notes),
         scale={k: v.scale for k, v in specs.items() if v.scale != 1.0},
     )
+
+
+def _joint_signals(
+    signals: tuple[str, ...],
+    required: tuple[str, ...],
+    idx: _Index,
+    n: int,
+    joint_names: tuple[str, ...] | None,
+    specs: dict[str, ColumnSpec],
+    layout: JointStateLayout | None,
+    count: int | None,
+    where: str,
+    notes: list[str],
+) -> tuple[dict[str, tuple[str, ...]], list[str]]:
+    """(the columns of each joint signal found by mapping, schema or name; the signals left to the JointState
+    layout); a required signal found nowhere raises :class:`DataError` naming what was looked for."""
+    columns = idx.columns
+    joints: dict[str, tuple[str, ...]] = {}
+    from_layout: list[str] = []
+    for s in signals:
+        found = _find_joint_signal(s, idx, n, joint_names, specs.get(s), where, notes)
+        if found is not None:
+            joints[s] = found
+        elif layout is not None and _layout_field(s) in layout.fields:
+            from_layout.append(s)
+        elif s in required and count is not None:
+            missing = next(f"{s}_{j}" for j in range(1, n + 1) if idx.full.get(f"{s}_{j}") is None)
+            raise DataError(
+                f"{where}: column {missing!r} missing; found: {', '.join(columns)}",
+                source=where,
+                column=missing,
+                expected=tuple(columns),
+            )
+        elif s in required:
+            looked, message = _missing(s, n, joint_names, columns, where)
+            raise DataError(message, source=where, column=looked, expected=tuple(columns))
+    return joints, from_layout
+
+
+def _specs(mapping: dict[str, str], torque_from: str) -> dict[str, ColumnSpec]:
+    """The mapping's entries parsed, checked against the torque source."""
+    check_column_mapping(mapping)
+    if torque_from not in TORQUE_SOURCES:
+        raise ConfigError(f"unknown torque source {torque_from!r}; choose one of: {', '.join(TORQUE_SOURCES)}")
+    if "current" in mapping and torque_from != "current":
+        raise ConfigError(
+            f"column mapping current={mapping['current']!r} names motor currents: read the torque from them with "
+            "torque_from='current' and per-joint gains (--torque-from current --gains G1,G2,.. [Nm/A])"
+        )
+    return {k: parse_column_spec(k, v) for k, v in mapping.items()}
+
+
+def _layout_plan(
+    layout: JointStateLayout,
+    signals: list[str],
+    n: int,
+    joint_names: tuple[str, ...] | None,
+    where: str,
+    notes: list[str],
+) -> JointStateLayout:
+    """The JointState layout's columns of ``signals`` (motor currents from its effort field), noted."""
+    plan, note = _use_layout(layout, [_layout_field(s) for s in signals], n, joint_names, where)
+    if "current" in signals:
+        plan = JointStateLayout(plan.names, {("current" if k == "tau" else k): v for k, v in plan.fields.items()})
+        note += "; the effort field taken as motor currents"
+    notes.append(note)
+    return plan
 
 
 def _layout_field(s: str) -> str:

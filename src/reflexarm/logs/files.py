@@ -108,14 +108,7 @@ def load_log(
         raise DataError(f"{where}: joint_topic / wrench_topic apply to bags (.db3, .mcap, a rosbag2 folder) only")
     if columns and (bag or suffix == ".npz"):
         raise DataError(f"{where}: a column mapping applies to CSV and Parquet logs only")
-    if torque_from not in TORQUE_SOURCES:
-        raise ConfigError(f"unknown torque source {torque_from!r}; choose one of: {', '.join(TORQUE_SOURCES)}")
-    if torque_from == "current":
-        check_gains(gains, n_joints, where)  # before reading a large file
-    elif gains is not None:
-        raise ConfigError(
-            f"{where}: gains [Nm/A] turn motor currents into torques: give them with torque_from='current'"
-        )
+    _check_torque_source(torque_from, gains, n_joints, where)  # before reading a large file
     notes: list[str] = []
     if bag:
         data, notes = read_bag(
@@ -140,6 +133,17 @@ def load_log(
         data["tau"], note = torque_from_current(current, gains, where)
         notes.append(note)
     return _finish(data, where, n_joints, repair, period, notes=tuple(notes))
+
+
+def _check_torque_source(torque_from: str, gains: npt.ArrayLike | None, n_joints: int | None, where: str) -> None:
+    if torque_from not in TORQUE_SOURCES:
+        raise ConfigError(f"unknown torque source {torque_from!r}; choose one of: {', '.join(TORQUE_SOURCES)}")
+    if torque_from == "current":
+        check_gains(gains, n_joints, where)
+    elif gains is not None:
+        raise ConfigError(
+            f"{where}: gains [Nm/A] turn motor currents into torques: give them with torque_from='current'"
+        )
 
 
 def _read_npz(p: Path, torque: str = "tau") -> dict[str, np.ndarray]:

@@ -252,6 +252,38 @@ def _numeric(x: npt.ArrayLike, where: str, name: str) -> np.ndarray:
     return np.asarray(arr, dtype=float)
 
 
+def _repair_time(
+    data: dict[str, np.ndarray], where: str, repair: bool, period: float | None, notes: list[str]
+) -> np.ndarray:
+    """The log's times with irregular steps repaired (re-timed onto the grid or kept, see the module docstring);
+    what was done goes to ``notes`` (and a :class:`LogRepairWarning` when a time was changed)."""
+    t = data["t"]
+    steps = np.diff(t)
+    if period is not None:
+        T = float(period)
+    elif np.any(steps > 0):
+        T = float(np.median(steps[steps > 0]))  # the period is the median step, always
+    else:
+        raise DataError(f"{where}: all time stamps are equal")
+    irregular = irregular_steps(steps, T)
+    if irregular.any():
+        if not repair:
+            if np.any(steps <= 0):
+                r = int(np.argmax(steps <= 0)) + 1
+                raise DataError(f"{where}: time does not increase at row {r}: t = {t[r]:.9g} s twice")
+            r = int(np.argmax(irregular)) + 1
+            raise DataError(
+                f"{where}: irregular time step at row {r}: {steps[r - 1] * 1e3:.3g} ms for a {T * 1e3:.3g} ms period "
+                f"({int(irregular.sum())} such steps); load with repair=True to re-time"
+            )
+        new_t, msg, changed = retime(t, data["q"], data["dq"], T, where, fixed=period is not None)
+        if changed:
+            warnings.warn(msg, LogRepairWarning, stacklevel=4)
+        notes.append(msg)
+        return new_t
+    return t
+
+
 def _finish(
     data: dict[str, np.ndarray],
     where: str,
@@ -329,30 +361,7 @@ def _finish(
         )
         warnings.warn(msg, LogRepairWarning, stacklevel=3)
         notes_out.append(msg)
-        t = data["t"]
-    steps = np.diff(t)
-    if period is not None:
-        T = float(period)
-    elif np.any(steps > 0):
-        T = float(np.median(steps[steps > 0]))  # the period is the median step, always
-    else:
-        raise DataError(f"{where}: all time stamps are equal")
-    irregular = irregular_steps(steps, T)
-    if irregular.any():
-        if not repair:
-            if np.any(steps <= 0):
-                r = int(np.argmax(steps <= 0)) + 1
-                raise DataError(f"{where}: time does not increase at row {r}: t = {t[r]:.9g} s twice")
-            r = int(np.argmax(irregular)) + 1
-            raise DataError(
-                f"{where}: irregular time step at row {r}: {steps[r - 1] * 1e3:.3g} ms for a {T * 1e3:.3g} ms period "
-                f"({int(irregular.sum())} such steps); load with repair=True to re-time"
-            )
-        new_t, msg, changed = retime(t, data["q"], data["dq"], T, where, fixed=period is not None)
-        if changed:
-            warnings.warn(msg, LogRepairWarning, stacklevel=3)
-        notes_out.append(msg)
-        data["t"] = new_t
+    data["t"] = _repair_time(data, where, repair, period, notes_out)
     log = RobotLog(
         t=data["t"],
         q=data["q"],

@@ -34,28 +34,7 @@ def read_table(
     header = _csv_header(p, where) if suffix == ".csv" else ()
     df = _read_frame(p, where, suffix, header is None)
     notes: list[str] = []
-    if header is None:
-        df.columns = [str(k) for k in range(df.shape[1])]
-        _refuse_unmapped_headerless(columns or {}, torque_from, df.shape[1], where)
-        notes.append(
-            f"{where}: no header row (the first row is numbers): columns named by position 0..{df.shape[1] - 1}"
-        )
-    else:
-        names = [str(c).strip() for c in df.columns]
-        if header and len(header) == len(names):
-            names = list(header)  # pandas renames repeated names (q_1, q_1.1): the file's own names
-        dup = sorted({c for c in names if names.count(c) > 1})
-        if dup:
-            at = [k for k, c in enumerate(names) if c == dup[0]]
-            raise DataError(
-                f"{where}: column {dup[0]!r} appears {len(at)} times (positions {', '.join(map(str, at))}, from 0)"
-                + (f"; also repeated: {', '.join(map(repr, dup[1:]))}" if dup[1:] else "")
-                + "; every column needs its own name: rename the copies",
-                source=where,
-                column=dup[0],
-                value=tuple(at),
-            )
-        df.columns = names
+    _name_columns(df, header, columns or {}, torque_from, where, notes)
     df, expanded = _expand_arrays(df)
     names = [str(c) for c in df.columns]
     plan = plan_columns(
@@ -109,6 +88,40 @@ def read_table(
         if s in data:
             data[s] = data[s] * factor
     return data, notes
+
+
+def _name_columns(
+    df: Any,
+    header: list[str] | tuple[str, ...] | None,
+    columns: dict[str, str],
+    torque_from: str,
+    where: str,
+    notes: list[str],
+) -> None:
+    """Name ``df``'s columns: by position for a header-less file (whose signals must be mapped by position),
+    else as the file's header writes them (a name given twice is refused, naming it and its positions)."""
+    if header is None:
+        df.columns = [str(k) for k in range(df.shape[1])]
+        _refuse_unmapped_headerless(columns, torque_from, df.shape[1], where)
+        notes.append(
+            f"{where}: no header row (the first row is numbers): columns named by position 0..{df.shape[1] - 1}"
+        )
+    else:
+        names = [str(c).strip() for c in df.columns]
+        if header and len(header) == len(names):
+            names = list(header)  # pandas renames repeated names (q_1, q_1.1): the file's own names
+        dup = sorted({c for c in names if names.count(c) > 1})
+        if dup:
+            at = [k for k, c in enumerate(names) if c == dup[0]]
+            raise DataError(
+                f"{where}: column {dup[0]!r} appears {len(at)} times (positions {', '.join(map(str, at))}, from 0)"
+                + (f"; also repeated: {', '.join(map(repr, dup[1:]))}" if dup[1:] else "")
+                + "; every column needs its own name: rename the copies",
+                source=where,
+                column=dup[0],
+                value=tuple(at),
+            )
+        df.columns = names
 
 
 def _csv_header(p: Path, where: str) -> list[str] | None:
