@@ -75,3 +75,21 @@ def test_a_wrench_that_measures_a_contact_is_included(panda):
     rmse_auto = validate_model(auto, panda, val).pooled_rmse
     rmse_excluded = validate_model(excluded, panda, val).pooled_rmse
     assert rmse_auto < 0.2 * rmse_excluded, (rmse_auto, rmse_excluded)
+
+
+def test_validation_scores_against_the_wrench_only_when_it_explains_the_error(panda):
+    """A held-out log whose wrench is only noise is scored against its measured torque alone (J^T F of the
+    noise would add ~0.2 Nm RMS to the reference); one with a contact against tau_m + J^T F."""
+    model = identify_dynamics(panda, _log(panda, 1, wrench=False), method="combined")
+    noisy = _log(panda, 2)
+    v_noise = validate_model(model, panda, noisy)
+    v_clean = validate_model(model, panda, replace(noisy, wrench=None))
+    np.testing.assert_array_equal(v_noise.measured, v_clean.measured)
+    assert "wrist wrench left out" in v_noise.friction_model
+    contact = _log(panda, 4, contact=np.array([20.0, 0.0, -10.0, 0.0, 0.0, 0.0]))
+    v_contact = validate_model(model, panda, contact)
+    assert "wrist wrench included" in v_contact.friction_model
+    # (its force noise stays in the reference: J^T n_F, ~1 Nm RMS here; without the wrench the contact's
+    # torque would stay in the error instead)
+    v_without = validate_model(model, panda, replace(contact, wrench=None))
+    assert v_contact.pooled_rmse < 0.5 * v_without.pooled_rmse, (v_contact.pooled_rmse, v_without.pooled_rmse)

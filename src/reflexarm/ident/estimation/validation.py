@@ -140,8 +140,12 @@ def validate_model(
         pred += friction.compute_torque(dq) - result.friction.compute_torque(dq)
         how = describe_friction_model(friction)
     meas = log.measured_torque
-    if log.wrench is not None:
-        meas = _rhs(robot, replace(log, tau=meas, tau_raw=None))
+    if log.wrench is not None:  # + J^T F when the wrench explains the error (not when it is only noise)
+        from reflexarm.ident.estimation.wrist_wrench import validation_reference
+
+        wrench_torque = _rhs(robot, replace(log, tau=np.zeros_like(meas), tau_raw=None))
+        meas, decision = validation_reference(wrench_torque, meas, pred)
+        how = f"{how}; {decision.reason}"
     return TorqueValidation(
         log.t.copy(), meas.copy(), pred, label if label is not None else result.method, dq.copy(), how
     )

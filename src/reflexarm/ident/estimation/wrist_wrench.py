@@ -25,11 +25,13 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import numpy as np
+
 #: alpha within this many standard deviations of 0 (of 1) counts as 0 (as 1): 3 sigma, a 0.3 % chance
 #: of calling a real wrench noise under Gaussian errors.
 SIGNIFICANCE = 3.0
 
-__all__ = ["SIGNIFICANCE", "WristWrenchDecision", "decide_wrist_wrench"]
+__all__ = ["SIGNIFICANCE", "WristWrenchDecision", "decide_wrist_wrench", "validation_reference"]
 
 
 class WristWrenchDecision(NamedTuple):
@@ -57,3 +59,20 @@ def decide_wrist_wrench(alpha: float, alpha_std: float) -> WristWrenchDecision:
         f"beyond {SIGNIFICANCE:g} sigma of 0); its noise enters each joint's residual variance, hence its weight "
         "in Sigma",
     )  # fmt: skip
+
+
+def validation_reference(
+    wrench_torque: np.ndarray, measured: np.ndarray, predicted: np.ndarray
+) -> tuple[np.ndarray, WristWrenchDecision]:
+    """The torque a model's prediction is scored against on a log with a wrist wrench: ``measured + J^T F``
+    when the wrench explains the prediction's error (alpha of ``predicted - measured = alpha J^T F`` beyond
+    :data:`SIGNIFICANCE` sigma of 0), else ``measured`` alone (a wrench of only noise would add its noise to
+    the reference). ``wrench_torque`` is J^T F per sample (N, n) [Nm]."""
+    w = wrench_torque.reshape(-1)
+    e = (predicted - measured).reshape(-1)
+    ww = float(w @ w)
+    alpha = float(w @ e) / max(ww, 1e-300)
+    r = e - alpha * w
+    alpha_std = float(np.sqrt(float(r @ r) / max(e.size - 1, 1) / max(ww, 1e-300)))
+    decision = decide_wrist_wrench(alpha, alpha_std)
+    return (measured + wrench_torque if decision.included else measured), decision
