@@ -123,3 +123,25 @@ def test_a_csv_below_the_floor_is_refused(gen3):
                        r"z = 0 m at t = [\d.]+ s \(workspace\)") as err:  # fmt: skip
         sample_excitation(tr, robot, rate=100.0, limits=limits)
     assert err.value.quantity == "workspace" and err.value.excess > 0
+
+
+def test_a_recorded_run_that_leaves_the_trajectory_is_reported(gen3):
+    """``excite --record`` compares the log with the trajectory: a joint 0.2 rad off, a torque at its limit
+    in a tenth of the samples and the hand below the base plane are each reported with a WARNING."""
+    from reflexarm.experiments.identification import DEVIATION_WARN, describe_tracking
+    from reflexarm.logs.robot_log import RobotLog
+
+    _, robot = gen3
+    a = np.zeros((7, 2))
+    a[1] = a[3] = [0.4, -0.4]  # folds forward to below the base plane (see the test above)
+    tr = FourierTrajectory(2 * np.pi * 0.05, a, np.zeros((7, 2)), np.zeros(7))
+    t = np.arange(0.0, tr.period, 0.01)
+    q, dq, _ = tr.evaluate(t)
+    q[:, 2] += 0.2  # joint 3 off by 0.2 rad > DEVIATION_WARN
+    tau = np.zeros_like(q)
+    tau[: t.size // 10, 1] = 0.98 * robot.effort_limit[1]
+    lines = describe_tracking(robot, tr, RobotLog(t=t, q=q, dq=dq, tau=tau, source="rec"))
+    assert 0.2 > DEVIATION_WARN
+    assert lines[0].startswith("WARNING: recorded run vs the trajectory: largest deviation 0.2 rad on joint 3")
+    assert lines[1].startswith("WARNING: measured torque at >= 97 % of the effort limit: 10 % of the samples on")
+    assert lines[2].startswith("WARNING: lowest point of the arm in the run:") and "below the base plane" in lines[2]
