@@ -43,7 +43,7 @@ import numpy as np
 import numpy.typing as npt
 import scipy.optimize
 
-from reflexarm.errors import ConfigError, IdentificationError
+from reflexarm.errors import ConfigError, IdentificationError, ModelError
 from reflexarm.ident.estimation.base_parameters import BaseParameters, compute_base_parameters, condition_number
 from reflexarm.ident.estimation.regressor import BatchRegressor
 from reflexarm.ident.excitation.fourier_trajectory import FourierTrajectory
@@ -242,7 +242,12 @@ def excitation_limits(
     mid = 0.5 * (lo + hi) if center is None else np.asarray(center, dtype=float)
     geometry = None
     if floor is not None or self_collision:
-        geometry = arm_geometry(robot, mid, clearance=clearance)
+        try:
+            geometry = arm_geometry(robot, mid, clearance=clearance)
+        except ModelError as e:  # e.g. a model built in memory: no file, no collision geometry
+            notes.append(f"workspace and self-collision NOT checked: no collision geometry ({e})")
+            warnings.warn(notes[-1], UserWarning, stacklevel=3)
+            floor, self_collision = None, False
     if floor == "default":
         assert geometry is not None
         floor, why = default_floor(robot, geometry, mid)
