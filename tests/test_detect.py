@@ -118,3 +118,14 @@ def test_bad_input_is_a_clear_error(iiwa, tmp_path, capsys):
     assert "time" in capsys.readouterr().err.lower()
     assert main(["detect", str(_csv(tmp_path, log)), *base[:2], "--threshold", "1,2,3"]) == 2
     assert "--threshold has 3 levels; robot 'iiwa14' has 7 joints" in capsys.readouterr().err
+
+
+def test_one_level_for_every_joint_runs_without_coverage_and_says_so(iiwa, tmp_path, capsys):
+    log = _csv(tmp_path, impact_log(iiwa, rate_hz=100.0, duration_s=10, seed=41, n_pulses=2, peak_range=(6.0, 8.0)).log)
+    out = tmp_path / "out"
+    assert main(["detect", str(log), "--robot", ROBOT, "--threshold", "6", "--no-figure", "--out", str(out)]) == 0
+    captured = capsys.readouterr()
+    assert "warning: no coverage stored with the levels" in captured.err
+    doc = json.loads((out / "events.json").read_text())
+    assert doc["method"]["zeta_Nm"] == [6.0] * iiwa.n and doc["method"]["observer"]["detection_observer_gain"] == 100.0
+    assert doc["logs"][0]["delay_resolution_s"] == pytest.approx(0.01)

@@ -117,3 +117,20 @@ def test_measured_hit_rate_and_false_alarms(iiwa, rate):
           f"{links[0]}/{caught}, within one {links[1]}/{caught}; {alarms} false alarm(s) in 30 min held out "
           f"({2 * alarms} per hour)")  # fmt: skip
     assert caught >= 0.9 * eligible
+
+
+def test_a_step_is_no_glitch_and_a_spike_is_one():
+    """The rule's own promise on a plain signal: a one-sample spike is found, the edge of a step is not (a spike of
+    h gives d = h with h/2 beside it; a step's edge h/2 on both samples)."""
+    from reflexarm.logs import RobotLog
+
+    n, N = 2, 400
+    t = np.arange(N) * 0.01
+    rng = np.random.default_rng(0)
+    q = np.zeros((N, n)) + rng.normal(0.0, 1e-5, (N, n))
+    dq = rng.normal(0.0, 2e-3, (N, n))
+    dq[200:, 0] += 0.5  # a velocity step on joint 1 (a hit changes the velocity and keeps it)
+    dq[300, 1] += 0.5  # a one-sample velocity spike on joint 2
+    tau = rng.normal(0.0, 0.1, (N, n))
+    found = find_glitches(RobotLog(t=t, q=q, dq=dq, tau=tau, source="plain"))
+    assert [(g.sample, g.joint, g.kind) for g in found] == [(300, 1, "velocity")]
