@@ -18,6 +18,8 @@
 
 #include "reflexarm/model_io.hpp"
 #include "reflexarm/reflexarm.hpp"
+#include "reflexarm/replay.hpp"
+#include "reflexarm/run_statistics.hpp"
 
 // ------------------------------------------------------------------ counting operator new
 static std::atomic<long> g_allocations{0};
@@ -259,6 +261,111 @@ namespace
     }
   }
 
+  // replayLog (a log through update() in one call) equals an update() loop bitwise, allocates nothing (fault texts
+  // off), counts the rejected rows; RunStatistics::addRows allocates nothing and counts what it is given.
+  void testReplayAndStatistics()
+  {
+    const pinocchio::Model model = makeArm();
+    reflexarm::ControllerParams p;
+    p.threshold = Eigen::VectorXd::Constant(model.nv, 4.0);
+    reflexarm::Controller a, b;
+    a.configure(model, p);
+    b.configure(model, p);
+    reflexarm::Command ca, cb;
+    a.initCommand(ca);
+    b.initCommand(cb);
+    const int n = a.nv();
+    const long N = 3000;
+    std::vector<double> t(N), q(N * n), dq(N * n), tau(N * n), res(N * n);
+    std::vector<std::uint8_t> over(N * n), col(N);
+    std::vector<std::int8_t> mode(N);
+    std::vector<std::int32_t> status(N);
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    for (long k = 0; k < N; ++k)
+    {
+      t[k] = 1e-3 * (k + 1);
+      for (int i = 0; i < n; ++i)
+      {
+        q[k * n + i] = 0.3 * std::sin(2.0 * t[k] + i) + 3e-4 * u(rng);
+        dq[k * n + i] = 0.6 * std::cos(2.0 * t[k] + i) + 5e-2 * u(rng);
+        tau[k * n + i] = 2.0 * u(rng) + (k > 2000 && i == 1 ? 15.0 : 0.0);
+      }
+      if (k % 211 == 17)
+        q[k * n + 2] = std::nan("");
+    }
+    reflexarm::ReplayInputs in;
+    in.rows = N;
+    in.t = t.data();
+    in.q = q.data();
+    in.dq = dq.data();
+    in.tau_m = tau.data();
+    in.gravity[2] = -9.81;
+    reflexarm::ReplayOutputs out;
+    out.residual = res.data();
+    out.over = over.data();
+    out.collision = col.data();
+    out.mode = mode.data();
+    out.status = status.data();
+    std::vector<reflexarm::ReplayFault> faults;
+    // allocations of a one-row replay (the call's own constant vectors) and of the whole log: none per row
+    reflexarm::Controller one;
+    one.configure(model, p);
+    reflexarm::Command c1;
+    one.initCommand(c1);
+    reflexarm::ReplayInputs in1 = in;
+    in1.rows = 1;
+    g_allocations = 0;
+    g_counting = true;
+    reflexarm::replayLog(one, c1, in1, out, faults, 0);
+    g_counting = false;
+    const long per_call = g_allocations;
+    g_allocations = 0;
+    g_counting = true;
+    const long rejected = reflexarm::replayLog(a, ca, in, out, faults, 0);
+    g_counting = false;
+    CHECK(g_allocations == per_call && per_call <= 2, "%ld allocations in replayLog of %ld rows, %ld of one row",
+          static_cast<long>(g_allocations), N, per_call);
+    long expect_rejected = 0;
+    bool same = true, any_over = false;
+    double first_over = std::nan("");
+    const Eigen::VectorXd z = Eigen::VectorXd::Zero(n);
+    const Eigen::Matrix<double, 6, 1> w = Eigen::Matrix<double, 6, 1>::Zero();
+    const Eigen::Vector3d g(0.0, 0.0, -9.81);
+    for (long k = 0; k < N; ++k)
+    {
+      const Eigen::Map<const Eigen::VectorXd> qk(&q[k * n], n), dqk(&dq[k * n], n), tk(&tau[k * n], n);
+      const auto code = b.update(t[k], 0.0, {qk, dqk, tk, w, g}, {qk, z, z}, cb);
+      expect_rejected += code != reflexarm::FaultCode::None ? 1 : 0;
+      for (int i = 0; i < n; ++i)
+        same = same && res[k * n + i] == cb.residual[i];
+      same = same && (col[k] != 0) == cb.collision;
+      if (status[k] > 0 && !any_over)
+        first_over = t[k];
+      any_over = any_over || status[k] > 0;
+    }
+    CHECK(same, "replayLog differs from the update() loop");
+    CHECK(rejected == expect_rejected && rejected == 15, "rejected %ld, expected %ld", rejected, expect_rejected);
+    CHECK(any_over && a.detected() && b.detected(), "no threshold crossing was replayed");
+    reflexarm::RunStatistics st;
+    st.configure(n, 0.1, 1001, reflexarm::kModeCount);
+    std::vector<std::int32_t> mode32(mode.begin(), mode.end()), codes(N);
+    for (long k = 0; k < N; ++k)
+      codes[k] = status[k] < 0 ? status[k] : 0;
+    g_allocations = 0;
+    g_counting = true;
+    st.addRows(N, t.data(), res.data(), res.data(), col.data(), over.data(), mode32.data(), codes.data());
+    g_counting = false;
+    CHECK(g_allocations == 0, "%ld allocations in RunStatistics::addRows", static_cast<long>(g_allocations));
+    long hist = 0;
+    for (auto c : st.counts)
+      hist += static_cast<long>(c);
+    CHECK(st.ticks == N && st.fault_ticks == 15 && hist == N * n, "ticks %ld faults %ld histogram %ld", st.ticks,
+          st.fault_ticks, hist);
+    CHECK(st.collision_events == 1 && st.first_collision_t == first_over, "events %ld first %g (expected %g)",
+          st.collision_events, st.first_collision_t, first_over);
+  }
+
   void testFaultKeepsState()
   {
     const pinocchio::Model model = makeArm();
@@ -416,6 +523,7 @@ int main()
   testNoAllocation();
   testNoAllocationInThePipeline();
   testFaultKeepsState();
+  testReplayAndStatistics();
   testModalDamping();
   testModalDampingInParts();
   testRepr();
