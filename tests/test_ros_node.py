@@ -129,7 +129,7 @@ def test_parameter_overrides_are_typed_and_checked():
 class _Harness:
     """A CollisionMonitor and a test node (publishers of its inputs, listeners of its outputs) on one executor."""
 
-    def __init__(self, mode: str, **params: object) -> None:
+    def __init__(self, mode: str, cli_args: list[str] | None = None, **params: object) -> None:
         import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.executors import SingleThreadedExecutor
@@ -143,7 +143,7 @@ class _Harness:
         self.ctx = rclpy.Context()
         rclpy.init(context=self.ctx)
         overrides = [Parameter(k, value=v) for k, v in params.items()]
-        self.node = CollisionMonitor(mode, context=self.ctx, parameter_overrides=overrides)
+        self.node = CollisionMonitor(mode, context=self.ctx, parameter_overrides=overrides, cli_args=cli_args)
         self.peer = rclpy.create_node("test_peer", context=self.ctx)
         self.pub = self.peer.create_publisher(JointState, "/joint_states", reliable(50))
         self.commands: list[np.ndarray] = []
@@ -202,7 +202,7 @@ def test_bad_input_is_a_fault_naming_it_the_node_lives_and_detection_goes_on(req
     try:
         for _ in range(20):
             h.send()
-        assert h.node.faults == {} and h.node.events == []
+        assert h.node.faults == {} and h.node.tracker.events == []
         h.send(names=[*h.names[:6], "l_arm_gripper"])  # a joint named wrong
         assert "missing ['l_arm_wry2']" in h.node.faults["joint_state"]
         assert "(unknown ['l_arm_gripper'])" in h.node.faults["joint_state"]
@@ -242,10 +242,10 @@ def test_bad_input_is_a_fault_naming_it_the_node_lives_and_detection_goes_on(req
         h.send(step_ns=10_000_000)
         for _ in range(400):
             h.send(tau=h.tau + np.array([0, 30.0, 0, 0, 0, 0, 0]))
-            if h.node.events:
+            if h.node.tracker.events:
                 break
-        assert len(h.node.events) == 1, "no collision detected after the faults"
-        event = h.node.events[0]
+        assert len(h.node.tracker.events) == 1, "no collision detected after the faults"
+        event = h.node.tracker.events[0]
         assert event["joints"] == [1] and event["contact_class"] == "collision"
         h.spin_until(lambda: len(h.events) >= 1, "the event on ~/collision_events")
         status = h.events[0]
@@ -262,8 +262,14 @@ def test_control_mode_sends_the_safe_command_on_faults(request, tmp_path):
     if not inside_private_network(request):
         return
     bag = tmp_path / "heard"
-    h = _Harness("control", joint_state_timeout=30.0, record_bag=str(bag))
+    yaml = tmp_path / "params.yaml"  # ROS 2's layout; -p overrides (here: record_bag) win over the file
+    yaml.write_text("/**:\n  ros__parameters:\n    joint_state_timeout: 30.0\n    threshold: '12,12,12,12,9,9,9'\n"
+                    "    reaction: brake\n    record_bag: ignored\n")  # fmt: skip
+    h = _Harness("control", ["--ros-args", "--params-file", str(yaml)], record_bag=str(bag))
     try:
+        assert (h.node.config.joint_state_timeout, h.node.config.reaction) == (30.0, "brake")
+        assert h.node.controller.detector.threshold.tolist() == [12, 12, 12, 12, 9, 9, 9]
+        assert h.node.config.record_bag == str(bag)
         for _ in range(5):
             h.send()
         h.spin_until(lambda: len(h.commands) >= 5, "five commands")

@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
 from rclpy.clock import JumpThreshold
@@ -46,6 +47,7 @@ from reflexarm.robots.robot_model import RobotModel
 from reflexarm.ros import outputs
 from reflexarm.ros._node_tools import declare_parameters, reliable
 from reflexarm.ros.config import MONITOR_PARAMETERS, MonitorConfig
+from reflexarm.ros.event_tracker import EventTracker
 from reflexarm.ros.inputs import JointStateReader, StampClock, stamp_ns
 from reflexarm.ros.latency import LatencyLog
 from reflexarm.ros.references import ReferenceSource
@@ -53,9 +55,6 @@ from reflexarm.signals import Measurement, Reference
 
 __all__ = ["CollisionMonitor", "build_controller"]
 
-#: A residual below this share of zeta on every joint counts as quiet: the event's ``delay_s`` is the time since
-#: the last quiet tick (an estimate of the time from the contact's onset to detection).
-ONSET_SHARE = 0.25
 #: A JointState waiting for the wrench of its own stamp is handled with the last wrench after this long [s].
 SYNC_WAIT = 0.002
 #: Publisher types on the input topics are checked this often [s].
@@ -119,20 +118,16 @@ class CollisionMonitor(Node):
         self._wrench = self._zero_wrench
         self._wrench_ns: int | None = None
         self._zeros = np.zeros(n)
-        self._inv_zeta = 1.0 / np.broadcast_to(np.asarray(self.controller.detector.threshold), (n,))  # type: ignore[union-attr]
-        self._buf = np.zeros(n)
         self.reader = JointStateReader(self.joint_names, cfg.joint_states_topic)
+        self._residual_msg = outputs.residual_state(Time(), self.joint_names, self._zeros)
         self.stamps = StampClock(cfg.max_stamp_gap, cfg.joint_states_topic)
         self.reference = ReferenceSource(cfg, model)
         self.faults: dict[str, str] = {}
         self.fault_counts: dict[str, int] = {}
         self.fault_first: dict[str, str] = {}
-        self.events: list[dict[str, Any]] = []
         self.latency = LatencyLog()
         self.done = False
         self._q_safe: np.ndarray | None = None
-        self._event_open = self._event_final = False
-        self._t_quiet = self._t_below = 0.0
         self._pending: tuple[JointState, MessageInfo, float] | None = None
         self._last_js: float | None = None  # monotonic [s] of the last message
         self._last_wrench: float | None = None
@@ -143,6 +138,9 @@ class CollisionMonitor(Node):
         self._last_diag = 0.0
         self.recorder = self._make_recorder()
         self._make_interfaces()
+        self.tracker = EventTracker(self.controller, {"events": self.pub_events, "wrench": self.pub_wrench,
+                                    "marker": self.pub_marker}, node=self.get_name(), hardware_id=self.robot.name,
+                                    frame=self.base_frame)  # fmt: skip
 
     def _make_recorder(self) -> Any:
         if not self.config.record_bag:
@@ -216,7 +214,7 @@ class CollisionMonitor(Node):
         else:
             status.level = outputs.LEVEL_OK
             status.message = f"{self.config.mode}: ok"
-        values = {"ticks": self._ticks, "events": len(self.events), "lost_by_stamp": self._lost,
+        values = {"ticks": self._ticks, "events": len(self.tracker.events), "lost_by_stamp": self._lost,
                   "detection": "on" if self.controller.detector is not None else "off"}  # fmt: skip
         values.update({f"faults_{k}": v for k, v in self.fault_counts.items()})
         status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
@@ -296,7 +294,8 @@ class CollisionMonitor(Node):
         if self.pub_command is not None:
             tau = self._safe_command() if self.faults and not cmd.fault else cmd.tau
             self.pub_command.publish(outputs.effort_command(tau))
-        self.pub_residual.publish(outputs.residual_state(msg.header.stamp, self.joint_names, cmd.residual))
+        self.pub_residual.publish(outputs.residual_state(msg.header.stamp, self.joint_names, cmd.residual,
+                                                         self._residual_msg))  # fmt: skip
         event_published = self._follow_event(t, cmd.residual, cmd.collision, msg)
         self.latency.add(info["received_timestamp"], started, time.time_ns(), event_published)
 
@@ -313,66 +312,19 @@ class CollisionMonitor(Node):
     # ------------------------------------------------------------------ events
     def _follow_event(self, t: float, residual: np.ndarray, collision: bool, msg: JointState) -> bool:
         """Publish a new event at once, its estimate when it is in; re-arm the monitor. True: an event was sent."""
-        buf = self._buf
-        np.abs(residual, out=buf)
-        buf *= self._inv_zeta
-        ratio = float(buf.max())
-        if ratio < ONSET_SHARE:
-            self._t_quiet = t
-        if ratio >= 1.0:
-            self._t_below = t
-        if not collision:
-            return False
-        published = False
-        if not self._event_open or not self._event_final:
-            published = self._publish_event(msg)
-        if self._event_open and self.config.mode == "monitor" and self.config.rearm_after > 0:
-            if t - self._t_below >= self.config.rearm_after:
+        published = self.tracker.follow(t, residual, collision, msg.header.stamp, self.stamps.first_ns or 0)
+        cfg = self.config
+        if self.tracker.open and cfg.mode == "monitor" and cfg.rearm_after > 0:
+            if t - self.tracker.t_below >= cfg.rearm_after:
                 self._rearm(clear_clock=False)
         return published
-
-    def _publish_event(self, msg: JointState) -> bool:
-        event = self.controller.event
-        if event is None:
-            return False
-        final = event.estimate is not None or self.controller.contact_geometry is None
-        final = final or (event.t_detect < self.stamps_t(msg) - 1.0)  # the isolation gave nothing within 1 s
-        if self._event_open and not final:
-            return False
-        if not self._event_open:
-            self._event_open = True
-            delay = event.t_detect - self._t_quiet
-            self.events.append({"number": len(self.events) + 1, "delay_s": delay, **event.to_dict()})
-        record = self.events[-1]
-        record.update(event.to_dict())
-        self._event_final = final
-        status = outputs.event_status(
-            record["number"], event, node=self.get_name(), hardware_id=self.robot.name,
-            t0_ns=self.stamps.first_ns or 0, onset_delay=record["delay_s"],
-        )  # fmt: skip
-        array = DiagnosticArray()
-        array.header.stamp = msg.header.stamp
-        array.status = [status]
-        self.pub_events.publish(array)
-        wrench = outputs.contact_wrench(msg.header.stamp, self.base_frame, event)
-        if wrench is not None:
-            self.pub_wrench.publish(wrench)
-            self.pub_marker.publish(outputs.contact_marker(msg.header.stamp, self.base_frame, "contact", event))
-        return True
-
-    def stamps_t(self, msg: JointState) -> float:
-        """Seconds of ``msg``'s stamp since the first stamp heard."""
-        return (stamp_ns(msg.header.stamp) - (self.stamps.first_ns or 0)) * 1e-9
 
     def _rearm(self, *, clear_clock: bool) -> None:
         self.controller.reset()
         if clear_clock:
             self.stamps.reset()
             self.reference.reset()
-        if self._event_open:
-            self.pub_marker.publish(outputs.contact_marker(self.get_clock().now().to_msg(), self.base_frame,
-                                                           "contact", None))  # fmt: skip
-        self._event_open = self._event_final = False
+        self.tracker.close(self.get_clock().now().to_msg())
 
     # ------------------------------------------------------------------ watchdog
     def _watchdog(self) -> None:
@@ -423,7 +375,7 @@ class CollisionMonitor(Node):
             "joint_states": self._ticks,
             "lost_by_stamp": self._lost,
             "first_stamp_ns": self.stamps.first_ns,
-            "events": self.events,
+            "events": self.tracker.events,
             "faults": {k: {"first": self.fault_first.get(k, ""), "count": c} for k, c in self.fault_counts.items()},
             "active_faults": dict(self.faults),
             "latency": self.latency.summary(),

@@ -30,6 +30,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
+from reflexarm.errors import SimulationError
 from reflexarm.ros._node_tools import declare_parameters, reliable
 from reflexarm.ros.config import SIM_PARAMETERS, SimConfig
 
@@ -60,6 +61,7 @@ class SimulatedRobot(Node):
         self._tau = np.zeros(self.n)
         self.commands = self.rejected = self.lockstep_timeouts = self.overruns = self.ticks = 0
         self._rejected_text = ""
+        self.error = ""
         self.done = False
         out = reliable(10)
         self.pub_js = self.create_publisher(JointState, cfg.joint_states_topic, out)
@@ -122,7 +124,12 @@ class SimulatedRobot(Node):
             else:
                 deadline += self.period_ns * 1e-9
                 self._pace(executor, deadline)
-            self.plant.step(self._tau)
+            try:
+                self.plant.step(self._tau)
+            except SimulationError as e:  # a diverged plant ends the run, said, not a traceback
+                self.get_logger().error(f"the simulation stopped at tick {self.ticks}: {e}")
+                self.error = str(e)
+                break
             self.ticks += 1
         self.done = True
 
@@ -151,7 +158,8 @@ class SimulatedRobot(Node):
         """Counts of the run, JSON-ready."""
         return {"ticks": self.ticks, "simulated_s": self.ticks * self.period_ns * 1e-9, "commands": self.commands,
                 "rejected_commands": self.rejected, "lockstep_timeouts": self.lockstep_timeouts,
-                "overruns": self.overruns, "scene": self.config.scene, "robot": self.robot.name}  # fmt: skip
+                "overruns": self.overruns, "scene": self.config.scene, "robot": self.robot.name,
+                "error": self.error}  # fmt: skip
 
     def close(self) -> None:
         """Write the summary file, if asked."""
