@@ -23,6 +23,7 @@ from reflexarm.tuning import (
     replay_residual,
     tune_thresholds,
 )
+from reflexarm.tuning.output import write_thresholds
 
 DT = 1e-3
 #: Velocity noise of the paper (uniform, +-) [rad/s].
@@ -115,7 +116,7 @@ def test_a_file_of_pairs_drives_the_controller_at_its_gain(atlas, pairs, tmp_pat
     logs = [_still_log(atlas, 40.0, seed=s) for s in (11, 12)]
     proposal = tune_thresholds(logs, atlas, rate_per_hour=60.0, contact_rate_per_hour=600.0)
     proposal.detection_pairs = pairs.as_dict()
-    path = proposal.write(tmp_path, figure=False)["json"]
+    path = write_thresholds(proposal, tmp_path, figure=False)["json"]
     assert "detection_pairs" in json.loads(path.read_text())
     zeta, source, tuned = read_threshold(str(path), atlas, 100.0)
     np.testing.assert_allclose(zeta, pairs.pair(100.0).collision, rtol=1e-12)

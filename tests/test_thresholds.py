@@ -26,6 +26,7 @@ from reflexarm.tuning import (
     replay_residual,
     tune_thresholds,
 )
+from reflexarm.tuning._report import format_report
 
 DT = 1e-3
 
@@ -243,7 +244,7 @@ def test_the_report_prints_each_joint_with_its_full_name(atlas):
     prop = tune_thresholds(log, atlas, rate_per_hour=60.0, contact_rate_per_hour=600.0, gap_s=0.1, n_boot=20)
     names = [f"a_rather_long_joint_name_{j + 1}_joint" for j in range(atlas.n)]
     prop.joints = [replace(jt, name=name) for jt, name in zip(prop.joints, names, strict=True)]
-    table = prop.report().splitlines()
+    table = format_report(prop).splitlines()
     header = next(i for i, line in enumerate(table) if line.lstrip().startswith("joint"))
     rows = table[header + 1 : header + 1 + atlas.n]
     for j, (row, name) in enumerate(zip(rows, names, strict=True)):

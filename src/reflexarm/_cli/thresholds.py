@@ -187,14 +187,17 @@ def _tune(args: argparse.Namespace) -> int:
     pairs = _pairs(args, model, settings) if args.detection_gains else None
     if pairs is not None:
         proposal.detection_pairs = pairs.as_dict()
-    files = proposal.write(args.out, figure=not args.no_figure)
-    print(proposal.report())
+    from reflexarm.tuning._report import format_pairs, format_report
+    from reflexarm.tuning.output import write_thresholds
+
+    files = write_thresholds(proposal, args.out, figure=not args.no_figure)
+    print(format_report(proposal))
     if pairs is not None:
         import pandas as pd
 
         files["pairs_csv"] = Path(args.out) / "detection_pairs.csv"
         pd.DataFrame(pairs.rows()).to_csv(files["pairs_csv"], index=False, float_format="%.6g")
-        print("\n" + pairs.report())
+        print("\n" + format_pairs(pairs))
     print(f"\nwrote {', '.join(str(f) for f in files.values())}")
     return 0
 

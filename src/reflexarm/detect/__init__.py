@@ -17,7 +17,8 @@ if TYPE_CHECKING:
     from reflexarm.detect.defaults import DEFAULT_DETECTION_GAIN, SHORTEST_IMPACT_S
     from reflexarm.detect.events import DetectedEvent, find_events
     from reflexarm.detect.glitches import Glitch, find_glitches, repair_glitches
-    from reflexarm.detect.run import DetectionReport, LogDetection, detect_collisions
+    from reflexarm.detect.result import LogDetection
+    from reflexarm.detect.run import DetectionReport, detect_collisions
 
 __all__ = [
     "DEFAULT_DETECTION_GAIN",
@@ -41,7 +42,8 @@ _SOURCES = {
     **dict.fromkeys(("DEFAULT_DETECTION_GAIN", "SHORTEST_IMPACT_S"), "defaults"),
     **dict.fromkeys(("DetectedEvent", "find_events"), "events"),
     **dict.fromkeys(("Glitch", "find_glitches", "repair_glitches"), "glitches"),
-    **dict.fromkeys(("DetectionReport", "LogDetection", "detect_collisions"), "run"),
+    "LogDetection": "result",
+    **dict.fromkeys(("DetectionReport", "detect_collisions"), "run"),
 }
 
 

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from reflexarm.detect.run import LogDetection
+    from reflexarm.detect.result import LogDetection
 
 __all__ = ["plot_detection"]
 

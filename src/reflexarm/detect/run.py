@@ -12,16 +12,17 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from reflexarm.detect.coverage import JointCoverage, Outside, check_coverage
+from reflexarm.detect.coverage import JointCoverage, check_coverage
 from reflexarm.detect.events import DetectedEvent, find_events
-from reflexarm.detect.glitches import Glitch, repair_glitches
+from reflexarm.detect.glitches import repair_glitches
+from reflexarm.detect.result import LogDetection
 from reflexarm.errors import ConfigError
 from reflexarm.logs.robot_log import RobotLog
 from reflexarm.robots.robot_model import RobotModel
@@ -31,49 +32,6 @@ __all__ = ["DetectionReport", "LogDetection", "detect_collisions"]
 
 #: Events closer than this many detection time constants are one (the tuning's declustering gap, 5 / k_o).
 GAP_TIME_CONSTANTS = 5.0
-
-
-@dataclass
-class LogDetection:
-    """What :func:`detect_collisions` found in one log."""
-
-    source: str
-    t: np.ndarray
-    residual: np.ndarray
-    zeta: np.ndarray
-    dt: float
-    settings: ObserverSettings
-    events: list[DetectedEvent]
-    glitches: list[Glitch]
-    outside: list[Outside]
-    fault_ticks: int
-    joint_names: list[str]
-    notes: list[str] = field(default_factory=list)
-
-    @property
-    def duration(self) -> float:
-        """Span of the log [s] (N samples of dt)."""
-        return float(self.t.size * self.dt)
-
-    @property
-    def rate_hz(self) -> float:
-        """The log's sample rate [Hz] (1 / its median period)."""
-        return 1.0 / self.dt
-
-    def summary(self) -> dict[str, Any]:
-        """JSON-ready summary of the log (events listed separately)."""
-        return {
-            "log": self.source,
-            "samples": int(self.t.size),
-            "duration_s": self.duration,
-            "period_s": self.dt,
-            "delay_resolution_s": self.dt,
-            "events": len(self.events),
-            "glitches": [g.as_dict() for g in self.glitches],
-            "outside_coverage": [o.line() for o in self.outside],
-            "fault_ticks": self.fault_ticks,
-            "notes": list(self.notes),
-        }
 
 
 def _isolate(events: list[DetectedEvent], q: np.ndarray, t: np.ndarray, model: RobotModel, zeta: np.ndarray,

@@ -161,12 +161,6 @@ class DetectionPairs:
             rows.append(d)
         return rows
 
-    def report(self) -> str:
-        """The pairs as a plain-text table."""
-        from reflexarm.tuning._report import format_pairs
-
-        return format_pairs(self)
-
 
 def _replay_once(item: Item, robot: RobotModel, s: ObserverSettings, load: Callable[[Any], RobotLog]) -> Any:
     """A replay at ``s`` (exact) if ``item`` refilters, else the log itself (replayed at each gain later)."""

@@ -29,13 +29,11 @@ rate allows (:data:`CONSISTENCY_QUANTILE` of the Poisson count), it is flagged w
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 from scipy.stats import poisson
@@ -217,29 +215,6 @@ class ThresholdProposal:
             "coverage": None if self.coverage is None else [c.as_dict() for c in self.coverage],
             **({} if self.detection_pairs is None else {"detection_pairs": self.detection_pairs}),
         }
-
-    def report(self) -> str:
-        """Plain-text report: the method, then one line per joint (1-based) with both levels and delays."""
-        from reflexarm.tuning._report import format_report
-
-        return format_report(self)
-
-    def write(self, out: str | Path, *, figure: bool = True) -> dict[str, Path]:
-        """Write ``thresholds.json``, ``thresholds.csv`` and (``figure``) ``thresholds.png`` (residuals
-        with both levels) and ``threshold_tails.png`` (rate against level per joint) into ``out``."""
-        import pandas as pd
-
-        folder = Path(out)
-        folder.mkdir(parents=True, exist_ok=True)
-        files = {"json": folder / "thresholds.json", "csv": folder / "thresholds.csv"}
-        files["json"].write_text(json.dumps(self.as_dict(), indent=2))
-        pd.DataFrame(self.rows()).to_csv(files["csv"], index=False, float_format="%.6g")
-        if figure:
-            from reflexarm.tuning.plots import plot_residual_levels, plot_tails
-
-            files["figure"] = plot_residual_levels(self, folder / "thresholds.png")
-            files["tails"] = plot_tails(self, folder / "threshold_tails.png")
-        return files
 
 
 def _check_rate(value: float, name: str) -> float:
