@@ -146,6 +146,13 @@ def _html(study: PflStudy, table: list[dict[str, Any]], figures: list[Path]) -> 
     err = "".join(f"<li>{html.escape(e)}</li>" for e in errors) or "<li>none</li>"
     figs = "".join(f'<img src="{f.name}" width="48%">' for f in figures)
     cond = html.escape(json.dumps(study.conditions, default=str))
+    clamped_html = (
+        f"<h3>Clamped contact (wall behind the region): largest force [N], largest force from {QS_WINDOW_S:g} s "
+        "after detection [N], time after detection until the force stays below F_QS [s]</h3>"
+        + _table_html(table, clamped)
+        if len(clamped) > len(ident) + 1
+        else "<p>No clamped runs on a motion file (the clamping runs use the demo swing).</p>"
+    )
     return f"""<!doctype html><html><head><meta charset="utf-8"><title>reflexarm pfl</title>
 <style>body{{font-family:sans-serif;font-size:11px;margin:12px}}table{{border-collapse:collapse;margin-bottom:8px}}
 td,th{{border:1px solid #bbb;padding:2px 4px;text-align:right}}</style></head><body>
@@ -165,8 +172,7 @@ can only lower it if detection comes before the peak.
 "transient_detection_delay_s": the longest time from first contact to detection over the transient runs ("-":
 not detected in the run); "sim_over_analytic_max": the largest simulated/analytic peak ratio, detection off.</p>
 <h3>Transient contact: permissible speed [m/s]</h3>{_table_html(table, transient)}
-<h3>Clamped contact (wall behind the region): largest force [N], largest force from {QS_WINDOW_S:g} s after
-detection [N], time after detection until the force stays below F_QS [s]</h3>{_table_html(table, clamped)}
+{clamped_html}
 <h3>Runs that could not be made</h3><ul>{err}</ul>
 <h3>Per region: peak force vs speed</h3>{figs}
 <p>Conditions: {cond}</p></body></html>"""
