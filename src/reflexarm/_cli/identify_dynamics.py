@@ -132,6 +132,9 @@ def _identify_from_logs(args: argparse.Namespace) -> int:
         results[m] = for_controller(estimate, robot, robot, args)
         if estimate.inertia_determinacy is not None:
             print(f"{m}: {estimate.inertia_determinacy.describe()}")
+        for note in estimate.notes:  # whether the wrist wrench entered the regression, and why
+            if note.startswith("wrist wrench"):
+                print(f"{m}: {note}")
     # what can still fail on the logs (validation times against the states) runs before anything is written
     vals = {} if val_raw is None else {m: validate_model(r, robot, val_raw, states=states) for m, r in results.items()}
     copies, copy_notes = [], {}
