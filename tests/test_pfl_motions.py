@@ -243,7 +243,7 @@ def test_estimated_safe_speeds_beyond_the_tested_ones_are_simulated_where_reacha
     assert est["simulated_safe_speed_m_s"] == pytest.approx(2.0) and est["extrapolated"] is True
 
 
-@pytest.mark.slow  # ~10 s alone, ~45 s on a loaded machine (16-20 closed-loop runs)
+@pytest.mark.slow  # ~5 s alone, ~45 s on a loaded machine (16-20 closed-loop runs)
 def test_cli_simulates_a_trajectory_file_per_contact_point(tmp_path, capsys):
     import csv
 
