@@ -331,3 +331,26 @@ def test_demo_collision_over_dds_is_detected_at_the_in_process_tick(request, tmp
     assert abs(k_dds - k_ref) <= 2, f"detected at tick {k_dds} over DDS, {k_ref} in process"
     assert event["contact_class"] == trace.meta["collision_event"]["contact_class"] == "contact"
     assert event["estimate"]["link_name"] == trace.meta["collision_event"]["estimate"]["link_name"]
+
+
+def test_the_simulated_robot_runs_in_real_time_and_is_heard(request, tmp_path):
+    if not inside_private_network(request):
+        return
+    cli = [sys.executable, "-m", "reflexarm.cli", "ros"]
+    monitor = subprocess.Popen(
+        [*cli, "monitor", "-p", "joint_state_timeout:=30.0", "-p", f"summary_file:={tmp_path}/monitor.json"],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )  # fmt: skip
+    try:
+        sim = subprocess.run([*cli, "sim", "-p", "scene:=none", "-p", f"summary_file:={tmp_path}/sim.json",
+                              "--duration", "0.5"], capture_output=True, text=True, timeout=240)  # fmt: skip
+        time.sleep(1.0)  # the last messages on their way (not a timing assertion: counts are compared below)
+    finally:
+        monitor.terminate()
+        out, _ = monitor.communicate(timeout=60)
+    assert sim.returncode == 0, sim.stdout + sim.stderr
+    assert "sim: 500 ticks (0.500 s)" in sim.stdout
+    ran = json.loads((tmp_path / "sim.json").read_text())
+    heard = json.loads((tmp_path / "monitor.json").read_text())
+    assert ran["ticks"] == 500 and ran["commands"] == 0  # nobody commands: the plant holds zero effort
+    assert 0 < heard["heard"] <= 500, out  # the arm falls (no command): its faults are the contract's business
