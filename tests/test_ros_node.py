@@ -113,7 +113,10 @@ def test_without_the_ros_extra_the_command_says_what_to_install():
 def test_parameter_overrides_are_typed_and_checked():
     from reflexarm._cli.ros import parse_overrides
     from reflexarm.errors import ConfigError
-    from reflexarm.ros.config import MONITOR_PARAMETERS, MonitorConfig
+    from reflexarm.ros.config import MONITOR_PARAMETERS, SIM_PARAMETERS, MonitorConfig, SimConfig, parameter_names
+
+    assert parameter_names(MonitorConfig) == ["mode"] + [name for name, _, _ in MONITOR_PARAMETERS]
+    assert parameter_names(SimConfig) == [name for name, _, _ in SIM_PARAMETERS]
 
     values = parse_overrides(["threshold:=20", "observer_gain:=7", "rearm_after:=0.5"], MONITOR_PARAMETERS)
     assert values == {"threshold": "20", "observer_gain": 7.0, "rearm_after": 0.5}

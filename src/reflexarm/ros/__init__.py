@@ -8,4 +8,4 @@ modules import rclpy.
 
 from reflexarm.ros.config import MONITOR_PARAMETERS, SIM_PARAMETERS, MonitorConfig, SimConfig
 
-__all__ = ["MONITOR_PARAMETERS", "SIM_PARAMETERS", "MonitorConfig", "SimConfig"]
+__all__ = ["MONITOR_PARAMETERS", "MonitorConfig", "SIM_PARAMETERS", "SimConfig"]
