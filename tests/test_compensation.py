@@ -246,10 +246,12 @@ def test_efc_step_release_returns_with_dc(dry):
 
 
 def test_efc_step_figure_shows_the_three_runs(dry):
-    # Fig. 12's three panels (q_1, tau_ext,1, residual_1), each with one line per run, drawn from the traces
+    # Fig. 12's three panels (q_1, tau_ext,1, residual_1: joint 1 carries the load on Atlas), each with one
+    # line per run, drawn from the traces
     fig = efc_step_figure(dry)
+    assert dry.joint == 0
     assert [ax.get_ylabel() for ax in fig.axes] == [
-        "$q_1$ [rad]",
+        "$q_{1}$ [rad] (loaded joint)",
         "$\\tau_{ext,1}$ [Nm]",
         "$\\hat{\\tau}_{\\varepsilon,1}$ [Nm]",
     ]
