@@ -257,3 +257,38 @@ def test_a_plant_without_any_geometry_is_framed_by_its_bodies(tmp_path: Path) ->
     view = frame_scene(plant)  # raised SimulationError("... no finite geometry to frame ...")
     assert all(math.isfinite(v) for v in (*view.lookat, view.distance))
     np.testing.assert_allclose(view.lookat[2], 0.2, atol=1e-9)  # the box of the origins: world 0, bodies 0.2, 0.4 m
+
+
+# ---------------------------------------------------------------------- block placement (issue 18 items 4, 10)
+def test_the_block_placement_sees_how_low_each_link_reaches(tmp_path: Path) -> None:
+    """The placement's swept pieces reach at least as low as the plant's geometry itself: every corner of
+    each box and every vertex of each mesh hull, in MuJoCo's world at the same postures (spheres around a
+    box's or mesh's long axis stayed up to 3.3 cm above it on the Atlas arm, more than the clearance)."""
+    from reflexarm.experiments.any_arm import ee_swing_plan, geometry_plant, up_direction
+    from reflexarm.experiments.block_placement import SPHERES_PER_GEOM, _arm_geoms_along
+
+    _write(tmp_path, "box.dae", box_dae((40, 60, 100), translate_mm=(0, 0, 0), rotate_z_deg=0))
+    robot = _quiet(load_robot, _write(tmp_path, "arm.urdf", vendor_like_urdf("box.dae")), tip="end_effector_link")
+    traj = ee_swing_plan(robot).trajectory()
+    qs = np.array([traj.sample(float(t)).q_d for t in np.linspace(0.0, traj.duration, 20)])
+    centres, halves, _, _ = _arm_geoms_along(robot, qs)
+    up = up_direction(robot)
+    reached = (centres @ up - np.abs(halves) @ np.abs(up)).reshape(len(qs), -1, SPHERES_PER_GEOM).min(axis=2)
+    plant = _quiet(geometry_plant, robot)
+    m, d = plant.model, plant.data
+    geoms = [g for g in range(m.ngeom) if m.geom_bodyid[g] in plant._arm_bodies and m.geom_contype[g]]
+    kinds = {int(m.geom_type[g]) for g in geoms}
+    assert kinds == {int(mujoco.mjtGeom.mjGEOM_BOX), int(mujoco.mjtGeom.mjGEOM_MESH)}, kinds
+    short = np.zeros((len(qs), len(geoms)))  # how far each piece set stays above its geom's lowest point [m]
+    for k, q in enumerate(qs):
+        d.qpos[plant._qadr_arr] = q
+        mujoco.mj_kinematics(m, d)
+        for i, g in enumerate(geoms):
+            if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH:
+                start, count = m.mesh_vertadr[m.geom_dataid[g]], m.mesh_vertnum[m.geom_dataid[g]]
+                local = np.asarray(m.mesh_vert[start : start + count], dtype=float)
+            else:
+                local = (2.0 * _BOX_CORNERS - 1.0) * m.geom_size[g]
+            short[k, i] = reached[k, i] - float(np.min((local @ d.geom_xmat[g].reshape(3, 3).T + d.geom_xpos[g]) @ up))
+    worst = np.unravel_index(np.argmax(short), short.shape)
+    assert short.max() <= ATOL_M, f"geom {geoms[worst[1]]} at posture {worst[0]}: {short.max():.4f} m above it"
