@@ -26,6 +26,7 @@ from __future__ import annotations
 import json
 import math
 import time
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -42,18 +43,17 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Empty, Float64MultiArray
 from visualization_msgs.msg import Marker
 
-from reflexarm.control import Controller
-from reflexarm.robots.robot_model import RobotModel
 from reflexarm.ros import outputs
 from reflexarm.ros._node_tools import declare_parameters, reliable
 from reflexarm.ros.config import MONITOR_PARAMETERS, MonitorConfig
+from reflexarm.ros.controller_setup import build_controller, load_models
 from reflexarm.ros.event_tracker import EventTracker
 from reflexarm.ros.inputs import JointStateReader, StampClock, stamp_ns
 from reflexarm.ros.latency import LatencyLog
 from reflexarm.ros.references import ReferenceSource
 from reflexarm.signals import Measurement, Reference
 
-__all__ = ["CollisionMonitor", "build_controller"]
+__all__ = ["CollisionMonitor"]
 
 #: A JointState waiting for the wrench of its own stamp is handled with the last wrench after this long [s].
 SYNC_WAIT = 0.002
@@ -61,45 +61,6 @@ SYNC_WAIT = 0.002
 DRAIN_MAX = 100
 #: Publisher types on the input topics are checked this often [s].
 TYPE_CHECK_PERIOD = 0.5
-
-
-def load_models(config: MonitorConfig) -> tuple[RobotModel, RobotModel]:
-    """(the robot, the controller's model: the identified model file, or the robot perturbed by model_error)."""
-    from reflexarm.robots import load_robot, perturb_model
-
-    robot = load_robot(config.robot)
-    if config.model_file:
-        from reflexarm.ident import load_identified_model
-
-        return robot, load_identified_model(Path(config.model_file), robot)
-    if config.model_error > 0:
-        return robot, perturb_model(robot, config.model_error, config.model_seed)
-    return robot, robot
-
-
-def build_controller(config: MonitorConfig, model: RobotModel) -> Controller:
-    """The controller of ``config`` on ``model`` (thresholds as ``--threshold`` reads them), warmed up: a few ticks
-    at rest, then :meth:`Controller.reset` (after which it runs as a fresh one, bitwise), so that the first real
-    tick carries no first-use cost."""
-    from reflexarm._cli.common import read_threshold
-
-    detecting = config.detection_observer_gain or None
-    zeta, _, _ = read_threshold(config.threshold, model, detecting or config.observer_gain)
-    controller = Controller(
-        model,
-        stiffness=config.stiffness,
-        observer_gain=config.observer_gain,
-        detection_observer_gain=detecting,
-        threshold=zeta,
-        reaction=config.reaction,
-        observer_discretization=config.observer_discretization,
-    )
-    q = np.clip(np.zeros(model.n), model.lower_limit, model.upper_limit)
-    rest = Measurement(0.0, q, np.zeros(model.n), model.compute_gravity(q), np.zeros(6), np.asarray(model.gravity))
-    for k in range(12):
-        controller.step(rest._replace(t=k * controller.dt), Reference.hold(q))
-    controller.reset()
-    return controller
 
 
 class CollisionMonitor(Node):
@@ -111,7 +72,11 @@ class CollisionMonitor(Node):
         super().__init__(name or f"reflexarm_{mode}", **node_kwargs)
         cfg = self.config = MonitorConfig.from_values(mode, declare_parameters(self, MONITOR_PARAMETERS))
         self.robot, model = load_models(cfg)
-        self.controller = build_controller(cfg, model)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            self.controller = build_controller(cfg, model)
+        for w in caught:  # model-file and threshold warnings go to the node's log
+            self.get_logger().warning(str(w.message))
         self.n = n = model.n
         self.joint_names = list(model.joint_names)
         self.base_frame = model.frame_names[1] if len(model.frame_names) > 1 else "world"
@@ -254,6 +219,8 @@ class CollisionMonitor(Node):
     def _on_one_joint_state(self, msg: JointState, info: MessageInfo) -> None:
         self._last_js = now = time.monotonic()
         self.heard += 1
+        if "joint_state_stale" in self.faults:
+            self._clear_fault("joint_state_stale")
         if self.recorder is not None:
             self.recorder.put(self.config.joint_states_topic, serialize_message(msg), info["received_timestamp"])
         if self._pending is not None:  # a newer JointState: the waiting one goes with the wrench there is
