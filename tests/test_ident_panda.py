@@ -47,14 +47,11 @@ def panda_log():
 def test_the_real_log_is_repaired_and_says_so(panda_log):
     log, _, messages = panda_log
     assert any("dropped 1,131 rows that exactly repeat the previous row" in m for m in messages)
-    retime = next(m for m in messages if "time stamps jitter" in m)
-    assert "re-timed 19,413 samples on the 1 ms grid" in retime
+    # the host's stamps jitter by more than half a period (0.7 to 15.5 ms steps): re-timing onto a grid would
+    # move samples by more than half a period, so the log keeps its own stamps and its notes say why
+    kept = next(m for m in log.notes if "kept the log's own time stamps" in m)
+    assert "period 1 ms, the median step" in kept and "on one tick" in kept
     assert log.is_uniform is False and np.all(np.diff(log.t) > 0)
-    # after re-timing, the positions and velocities agree better (the warning gives both numbers)
-    before, after = (
-        float(x) for x in retime.split("mismatch |delta q - dq dt| / |dq T| ")[1].split(";")[0].split(" -> ")
-    )
-    assert after < 0.5 * before
 
 
 @pytest.mark.slow  # ~30 s alone, 150 s on a loaded 2-core machine (the consistency projection)

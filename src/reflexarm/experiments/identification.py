@@ -52,8 +52,9 @@ from reflexarm.ident import (
 )
 from reflexarm.ident._blas_threads import DEFAULT_BLAS_THREADS, blas_threads
 from reflexarm.ident.export.write_back import with_consistent_links
+from reflexarm.robots.loader import load_robot
 from reflexarm.robots.perturbation import perturb_model
-from reflexarm.robots.robot_model import RobotModel, load_robot
+from reflexarm.robots.robot_model import RobotModel
 from reflexarm.sim import PAPER_NOISE, SensorNoise
 
 __all__ = [

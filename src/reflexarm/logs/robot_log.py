@@ -32,7 +32,7 @@ import numpy.typing as npt
 
 from reflexarm.errors import DataError
 from reflexarm.logs._retime import irregular_steps, retime
-from reflexarm.logs.plausibility import check_absolute_bounds
+from reflexarm.logs.bounds import check_absolute_bounds
 
 __all__ = ["WRENCH_COLUMNS", "LogRepairWarning", "RobotLog"]
 

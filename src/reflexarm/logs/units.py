@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from reflexarm.errors import ImplausibleDataError
-from reflexarm.logs.plausibility import BadSample
+from reflexarm.logs.bounds import BadSample
 
 if TYPE_CHECKING:
     from reflexarm.robots.robot_model import RobotModel

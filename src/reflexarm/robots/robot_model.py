@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -17,10 +17,7 @@ from reflexarm.robots._loading import build_pinocchio_model
 from reflexarm.robots._notes import warn_note
 from reflexarm.robots.friction import CoulombViscousFriction
 
-if TYPE_CHECKING:  # at run time they come through __getattr__ below (loader.py imports this module)
-    from reflexarm.robots.loader import builtin_robots, load_robot  # noqa: F401
-
-__all__ = ["RobotModel"]  # load_robot and builtin_robots: see loader.py (still importable from here)
+__all__ = ["RobotModel"]  # load_robot and builtin_robots: reflexarm.robots.loader (which builds on this module)
 
 #: Inertial parameters per link, in Pinocchio's order (about the joint frame origin):
 #: m, m*c_x, m*c_y, m*c_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz.
@@ -381,12 +378,3 @@ def _joint_vector(
             f"{name}{where} must be a finite{' non-negative' if nonnegative else ''} ({n},) array; got {value!r}"
         )
     return arr
-
-
-def __getattr__(name: str) -> Any:
-    """``load_robot`` and ``builtin_robots`` live in ``loader.py``; still importable from here."""
-    if name in ("load_robot", "builtin_robots"):
-        from reflexarm.robots import loader
-
-        return getattr(loader, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -15,7 +15,8 @@ import numpy.typing as npt
 
 from reflexarm.errors import ConfigError, ModelError, SimulationError
 from reflexarm.robots.friction import CoulombViscousFriction
-from reflexarm.robots.robot_model import RobotModel, load_robot
+from reflexarm.robots.loader import load_robot
+from reflexarm.robots.robot_model import RobotModel
 from reflexarm.sim import _kernels
 from reflexarm.sim._builder import SENSOR_FORCE, SENSOR_TORQUE, build_robot_spec
 from reflexarm.sim._plant_forces import _AppliedForce, _PlantForces

@@ -28,7 +28,8 @@ from reflexarm.ident.export._robot_xml import (
     set_inertial,
     write_xml,
 )
-from reflexarm.robots.robot_model import RobotModel, load_robot
+from reflexarm.robots.loader import load_robot
+from reflexarm.robots.robot_model import RobotModel
 
 
 @dataclass(frozen=True)

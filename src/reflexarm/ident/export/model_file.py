@@ -33,7 +33,8 @@ import numpy as np
 from reflexarm.errors import ModelError
 from reflexarm.ident.estimation.identify import DynamicsIdentification, PhysicalConsistencyWarning, mass_matrix_margin
 from reflexarm.robots.friction import CoulombViscousFriction
-from reflexarm.robots.robot_model import RobotModel, builtin_robots, load_robot
+from reflexarm.robots.loader import builtin_robots, load_robot
+from reflexarm.robots.robot_model import RobotModel
 
 __all__ = ["FORMAT", "load_identified_model", "read_identified_model", "resolve_robot_source", "save_identified_model"]
 
