@@ -11,7 +11,7 @@ whose ``contype`` has bit 1; static scenery (floor, table) and hard object cores
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -19,14 +19,14 @@ import numpy as np
 from reflexarm.robots.robot_model import RobotModel
 from reflexarm.sim._builder import CONTACT_ARM, CONTACT_WORLD
 
-if TYPE_CHECKING:
-    from reflexarm.sim.plant import Plant
-
 __all__ = ["CONTACT_ARM", "CONTACT_WORLD", "Scene", "add_floor"]
 
 
 class Scene:
     """Base class of the scenes. Subclasses override what they need; every hook defaults to nothing.
+
+    The hooks receive the :class:`~reflexarm.sim.plant.Plant` that runs them (typed ``Any`` here because the
+    plant imports this module; subclasses annotate it as ``Plant``).
 
     A scene object may hold per-run state (e.g. a stick's approach direction, fixed at its start): use
     one scene object per plant at a time. Body names must be unique in the plant (pass ``name=``).
@@ -35,13 +35,13 @@ class Scene:
     def build(self, spec: mujoco.MjSpec, robot: RobotModel) -> None:
         """Add bodies, geoms, joints to the plant's spec (called once, before compiling)."""
 
-    def reset(self, plant: Plant) -> None:
+    def reset(self, plant: Any) -> None:
         """Called by :meth:`Plant.reset` after the state was reset (objects back at their initial poses)."""
 
-    def update(self, plant: Plant) -> None:
+    def update(self, plant: Any) -> None:
         """Called once per control tick, before the physics substeps (``plant.time`` is the tick's time)."""
 
-    def observe(self, plant: Plant) -> dict[str, np.ndarray]:
+    def observe(self, plant: Any) -> dict[str, np.ndarray]:
         """Scene signals recorded by :func:`run_closed_loop` into ``Trace.extras`` (fixed shapes per key)."""
         return {}
 
