@@ -15,9 +15,9 @@ from reflexarm.ident import (
     FrictionParameters,
     RobotLog,
     compute_base_parameters,
-    estimation,
     identify_dynamics,
 )
+from reflexarm.ident.estimation import identify as estimation
 from reflexarm.ident.estimation.base_parameters import random_samples
 from reflexarm.ident.estimation.known_terms import KnownJointTerms
 from reflexarm.robots import load_robot
