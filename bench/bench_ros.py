@@ -9,7 +9,8 @@ after the residual fell below the threshold) detects each step and publishes an 
 in the same run, is a bare rclpy echo node on the same stream (10 s; arrival to the publication of a
 Float64MultiArray): the floor of rclpy and DDS on this machine.
 
-Goal (issue 17): 0 lost messages; latency median <= 1 ms, p99 <= 5 ms on the 2-core machine.
+Twice: the node on the normal scheduler, then with ``--realtime-priority 50`` (SCHED_FIFO, as ros2_control runs
+its loop). Goal (issue 17): 0 lost messages; latency median <= 1 ms, p99 <= 5 ms on the 2-core machine.
 ``python bench/bench_ros.py [SECONDS]`` (default 60).
 """
 
@@ -31,6 +32,9 @@ SECONDS = 60.0
 PULSE = (0.3, 1.0, 30.0)  # [s] on, [s] period, [Nm] on joint 2
 DEPTH = 1000  # history of the publisher and of the node's subscription: 1 s at 1 kHz, a backlog rather than a loss
 SLEEP_MARGIN = 0.0002  # the publisher busy-waits only this last part of a period [s]
+#: SCHED_FIFO priority of the node (``--realtime-priority``; 0: the normal scheduler), from $BENCH_ROS_REALTIME
+REALTIME = int(os.environ.get("BENCH_ROS_REALTIME", "0"))
+PRIORITIES = (0, 50)
 
 
 def _echo() -> None:
@@ -119,7 +123,7 @@ def _inner(seconds: float, out: Path) -> None:
         ("echo", [sys.executable, __file__, "--echo", str(tmp / "echo.json")]),
         ("monitor", [sys.executable, "-m", "reflexarm.cli", "ros", "monitor", "-p", "rearm_after:=0.3",
                      "-p", "joint_state_timeout:=0.5", "-p", f"qos_depth:={DEPTH}",
-                     "-p", f"summary_file:={tmp / 'monitor.json'}"]),
+                     "-p", f"summary_file:={tmp / 'monitor.json'}", "--realtime-priority", str(REALTIME)]),
     ):  # fmt: skip
         proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         try:
@@ -133,7 +137,7 @@ def _inner(seconds: float, out: Path) -> None:
     out.write_text(json.dumps(results))
 
 
-def _report(results: dict) -> dict[str, object]:
+def _report(results: dict, priority: int) -> dict[str, object]:
     echo, mon = results["echo"], results["monitor"]
     echo_ms = np.asarray(echo["node"]["latency_ns"]) * 1e-6
     summary = mon["node"]
@@ -154,12 +158,13 @@ def _report(results: dict) -> dict[str, object]:
           f"p99 {proc['p99_ms']:.3f} ms")
     print(f"baseline, bare rclpy echo: median {base:.3f} ms, p99 {np.percentile(echo_ms, 99):.3f} ms, "
           f"lost {echo['publisher']['sent'] - echo['node']['heard']} of {echo['publisher']['sent']}")  # fmt: skip
-    print(f"reliable, keep last {DEPTH} on both sides; goal: 0 lost; median <= 1 ms, p99 <= 5 ms (2 cores); "
+    print(f"node scheduler: {'SCHED_FIFO ' + str(priority) if priority else 'normal'}; "
+          f"reliable, keep last {DEPTH} on both sides; goal: 0 lost; median <= 1 ms, p99 <= 5 ms (2 cores); "
           "load average now " + " ".join(f"{v:.1f}" for v in os.getloadavg()))
     return {"lost": lost, "sent": mon["publisher"]["sent"], "rate_hz": mon["publisher"]["rate_hz"],
             "tick_latency_ms": ticks, "event_latency_ms": events, "processing_ms": proc,
             "events": len(summary["events"]), "echo_median_ms": base, "echo_p99_ms": float(np.percentile(echo_ms, 99)),
-            "load": os.getloadavg()}  # fmt: skip
+            "load": os.getloadavg(), "realtime_priority": priority}  # fmt: skip
 
 
 def main(seconds: float = SECONDS) -> dict[str, object]:
@@ -172,16 +177,21 @@ def main(seconds: float = SECONDS) -> dict[str, object]:
     if probe.returncode != 0:
         print(f"skipped: unshare -n is not permitted here ({probe.stderr.strip()}); DDS runs only on loopback")
         return {"skipped": "no unshare"}
-    with tempfile.TemporaryDirectory() as tmp:
-        out = Path(tmp) / "results.json"
-        inner = (f"ip link set lo up && exec env {INSIDE}=1 ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST "
-                 f"{sys.executable} {__file__} --inner {seconds} {out}")  # fmt: skip
-        res = subprocess.run(["unshare", "-n", "bash", "-c", inner], cwd=ROOT, capture_output=True, text=True)
-        if res.returncode != 0 or not out.exists():
-            print(f"failed: {res.stdout[-3000:]}{res.stderr[-3000:]}")
-            return {"failed": res.returncode}
-        return _report(json.loads(out.read_text()))
-
+    results: dict[str, object] = {}
+    for priority in PRIORITIES:  # the normal scheduler, then SCHED_FIFO as a deployed control loop runs
+        print(f"--- the node on {'SCHED_FIFO ' + str(priority) if priority else 'the normal scheduler'}")
+        with tempfile.TemporaryDirectory() as tmp:
+            out = Path(tmp) / "results.json"
+            inner = (f"ip link set lo up && exec env {INSIDE}=1 BENCH_ROS_REALTIME={priority} "
+                     "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST "
+                     f"{sys.executable} {__file__} --inner {seconds} {out}")  # fmt: skip
+            res = subprocess.run(["unshare", "-n", "bash", "-c", inner], cwd=ROOT, capture_output=True, text=True)
+            if res.returncode != 0 or not out.exists():
+                print(f"failed: {res.stdout[-3000:]}{res.stderr[-3000:]}")
+                results[f"fifo_{priority}"] = {"failed": res.returncode}
+                continue
+            results[f"fifo_{priority}"] = _report(json.loads(out.read_text()), priority)
+    return results
 
 if __name__ == "__main__":
     if len(sys.argv) > 1 and sys.argv[1] == "--echo":

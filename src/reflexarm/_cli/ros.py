@@ -6,6 +6,8 @@ Thin: the nodes live in :mod:`reflexarm.ros`; rclpy is imported only when a comm
 from __future__ import annotations
 
 import argparse
+import os
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -38,6 +40,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         r.add_argument("-p", "--param", action="append", default=[], metavar="NAME:=VALUE",
                        help="set a parameter (repeatable); 'reflexarm ros NODE --list-params' lists them")  # fmt: skip
         r.add_argument("--list-params", action="store_true", help="print the node's parameters and exit")
+        r.add_argument("--realtime-priority", type=int, default=0, metavar="N",
+                       help="run with SCHED_FIFO priority N (1-99; root or CAP_SYS_NICE), as ros2_control runs "
+                       "its loop; the middleware's threads started later inherit it (default 0: the normal "
+                       "scheduler)")  # fmt: skip
         r.add_argument("--duration", type=float, default=None, metavar="S",
                        help="stop after S seconds (sim: of simulated time; default: until stopped)")  # fmt: skip
         r.set_defaults(func=_run)
@@ -82,6 +88,19 @@ def _import_rclpy() -> None:
         ) from e
 
 
+def _set_realtime_priority(priority: int) -> None:
+    """SCHED_FIFO at ``priority`` for this thread and those it starts (0: leave the scheduler alone)."""
+    if priority == 0:
+        return
+    if not 1 <= priority <= 99:
+        raise ConfigError(f"--realtime-priority must be in 1-99 (0: off); got {priority}")
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (PermissionError, AttributeError) as e:
+        print(f"reflexarm ros: warning: --realtime-priority {priority} not applied ({e}); the normal scheduler runs "
+              "the node", file=sys.stderr)  # fmt: skip
+
+
 def _run(args: argparse.Namespace) -> int:
     table = _table(args.node)
     if args.list_params:
@@ -94,6 +113,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.params_file is not None and not args.params_file.is_file():
         raise ConfigError(f"--params-file: no such file {str(args.params_file)!r}")
     _import_rclpy()
+    _set_realtime_priority(args.realtime_priority)
     from rclpy.parameter import Parameter
 
     from reflexarm.ros._node_tools import run_node
