@@ -197,3 +197,23 @@ def test_mujoco_gl_is_egl_on_a_headless_machine(env, expected):
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env={**base, **env})
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip() == str(expected)
+
+
+def test_a_still_that_cannot_be_drawn_never_fails_the_command(tmp_path, capsys, monkeypatch):
+    """The still is a side product (issue 20 item 12): if drawing it fails (no GL context, a scene it cannot
+    frame), the command still ends with its numbers written and says why there is no still."""
+    from reflexarm.sim.video import StillCapture
+
+    def broken(self, *args, **kwargs):
+        raise RuntimeError("no OpenGL context on this machine")
+
+    monkeypatch.setattr(StillCapture, "save", broken)
+    out = tmp_path / "out"
+    code = main(["simulate", "free-motion", "--duration", "0.2", "--out", str(out), "--quiet"])
+    printed = capsys.readouterr().out
+    assert code == 0
+    assert not (out / "free_motion_still.png").exists()
+    doc = json.loads((out / "free_motion.json").read_text())
+    assert doc["scene"]["still"]["file"] is None
+    assert "no OpenGL context on this machine" in doc["scene"]["still"]["notes"][0]
+    assert "no still: the still could not be drawn (RuntimeError: no OpenGL context" in printed

@@ -261,7 +261,11 @@ class SceneCapture:
         if self.runs:
             with_contact = [i for i, r in enumerate(self.runs) if r.still.contact]
             i = with_contact[0] if with_contact else 0
-            info = self.runs[i].still.save(self.out / f"{self.name}_still.png", width=self.width, height=self.height)
+            try:
+                path = self.out / f"{self.name}_still.png"
+                info = self.runs[i].still.save(path, width=self.width, height=self.height)
+            except Exception as e:  # a still never fails a command (no GL context, a scene it cannot frame, ...)
+                info = {"file": None, "notes": [f"the still could not be drawn ({type(e).__name__}: {e})"]}
             info["run"] = names[i] if names else i + 1
             record["still"] = info
             record["event_still"] = self._event_still(names, run_traces)
@@ -290,6 +294,8 @@ class SceneCapture:
         still = record.get("still")
         if not still:
             return "no closed-loop run: no still"
+        if still.get("file") is None:
+            return "no still: " + "; ".join(still.get("notes", []))
         text = f"still of the scene: {still['file']} ({still['moment']}, t = {still['t']:.3f} s, run {still['run']})"
         event = record.get("event_still")
         if event and event.get("file"):
