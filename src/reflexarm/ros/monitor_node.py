@@ -47,6 +47,7 @@ from reflexarm.ros import outputs
 from reflexarm.ros._node_tools import declare_parameters, reliable
 from reflexarm.ros.config import MONITOR_PARAMETERS, MonitorConfig
 from reflexarm.ros.controller_setup import build_controller, load_models
+from reflexarm.ros.coverage_watch import CoverageWatch
 from reflexarm.ros.event_tracker import EventTracker
 from reflexarm.ros.inputs import JointStateReader, StampClock, stamp_ns
 from reflexarm.ros.latency import LatencyLog
@@ -103,6 +104,12 @@ class CollisionMonitor(Node):
         self.heard = 0  # JointState messages received
         self._last_type_check = 0.0
         self._last_diag = 0.0
+        self.coverage = CoverageWatch.from_threshold(cfg.threshold, n)
+        if self.coverage is None:
+            self.get_logger().warning(
+                "no coverage stored with the levels (a thresholds.json of tune-thresholds has it): motions outside "
+                "what they were tuned on are not flagged"
+            )
         self.recorder = self._make_recorder()
         self._make_interfaces()
         self.tracker = EventTracker(self.controller, {"events": self.pub_events, "wrench": self.pub_wrench,
@@ -178,6 +185,9 @@ class CollisionMonitor(Node):
         if self.faults:
             status.level = outputs.LEVEL_ERROR
             status.message = "; ".join(self.faults.values())
+        elif self.coverage is not None and self.coverage.warned:
+            status.level = outputs.LEVEL_WARN
+            status.message = "; ".join(self.coverage.warned.values())
         else:
             status.level = outputs.LEVEL_OK
             status.message = f"{self.config.mode}: ok"
@@ -270,6 +280,10 @@ class CollisionMonitor(Node):
         else:
             self._q_safe = q
             self._clear_fault("input")
+            if self.coverage is not None:
+                for line in self.coverage.check(t, q, dq):
+                    self.get_logger().warning(line)
+                    self._publish_diagnostics()
             for key in ("joint_state", "clock", "ros_clock"):
                 self._clear_fault(key)
         if self.pub_command is not None:
@@ -359,6 +373,7 @@ class CollisionMonitor(Node):
             "events": self.tracker.events,
             "faults": {k: {"first": self.fault_first.get(k, ""), "count": c} for k, c in self.fault_counts.items()},
             "active_faults": dict(self.faults),
+            "outside_coverage": [] if self.coverage is None else list(self.coverage.warned.values()),
             "latency": self.latency.summary(),
             "bag": None if self.recorder is None else {"path": str(self.recorder.path), "count": self.recorder.count},
         }
