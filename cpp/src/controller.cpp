@@ -1,9 +1,15 @@
-// reflexarm::Controller::update and its steps. The tick is the one of reflexarm.control.Controller.step (which
-// delegates to it); tests/test_cpp_core.py checks it against an independent numpy/Pinocchio oracle.
+// reflexarm::Controller::update: the tick, as the order of its steps, and the steps that carry the tick's own state
+// (the dynamics terms, the clock, the commit, the command). The tick is the one of reflexarm.control.Controller.step
+// (which delegates to it); tests/test_cpp_core.py checks it against an independent numpy/Pinocchio oracle.
 //
-// update() = commandFits -> checkPeriod -> checkInputs -> stageGravity -> computeDynamics -> checkModelTerms
-//          -> (accepted) commitInputs -> advanceClock -> updateObservers -> detect -> controlLaw
-//          -> boundTorque -> commitTick -> react -> writeCommand;  any fault on the way -> reject (safe command).
+// update() = commandFits -> checkPeriod -> checkInputs -> stageGravity -> dampingParts -> computeDynamics
+//          -> checkModelTerms -> runDampingParts -> (accepted) commitInputs -> advanceClock -> updateObservers
+//          -> detect -> controlLaw -> boundTorque -> commitTick -> react -> writeCommand;
+//          any fault on the way -> reject (safe command).
+// The steps live by concept: checkInputs, reject in contract.cpp; dampingParts, runDampingParts and the damping's
+// commit in damping_schedule.cpp (its math in modal_damping.cpp); updateObservers, detect in observer.cpp;
+// rampedEpsWeight, controlLaw, boundTorque in control_law.cpp; what react() runs after a detection in reaction.cpp
+// and contact_estimate.cpp; configure, reset, the mode and the switches in configure.cpp.
 #include "reflexarm/controller.hpp"
 
 #include <algorithm>
@@ -37,7 +43,9 @@ namespace reflexarm
     stageGravity(s.gravity);
     const DampingParts parts = dampingParts();
     computeDynamics(s, r, parts.first == 0);
-    code = checkModelTerms(parts);
+    code = checkModelTerms();
+    if (code == FaultCode::None)
+      code = runDampingParts(parts);
     if (code != FaultCode::None)
       return reject(code, cmd);
     // ---------------------------------------------------------------- accepted: commit from here on
@@ -128,36 +136,7 @@ namespace reflexarm
       M_ = pinocchio::crba(model_, data_m_, s.q); // upper triangle
   }
 
-  // The modal damping of a new M(q) is computed in four parts: 0 factorize (crba, M = L L^T, A = L^-1 K L^-T; it
-  // needs this tick's M(q)), 1 project A on the previous eigenvectors + one Jacobi sweep, 2 one more sweep, 3 the
-  // sweeps left (usually one or two), the new eigenvectors and D. They are spread over min(4,
-  // damping_update_period) consecutive accepted ticks (the last one runs all parts left) so that no tick carries
-  // the whole cost (~2x a plain tick) and most ticks carry none: part 0 on the tick the countdown reaches 0, the
-  // new D used from the tick of the last part on. The first tick after configure()
-  // / reset() runs all three at once (there is no D for this posture yet). In gravity compensation (13) D is
-  // not used and nothing is computed.
-  Controller::DampingParts Controller::dampingParts() const noexcept
-  {
-    DampingParts p;
-    if (gravity_mode_)
-      return p;
-    if (damping_countdown_ == 0) // a new M(q): start (again)
-    {
-      p.first = 0;
-      p.span = damping_full_ ? 1 : std::min(kDampingParts, params_.damping_update_period);
-    }
-    else if (damping_next_part_ > 0) // a computation under way
-    {
-      p.first = damping_next_part_;
-      p.span = damping_span_;
-    }
-    else
-      return p;
-    p.last = p.first == p.span - 1 ? kDampingParts - 1 : p.first;
-    return p;
-  }
-
-  FaultCode Controller::checkModelTerms(const DampingParts & parts) noexcept
+  FaultCode Controller::checkModelTerms() noexcept
   {
     const Eigen::MatrixXd & C = data_c_.C;
     double acc = 0.0;
@@ -172,39 +151,6 @@ namespace reflexarm
     }
     if (!std::isfinite(acc))
       return fault(FaultCode::ModelNonFinite, Signal::Model, -1, acc, 0.0, 0.0);
-    bool ok = true;
-    for (int part = parts.first; ok && part >= 0 && part <= parts.last; ++part)
-      switch (part)
-      {
-      case 0:
-        ok = modalFactorize(M_, K_, modal_);
-        break;
-      case 1: // a non-finite W from the previous basis: start cold
-        ok = modalProject(modal_);
-        if (!ok)
-        {
-          modal_.has_basis = false;
-          ok = modalProject(modal_);
-        }
-        if (ok)
-          modalSweep(modal_, 1);
-        break;
-      case 2:
-        modalSweep(modal_, 1);
-        break;
-      default: // not converged from the previous basis (never seen): once more, cold
-        ok = modalFinish(modal_) || (modalProject(modal_) && modalFinish(modal_));
-        if (ok)
-          modalAssemble(xi_, modal_, D_new_);
-      }
-    if (!ok)
-    {
-      // M(q) of this tick not positive definite (part 0; the next accepted tick tries its own), or, never seen,
-      // the rotations of a later part did not converge: start again from the next tick's M(q)
-      damping_next_part_ = -1;
-      damping_countdown_ = 0;
-      return fault(FaultCode::MassNotPositiveDefinite, Signal::Model, -1, 0.0, 0.0, 0.0);
-    }
     return FaultCode::None;
   }
 
@@ -212,24 +158,7 @@ namespace reflexarm
   {
     last_q_ = q;
     has_last_q_ = true;
-    damping_parts_run_ = 0;
-    for (int part = parts.first; part >= 0 && part <= parts.last; ++part)
-      damping_parts_run_ |= 1 << part;
-    damping_updated_ = parts.last == kDampingParts - 1;
-    if (parts.first == 0)
-    {
-      damping_full_ = false;
-      damping_span_ = parts.span;
-    }
-    if (damping_updated_)
-    {
-      D_ = D_new_;
-      damping_next_part_ = -1;
-    }
-    else if (parts.first >= 0)
-      damping_next_part_ = parts.last + 1;
-    else if (gravity_mode_)
-      damping_next_part_ = -1;
+    commitDamping(parts);
   }
 
   double Controller::advanceClock(double t, double period) noexcept
@@ -260,145 +189,6 @@ namespace reflexarm
     last_t_ = t;
     elapsed_ = 0.0;
     return h;
-  }
-
-  void Controller::updateObservers(const State & s, double h) noexcept
-  {
-    if (!started_) // p(0): the integral of (4) starts here
-    {
-      obs_.integral.setZero();
-      obs_.residual.setZero();
-      obs_.p0 = p_;
-      obs_det_.integral.setZero();
-      obs_det_.residual.setZero();
-      obs_det_.p0 = p_;
-      started_ = true;
-      return;
-    }
-    const Eigen::MatrixXd & C = data_c_.C;
-    const double kappa_f = static_cast<double>(kappa_f_);
-    const bool exact = params_.observer_discretization == ObserverDiscretization::Exact;
-    const bool nominal = h == params_.dt; // the decay at the nominal period is computed once in configure()
-    for (int i = 0; i < n_; ++i)
-    {
-      double ct_dq = 0.0; // C^T dq of gamma (5)
-      for (int j = 0; j < n_; ++j)
-        ct_dq += C(j, i) * s.dq[j];
-      double alpha = kappa_f * frictionTorque(i, s.dq[i]); // (6)
-      if (kappa_ext_)
-      {
-        double jt_f = 0.0;
-        for (int k = 0; k < 6; ++k)
-          jt_f += J_(k, i) * s.wrench[k];
-        alpha -= jt_f;
-      }
-      const double base = s.tau_m[i] - (g_[i] - ct_dq) - alpha;
-      if (exact)
-      {
-        stepExact(obs_, i, ko_[i], nominal ? decay_[i] : std::exp(-ko_[i] * h), base, h);
-        if (use_det_)
-          stepExact(obs_det_, i, ko_det_[i], nominal ? decay_det_[i] : std::exp(-ko_det_[i] * h), base, h);
-        continue;
-      }
-      // momentum observer (4), explicit Euler over the integrated period
-      obs_.integral[i] += h * (base + obs_.residual[i]);
-      obs_.residual[i] = ko_[i] * (p_[i] - obs_.p0[i] - obs_.integral[i]);
-      if (use_det_)
-      {
-        obs_det_.integral[i] += h * (base + obs_det_.residual[i]);
-        obs_det_.residual[i] = ko_det_[i] * (p_[i] - obs_det_.p0[i] - obs_det_.integral[i]);
-      }
-    }
-  }
-
-  // The observer (4) is the first-order filter dr/dt = K_o (tau_ext - r) of the external torque; over a period h the
-  // momentum's increment gives the mean tau_ext = (p_k - p_{k-1}) / h - beta, beta = tau_m - g + C^T dq - alpha, and
-  // the filter's exact (zero-order-hold) form is r_k = e^{-K_o h} r_{k-1} + (1 - e^{-K_o h}) tau_ext: stable at any
-  // gain. p_{k-1} is not stored: by (4), p_{k-1} = p0 + integral + r_{k-1} / K_o; the integral is kept so that (4)
-  // holds after the step (integral = p_k - p0 - r_k / K_o), so both forms share one state.
-  void Controller::stepExact(ObserverState & o, int i, double k, double decay, double base, double h) noexcept
-  {
-    const double p_prev = o.p0[i] + o.integral[i] + o.residual[i] / k;
-    const double ext = (p_[i] - p_prev) / h - base;
-    o.residual[i] = decay * o.residual[i] + (1.0 - decay) * ext;
-    o.integral[i] = p_[i] - o.p0[i] - o.residual[i] / k;
-  }
-
-  bool Controller::observersFinite() const noexcept
-  {
-    double acc = 0.0;
-    for (int i = 0; i < n_; ++i)
-      acc += obs_.integral[i] + obs_.residual[i] + obs_det_.integral[i] + obs_det_.residual[i];
-    return std::isfinite(acc);
-  }
-
-  int Controller::detect() noexcept
-  {
-    const Eigen::VectorXd & r = detectionResidual();
-    int n_over = 0;
-    for (int i = 0; i < n_; ++i) // (12); thresholds are +inf without a detector
-    {
-      over_[i] = (r[i] > threshold_[i] || -r[i] > threshold_[i]) ? 1 : 0;
-      n_over += over_[i];
-    }
-    return n_over;
-  }
-
-  double Controller::rampedEpsWeight() const noexcept
-  {
-    if (eps_weight_ == static_cast<double>(kappa_eps_))
-      return eps_weight_;
-    const double inc = params_.dt / params_.switch_time; // bumpless kappa_eps ramp
-    return kappa_eps_ > eps_weight_ ? std::min(eps_weight_ + inc, 1.0) : std::max(eps_weight_ - inc, 0.0);
-  }
-
-  FaultCode Controller::controlLaw(const State & s, const Reference & r, double eps_w) noexcept
-  {
-    const Eigen::MatrixXd & C = data_c_.C;
-    const double kappa_f = static_cast<double>(kappa_f_);
-    if (reacted_ && event_.phase == ReactionPhase::Retracting)
-      retractReference();
-    for (int i = 0; i < n_; ++i)
-    {
-      double tau;
-      if (gravity_mode_) // reaction (13), within the joint and velocity limits
-        tau = g_[i] + limitTorque(s, i);
-      else if (reactionLaw(s, i, tau)) // brake / retract / hold (reaction.cpp), within the limits
-        tau += limitTorque(s, i);
-      else // control law (2)
-      {
-        double c_dq = 0.0, d_e = 0.0;
-        for (int j = 0; j < n_; ++j)
-        {
-          c_dq += C(i, j) * s.dq[j];
-          d_e += D_(i, j) * (r.dq_d[j] - s.dq[j]);
-        }
-        tau = K_[i] * (r.q_d[i] - s.q[i]) + d_e + g_[i] + c_dq + ff_[i] + kappa_f * frictionTorque(i, s.dq[i]);
-        if (eps_w != 0.0) // disturbance compensation with the output cut-off
-          tau -= eps_w * std::min(std::max(obs_.residual[i], -limit_), limit_);
-      }
-      if (!std::isfinite(tau))
-        return fault(FaultCode::OutputNonFinite, Signal::Model, i, tau, 0.0, 0.0);
-      tau_new_[i] = tau;
-    }
-    return FaultCode::None;
-  }
-
-  int Controller::boundTorque() noexcept
-  {
-    int n_sat = 0; // rate limit, then saturation
-    for (int i = 0; i < n_; ++i)
-    {
-      const double want = tau_new_[i];
-      double tau = want;
-      if (has_prev_tau_)
-        tau = std::min(std::max(tau, tau_prev_[i] - tau_step_[i]), tau_prev_[i] + tau_step_[i]);
-      tau = std::min(std::max(tau, -tau_max_[i]), tau_max_[i]);
-      sat_[i] = tau != want ? 1 : 0;
-      n_sat += sat_[i];
-      tau_new_[i] = tau;
-    }
-    return n_sat;
   }
 
   void Controller::commitTick(double eps_w) noexcept

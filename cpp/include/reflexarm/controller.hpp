@@ -144,7 +144,7 @@ namespace reflexarm
     FaultCode reject(FaultCode code, Command & cmd) noexcept;
     void updateMode() noexcept;
     void restoreGravity() noexcept;
-    // the steps of update(), in order (controller.cpp)
+    // the steps of update(), in order (controller.cpp unless noted)
     bool commandFits(const Command & cmd) const noexcept;
     FaultCode notReady(Command & cmd) const noexcept;
     FaultCode checkPeriod(double period) noexcept;
@@ -155,20 +155,25 @@ namespace reflexarm
     {
       int first = -1, last = -1, span = 1;
     };
-    DampingParts dampingParts() const noexcept;
+    DampingParts dampingParts() const noexcept; // damping_schedule.cpp
     void computeDynamics(const State & s, const Reference & r, bool factorize) noexcept;
-    FaultCode checkModelTerms(const DampingParts & parts) noexcept;
+    FaultCode checkModelTerms() noexcept;
+    FaultCode runDampingParts(const DampingParts & parts) noexcept; // damping_schedule.cpp
     void commitInputs(const ConstVectorRef & q, const DampingParts & parts) noexcept;
+    void commitDamping(const DampingParts & parts) noexcept; // damping_schedule.cpp
     double advanceClock(double t, double period) noexcept;
+    // the momentum observers and the detection (observer.cpp)
     void updateObservers(const State & s, double h) noexcept;
     void stepExact(ObserverState & o, int i, double k, double decay, double base, double h) noexcept;
     bool observersFinite() const noexcept;
     int detect() noexcept;
+    // the control law and the torque limits (control_law.cpp)
     double rampedEpsWeight() const noexcept;
     FaultCode controlLaw(const State & s, const Reference & r, double eps_w) noexcept;
     int boundTorque() noexcept;
     void commitTick(double eps_w) noexcept;
     void react(double t, const State & s, int n_over, int n_sat, Command & cmd) noexcept;
+    void writeCommand(int n_sat, Command & cmd) const noexcept;
     // the collision pipeline after detection (reaction.cpp)
     void startReaction(double t, const State & s) noexcept;
     void planRetract(const State & s) noexcept;
@@ -185,7 +190,6 @@ namespace reflexarm
     bool reactionLaw(const State & s, int i, double & tau) const noexcept;
     double kineticEnergy() const noexcept;
     void filterVelocity(const State & s) noexcept;
-    void writeCommand(int n_sat, Command & cmd) const noexcept;
     /// tau_f of joint i: coulomb * clip(dq / velocity_band, -1, 1) + viscous * dq
     double frictionTorque(int i, double dq) const noexcept
     {
