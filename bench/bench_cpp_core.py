@@ -27,7 +27,7 @@ import reflexarm._core as core
 from _pinocchio_floor import floor_data
 from reflexarm import Measurement, Reference, load_robot
 from reflexarm.control import Controller
-from reflexarm.control._setup import core_params
+from reflexarm.control.controller import core_params
 
 N_STATES = 1000
 
