@@ -98,7 +98,9 @@ def test_combined_identification_on_six_joints_recovers_the_files_friction(six_d
 def test_identify_dynamics_study_runs_on_a_six_joint_arm_without_atlas_wording(tmp_path: Path, capsys) -> None:
     path = write_six_dof_urdf(tmp_path)
     out = tmp_path / "id"
-    code = main(["identify", "dynamics", "--robot", str(path), "--ee-frame", SIX_DOF_TOOL, "--maxiter", "0",
+    # a few iterations: the unoptimized start of this arm, stretched along its base plane, is nearly still (the
+    # floor bound shrinks its amplitudes to ~3 % of the joint ranges: no sample of joint 1 reaches 0.055 rad/s)
+    code = main(["identify", "dynamics", "--robot", str(path), "--ee-frame", SIX_DOF_TOOL, "--maxiter", "5",
                  "--quiet", "--out", str(out)])  # fmt: skip
     assert code == 0
     text = capsys.readouterr().out
@@ -106,6 +108,10 @@ def test_identify_dynamics_study_runs_on_a_six_joint_arm_without_atlas_wording(t
     assert "all 6 joints, sequential against combined" in text
     study = json.loads((out / "study.json").read_text())
     assert study["compared_joints"] == [1, 2, 3, 4, 5, 6]
+    table = (out / "table1_mse.csv").read_text().splitlines()
+    header = table[0].split(",")
+    moving = [float(row.split(",")[header.index("mse_moving_combined")]) for row in table[1:7]]
+    assert all(m > 0 for m in moving), moving  # every joint moved in the validation run
     assert len(study["friction_fits"]) == 6
     for method in ("combined", "sequential"):  # the robot copies load as the arm they were identified for
         assert (
@@ -122,3 +128,15 @@ def test_a_negative_value_within_two_standard_deviations_or_round_off_of_zero_is
     # -1e-12: round-off; -0.01 +- 0.01 and -0.02 +- 0.015: within 2 sigma; -0.05 +- 0.01: 5 sigma below 0
     assert [(w.joint, w.parameter) for w in issued] == [(2, "viscous")]
     assert "(5.0 standard deviations below 0)" in str(record[0].message)
+
+
+def test_the_mse_over_moving_samples_of_a_joint_that_never_moves_is_nan_not_zero() -> None:
+    from reflexarm.ident import TorqueValidation
+
+    t = np.arange(4) * 1e-3
+    measured = np.array([[1.0, 2.0], [1.5, 2.0], [2.0, 2.0], [2.5, 2.0]])
+    predicted = measured + np.array([[0.1, 0.3], [0.1, 0.3], [-0.1, 0.3], [-0.1, 0.3]])
+    dq = np.array([[0.5, 0.0], [0.5, 0.01], [0.0, 0.0], [0.5, 0.0]])  # joint 2 never reaches 0.055 rad/s
+    mse = TorqueValidation(t, measured, predicted, "x", dq=dq).mse_moving(0.055)
+    assert mse[0] == pytest.approx(0.01)  # (0.1^2 * 3) / 3 samples with |dq| >= 0.055
+    assert np.isnan(mse[1])

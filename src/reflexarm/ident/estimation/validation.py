@@ -53,12 +53,14 @@ class TorqueValidation:
         return self.predicted - self.measured
 
     def mse_moving(self, min_speed: float) -> np.ndarray:
-        """MSE per joint over the samples where that joint moves, |dq_j| >= ``min_speed`` [Nm^2]."""
+        """MSE per joint over the samples where that joint moves, |dq_j| >= ``min_speed`` [Nm^2]; NaN for a joint
+        without such a sample (not 0: there is nothing to average)."""
         if self.dq is None:
             raise IdentificationError("this validation has no velocities; build it with validate_model")
         keep = np.abs(self.dq) >= min_speed
         e2 = np.where(keep, self.error**2, 0.0)
-        return e2.sum(axis=0) / np.maximum(keep.sum(axis=0), 1)
+        count = keep.sum(axis=0)
+        return np.where(count > 0, e2.sum(axis=0) / np.maximum(count, 1), np.nan)
 
     @property
     def mse(self) -> np.ndarray:
