@@ -14,7 +14,7 @@ CHECK_TOOLCHAIN = command -v cmake >/dev/null 2>&1 || { \
 	  echo "error: no C++ compiler found (\$$CXX, c++, g++, clang++): reflexarm's C++ core (cpp/) needs a C++17 compiler" >&2; \
 	  echo "       install one (Debian/Ubuntu: sudo apt-get install g++) and run make again" >&2; exit 1; }
 
-.PHONY: install demo test test-fast bench lint clean
+.PHONY: install demo test test-fast bench lint clean sanitize
 
 # The C++ sources of the module reflexarm._core (cpp/tests and the C++ example are not part of it): a change
 # re-runs the install, which recompiles what changed in build/ (scikit-build-core, no build isolation).
@@ -53,6 +53,21 @@ test-fast: $(STAMP)
 
 bench: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/python bench/run_all.py
+
+# The C++ library and its tests (cpp/tests) under AddressSanitizer + UBSan (-DREFLEXARM_SANITIZE=ON) in
+# cpp/build-sanitize: configure, build (SAN_JOBS=1 on a small machine), run both tests; any report fails the run
+# (UBSan does not recover; ASan aborts on the first error). cpp/sanitize/ubsan.supp: the library-side finding.
+SAN_JOBS ?= 2
+sanitize:
+	@$(CHECK_TOOLCHAIN)
+	@$(BIN)/python -c "import cmeel" 2>/dev/null || { echo "error: make sanitize needs the build requirements in $(VENV): run make install first" >&2; exit 1; }
+	cmake -S cpp -B cpp/build-sanitize -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+	  -DCMAKE_PREFIX_PATH="$$($(BIN)/python -m cmeel cmake 2>/dev/null)" \
+	  -DREFLEXARM_BUILD_PYTHON=OFF -DREFLEXARM_BUILD_TESTS=ON -DREFLEXARM_SANITIZE=ON >/dev/null
+	cmake --build cpp/build-sanitize -j $(SAN_JOBS) --target test_controller test_isolation
+	ASAN_OPTIONS=detect_leaks=1:strict_string_checks=1:detect_stack_use_after_return=1 \
+	UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1:suppressions=$(CURDIR)/cpp/sanitize/ubsan.supp \
+	  ctest --test-dir cpp/build-sanitize --output-on-failure
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests bench examples
