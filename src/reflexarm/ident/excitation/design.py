@@ -44,8 +44,14 @@ import numpy.typing as npt
 import scipy.optimize
 
 from reflexarm.errors import ConfigError, IdentificationError, ModelError
-from reflexarm.ident.estimation.base_parameters import BaseParameters, compute_base_parameters, condition_number
-from reflexarm.ident.estimation.regressor import BatchRegressor
+from reflexarm.ident.estimation.base_parameters import BaseParameters, compute_base_parameters
+from reflexarm.ident.excitation.cost import Parametrisation, log_condition, log_condition_gradient
+from reflexarm.ident.excitation.diagnosis import (  # noqa: F401  (re-exported: importable from here as before)
+    STALLED_CONDITION,
+    ExcitationStalledWarning,
+    diagnose_stall,
+    regressor_condition,
+)
 from reflexarm.ident.excitation.fourier_trajectory import FourierTrajectory
 from reflexarm.ident.excitation.limits import (
     DEFAULT_CLEARANCE,
@@ -72,14 +78,6 @@ DEFAULT_MAX_VELOCITY = 1.5
 DEFAULT_MAX_ACCELERATION = 5.0
 #: Default margin kept from the joint position limits [rad].
 DEFAULT_POSITION_MARGIN = 0.1
-#: An optimized condition number above this is reported as stalled. Measured optimized values: 28 on the
-#: Gen3-like arm (L = 5, 100 iterations), 48-153 on the Atlas arm (L = 4, 12 iterations, per CPU); a
-#: regressor at 1e3 amplifies a 1 % torque error into up to 10 x its share on some combination.
-STALLED_CONDITION = 1e3
-#: Over the last :data:`_STALL_WINDOW` iterations, an improvement of the condition number below this
-#: fraction means the optimizer has stopped making progress.
-STALL_PROGRESS = 0.01
-_STALL_WINDOW = 10
 #: Scaled constraint margin (O(1) units, see :func:`_linear_margins`) an iterate may miss and still count
 #: as feasible: the 1 kHz check that follows removes what is left.
 FEASIBILITY_TOLERANCE = 1e-6
@@ -87,19 +85,6 @@ FEASIBILITY_TOLERANCE = 1e-6
 #: with the lowest condition number after that check is kept (a peak between grid points shrinks an iterate's
 #: amplitudes, and the last iterate is not always the best one after that: measured 17.0 vs 15.6 on a 7-DoF arm).
 CANDIDATES_AT_1KHZ = 5
-
-
-class ExcitationStalledWarning(UserWarning):
-    """The excitation optimization ended with a badly conditioned regressor; the message says why.
-
-    Attributes:
-        condition: the condition number reached; weakest: the base combinations of the weakest direction.
-    """
-
-    def __init__(self, message: str, *, condition: float, weakest: tuple[str, ...]) -> None:
-        super().__init__(message)
-        self.condition = condition
-        self.weakest = weakest
 
 
 @dataclass(frozen=True)
@@ -158,44 +143,6 @@ class ExcitationDesign:
                 "(>= 0 within), joints 0-based",
             },
         }
-
-
-class _Parametrisation:
-    """Free variables (a_i2..a_iL, b_i2..b_iL, q0_i per joint) <-> (a, b, q0) at rest at t = 0."""
-
-    def __init__(self, n: int, L: int, base_frequency: float) -> None:
-        self.n, self.L = n, L
-        self.size = n * (2 * (L - 1) + 1)
-        self.l = np.arange(1, L + 1)
-        self.base_frequency = base_frequency
-
-    def unpack(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        n, L = self.n, self.L
-        X = x.reshape(n, 2 * (L - 1) + 1)
-        a = np.empty((n, L))
-        b = np.empty((n, L))
-        a[:, 1:] = X[:, : L - 1]
-        b[:, 1:] = X[:, L - 1 : 2 * (L - 1)]
-        a[:, 0] = -a[:, 1:].sum(axis=1)  # dq(0) = sum_l a_l = 0
-        b[:, 0] = -(b[:, 1:] * self.l[1:]).sum(axis=1)  # ddq(0) ~ sum_l l b_l = 0
-        return a, b, X[:, -1]
-
-    def pack(self, a: np.ndarray, b: np.ndarray, q0: np.ndarray) -> np.ndarray:
-        return np.column_stack([a[:, 1:], b[:, 1:], q0]).reshape(-1)
-
-    def trajectory(self, x: np.ndarray) -> FourierTrajectory:
-        a, b, q0 = self.unpack(x)
-        return FourierTrajectory(self.base_frequency, a, b, q0)
-
-    def linear_maps(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(Gq, Gv, Ga), each (N, n, size): q(t_k) = Gq[k] x (and dq, ddq likewise); q, dq, ddq are linear in x."""
-        cols = [self.trajectory(e).evaluate(t) for e in np.eye(self.size)]
-        return tuple(np.stack([c[i] for c in cols], axis=-1) for i in range(3))  # type: ignore[return-value]
-
-    def scaled(self, x: np.ndarray, s: float) -> np.ndarray:
-        """The amplitudes times s about the same offsets q0."""
-        a, b, q0 = self.unpack(x)
-        return self.pack(a * s, b * s, q0)
 
 
 def excitation_limits(
@@ -331,16 +278,16 @@ def optimize_excitation(
     if np.any(mid <= limits.lower) or np.any(mid >= limits.upper):
         raise ConfigError(f"center {np.asarray(mid).tolist()} must lie inside the joint limits minus the margin")
     base = base if base is not None else compute_base_parameters(robot)
-    par = _Parametrisation(n, L, base_frequency)
+    par = Parametrisation(n, L, base_frequency)
     period = 2 * np.pi / base_frequency
     t_cost = np.arange(n_samples) * period / n_samples
-    log_cond = _log_condition(robot, base, par, t_cost)
+    log_cond = log_condition(robot, base, par, t_cost)
     linear = _linear_margins(par, limits, np.arange(n_grid) * period / n_grid)
     evaluator = LimitEvaluator(robot, limits, geometry)
     nonlinear = _nonlinear_margins(par, evaluator, np.arange(n_grid_dynamics) * period / n_grid_dynamics)
     x0 = _start(par, limits, evaluator, mid, seed, initial, np.arange(n_grid) * period / n_grid)
     start = par.trajectory(x0)
-    gradient = _log_condition_gradient(robot, base, par, t_cost)
+    gradient = log_condition_gradient(robot, base, par, t_cost)
     res, history, candidates = _minimise(log_cond, gradient, x0, linear, nonlinear, maxiter, progress)
     x, report = _best_at_1khz(par, candidates, limits, evaluator, log_cond)
     best = par.trajectory(x)
@@ -348,7 +295,8 @@ def optimize_excitation(
     return ExcitationDesign(
         best, start, float(np.exp(log_cond(x0))), cond1, _limit_uses(start, limits, evaluator),
         _limit_uses(best, limits, evaluator, report), int(res.get("nit", 0)), str(res.get("message", "")),
-        _bounds(limits), tuple(history), _diagnose(robot, base, best, cond1, history, res, n_samples), limits, report,
+        _bounds(limits), tuple(history), diagnose_stall(robot, base, best, cond1, history, res, n_samples), limits,
+        report,
     )  # fmt: skip
 
 
@@ -362,77 +310,10 @@ def _bounds(limits: ExcitationLimits) -> dict[str, list[float]]:
     }
 
 
-def _log_condition(
-    robot: RobotModel, base: BaseParameters, par: _Parametrisation, t_cost: np.ndarray
-) -> Callable[[np.ndarray], float]:
-    """The cost: log of the condition number of the base regressor stacked over ``t_cost``."""
-    reg = BatchRegressor(robot)
-
-    def log_cond(x: np.ndarray) -> float:
-        q, dq, ddq = par.trajectory(x).evaluate(t_cost)
-        W = base.select(reg.compute_regressor(q, dq, ddq)).reshape(-1, base.n_base)
-        # cond(W) = sqrt(cond(W^T W)); eigvalsh of the small Gram matrix is ~10x cheaper than an SVD of W
-        ev = np.linalg.eigvalsh(W.T @ W)
-        return float(0.5 * np.log(ev[-1] / max(ev[0], 1e-300)))
-
-    return log_cond
-
-
-def _log_condition_gradient(
-    robot: RobotModel, base: BaseParameters, par: _Parametrisation, t_cost: np.ndarray
-) -> Callable[[np.ndarray], np.ndarray]:
-    """d log cond / dx, exact: with G = W^T W and its extreme eigenpairs (lambda, v), d lambda = 2 (W v)^T
-    (dW v), and W v stacks the joint torques Y_b(q, dq, ddq) v, i.e. inverse dynamics with the inertial
-    parameters pi_v (v on the base columns): its derivatives come from Pinocchio's RNEA derivatives, taken
-    as the difference of a model with pi_0 + pi_v and one with pi_0 (pi_0 the file's parameters, so every
-    link keeps a positive mass; torques are linear in the parameters)."""
-    import pinocchio as pin
-
-    reg = BatchRegressor(robot)
-    Gq, Gv, Ga = par.linear_maps(t_cost)
-    model0 = robot.pin_model
-    pi0 = robot.inertial_parameters()
-    models = [pin.Model(model0), pin.Model(model0)]
-    datas = [m.createData() for m in models]
-    data0 = model0.createData()
-    n = robot.n
-
-    def torque_derivatives(model: pin.Model, data: pin.Data, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray):  # type: ignore[no-untyped-def]
-        pin.computeRNEADerivatives(model, data, q, dq, ddq)
-        M = np.triu(data.M) + np.triu(data.M, 1).T  # Pinocchio fills the upper triangle
-        return np.array(data.dtau_dq), np.array(data.dtau_dv), M
-
-    def gradient(x: np.ndarray) -> np.ndarray:
-        q, dq, ddq = par.trajectory(x).evaluate(t_cost)
-        W = base.select(reg.compute_regressor(q, dq, ddq)).reshape(-1, base.n_base)
-        ev, V = np.linalg.eigh(W.T @ W)
-        grad = np.zeros(par.size)
-        for sign, k, model, data in ((1.0, -1, models[0], datas[0]), (-1.0, 0, models[1], datas[1])):
-            v = V[:, k] / np.max(np.abs(V[:, k]))  # scaled to O(1) parameters (the derivative is linear in v)
-            pi_v = np.zeros(10 * n)
-            pi_v[base.independent] = v
-            scale = 1e-2 * max(float(np.max(np.abs(pi0))), 1.0) / max(float(np.max(np.abs(pi_v))), 1e-300)
-            pi = pi0 + scale * pi_v
-            for j in range(n):
-                model.inertias[j + 1] = pin.Inertia.FromDynamicParameters(pi[10 * j : 10 * j + 10])
-            Wv = (W @ v).reshape(-1, n)
-            g = np.zeros(par.size)
-            for s in range(t_cost.size):
-                a = torque_derivatives(model, data, q[s], dq[s], ddq[s])
-                b = torque_derivatives(model0, data0, q[s], dq[s], ddq[s])
-                dtau = ((a[0] - b[0]) @ Gq[s] + (a[1] - b[1]) @ Gv[s] + (a[2] - b[2]) @ Ga[s]) / scale
-                g += Wv[s] @ dtau
-            lam = max(float(ev[k]), 1e-300) * float(np.max(np.abs(V[:, k]))) ** -2  # lambda for the scaled v
-            grad += sign * 0.5 * 2.0 * g / lam
-        return grad
-
-    return gradient
-
-
 _Margins = tuple[Callable[[np.ndarray], np.ndarray], Callable[[np.ndarray], np.ndarray]]
 
 
-def _linear_margins(par: _Parametrisation, limits: ExcitationLimits, t_grid: np.ndarray) -> _Margins:
+def _linear_margins(par: Parametrisation, limits: ExcitationLimits, t_grid: np.ndarray) -> _Margins:
     """Position, velocity and acceleration limits on the grid: linear in x, margins A x + b >= 0 scaled to O(1)."""
     n_grid = t_grid.size
     Gq, Gv, Ga = par.linear_maps(t_grid)
@@ -447,7 +328,7 @@ def _linear_margins(par: _Parametrisation, limits: ExcitationLimits, t_grid: np.
     return (lambda x: A @ x + b), (lambda x: A)
 
 
-def _nonlinear_margins(par: _Parametrisation, evaluator: LimitEvaluator, t_grid: np.ndarray) -> _Margins | None:
+def _nonlinear_margins(par: Parametrisation, evaluator: LimitEvaluator, t_grid: np.ndarray) -> _Margins | None:
     """Torque, workspace and self-collision margins on the (coarser) grid and their exact derivatives."""
     if not evaluator.active:
         return None
@@ -466,7 +347,7 @@ def _nonlinear_margins(par: _Parametrisation, evaluator: LimitEvaluator, t_grid:
 
 
 def _start(
-    par: _Parametrisation,
+    par: Parametrisation,
     limits: ExcitationLimits,
     evaluator: LimitEvaluator,
     mid: np.ndarray,
@@ -508,7 +389,7 @@ def _within(report: dict[str, dict[str, Any]]) -> bool:
     return bool(ok)
 
 
-def _shrink_into_limits(par: _Parametrisation, x: np.ndarray, evaluator: LimitEvaluator, t: np.ndarray) -> np.ndarray:
+def _shrink_into_limits(par: Parametrisation, x: np.ndarray, evaluator: LimitEvaluator, t: np.ndarray) -> np.ndarray:
     """x with its amplitudes scaled down (bisection on s in [0, 1], 10 steps: s to 1e-3) until the
     nonlinear bounds hold at the times ``t``; the rest pose q0 (s = 0) must meet them."""
     if not evaluator.active:
@@ -592,7 +473,7 @@ def _minimise(
 
 
 def _best_at_1khz(
-    par: _Parametrisation,
+    par: Parametrisation,
     candidates: list[np.ndarray],
     limits: ExcitationLimits,
     evaluator: LimitEvaluator,
@@ -616,7 +497,7 @@ def _best_at_1khz(
 
 
 def _check_at_1khz(
-    par: _Parametrisation, x: np.ndarray, limits: ExcitationLimits, evaluator: LimitEvaluator
+    par: Parametrisation, x: np.ndarray, limits: ExcitationLimits, evaluator: LimitEvaluator
 ) -> tuple[np.ndarray, dict[str, dict[str, Any]]]:
     """Every limit on the trajectory sampled at 1 kHz; amplitudes shrunk about q0 if a peak fell between
     grid points. Returns x and the nonlinear bounds' report."""
@@ -657,55 +538,3 @@ def _limit_uses(
         else:
             uses["torque"] = float(report["torque"]["use"])  # type: ignore[arg-type]
     return uses
-
-
-def _diagnose(
-    robot: RobotModel,
-    base: BaseParameters,
-    trajectory: FourierTrajectory,
-    condition: float,
-    history: list[float],
-    res: scipy.optimize.OptimizeResult,
-    n_samples: int,
-) -> str:
-    """Why a run ended badly conditioned ("" if it did not): the optimizer's message, its progress over
-    the last iterations, and the base combinations of the regressor's weakest direction; warns."""
-    if condition <= STALLED_CONDITION:
-        return ""
-    t = np.arange(n_samples) * trajectory.period / n_samples
-    q, dq, ddq = trajectory.evaluate(t)
-    W = base.select(BatchRegressor(robot).compute_regressor(q, dq, ddq)).reshape(-1, base.n_base)
-    norms = np.linalg.norm(W, axis=0)
-    _, sv, vt = np.linalg.svd(W, full_matrices=False)  # the cost's own (unscaled) regressor
-    order = np.argsort(-np.abs(vt[-1]))[:3]
-    names = base.base_names(max_terms=2)
-    weakest = tuple(names[k] for k in order)
-    recent = history[-_STALL_WINDOW:]
-    progress = (recent[0] - recent[-1]) / recent[0] if len(recent) >= 2 else 0.0
-    small = int(np.argmin(norms))
-    stalled = len(recent) >= 2 and progress < STALL_PROGRESS
-    text = (
-        f"excitation optimization ended at condition number {condition:.4g} (> {STALLED_CONDITION:.0e}) after "
-        f"{len(history)} iteration(s) ({res.get('message', '')}"
-        + (f"; the last {len(recent)} improved it by {100 * progress:.2g} %: stalled" if stalled else "")
-        + "). The motion cannot excite the weakest direction of the base regressor, mostly "
-        + "; ".join(f"[{w}]" for w in weakest)
-        + f" (singular values {sv[0]:.3g} .. {sv[-1]:.3g}; the smallest column, [{names[small]}], is "
-        f"{norms[small] / norms.max():.2g} of the largest). "
-        + (base.note + "." if base.note else "A column far smaller than the others is a combination no motion "
-           "excites (e.g. an axis nearly, not exactly, aligned: see the base parameters 'reflexarm excite' prints); "
-           "otherwise raise --maxiter.")
-    )  # fmt: skip
-    warnings.warn(ExcitationStalledWarning(text, condition=condition, weakest=weakest), stacklevel=3)
-    return text
-
-
-def regressor_condition(
-    robot: RobotModel, trajectory: FourierTrajectory, *, base: BaseParameters | None = None, n_samples: int = 100
-) -> float:
-    """Condition number of the base regressor stacked over ``n_samples`` samples of one period."""
-    base = base if base is not None else compute_base_parameters(robot)
-    t = np.arange(n_samples) * trajectory.period / n_samples
-    q, dq, ddq = trajectory.evaluate(t)
-    W = base.select(BatchRegressor(robot).compute_regressor(q, dq, ddq)).reshape(-1, base.n_base)
-    return condition_number(W)
