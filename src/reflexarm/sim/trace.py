@@ -303,10 +303,14 @@ class TraceWriter:
         self.rows += len(block)
 
     def close(self) -> None:
-        """Finish the file (safe to call twice)."""
+        """Finish the file (safe to call twice) and give the memory of its blocks back to the system (Arrow's
+        allocator keeps freed pages for reuse: ~20 MB after a run of 10,000-row blocks)."""
         if self._writer is not None:
+            import pyarrow as pa
+
             self._writer.close()
             self._writer = None
+            pa.default_memory_pool().release_unused()
 
     def __enter__(self) -> TraceWriter:
         return self
