@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -37,9 +37,24 @@ from reflexarm._cli.identify_payload import (
 from reflexarm._cli.log_options import add_log_options, load_log_from_args
 from reflexarm.errors import ConfigError
 
+if TYPE_CHECKING:
+    from reflexarm.ident.friction.joint_friction import FrictionFit
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``excite``, ``identify`` (``friction``, ``dynamics``) and ``validate``."""
+    _register_excite(sub)
+    i = sub.add_parser("identify", help="identify friction (single-joint runs) or the base parameters")
+    isub = i.add_subparsers(dest="what", metavar="WHAT")
+    isub.required = True
+    _register_friction(isub)
+    _register_dynamics(isub)
+    register_payload(isub)
+    _register_validate(sub)
+
+
+def _register_excite(sub: argparse._SubParsersAction) -> None:
+    """``excite``: the trajectory's bounds and optimizer, then what else to write (--record, --csv)."""
     e = sub.add_parser(
         "excite", help="optimize a Fourier excitation trajectory (condition number of the base regressor)"
     )
@@ -94,9 +109,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     e.add_argument("--rate", type=float, default=1000.0, help="sampling rate of --csv [Hz] (default 1000)")
     e.set_defaults(func=_excite)
 
-    i = sub.add_parser("identify", help="identify friction (single-joint runs) or the base parameters")
-    isub = i.add_subparsers(dest="what", metavar="WHAT")
-    isub.required = True
+
+def _register_friction(isub: argparse._SubParsersAction) -> None:
+    """``identify friction``: logged runs (--run) or the simulated ones, the fit, from-motion and log options."""
     f = isub.add_parser(
         "friction",
         help="single-joint constant-velocity friction identification (Fig. 4, Table I): simulated on the "
@@ -134,6 +149,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_common(f, default_out="results/friction")
     f.set_defaults(func=_identify_friction)
 
+
+def _register_dynamics(isub: argparse._SubParsersAction) -> None:
+    """``identify dynamics``: the logs, the estimator's options, then the simulated study's."""
     d = isub.add_parser(
         "dynamics",
         help="base parameters by weighted least squares, combined and/or sequential; from your logs, or the "
@@ -193,8 +211,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_log_options(d)
     add_common(d, default_out="results/identify")
     d.set_defaults(func=identify_dynamics_command)
-    register_payload(isub)
 
+
+def _register_validate(sub: argparse._SubParsersAction) -> None:
+    """``validate``: the model and the log, or the closed-loop comparison on the plant."""
     v = sub.add_parser(
         "validate",
         help="validate an identified model on a log, or (--closed-loop) track a trajectory on the plant with "
@@ -338,15 +358,6 @@ def _record(args: argparse.Namespace, robot: object, trajectory: object) -> Path
 
 # ---------------------------------------------------------------------------------------------- friction
 def _identify_friction(args: argparse.Namespace) -> int:
-    from reflexarm.ident.friction.joint_friction import (
-        FrictionFit,
-        fit_friction,
-        friction_from_fits,
-        friction_points,
-        segment_constant_velocity,
-    )
-    from reflexarm.ident.plots import plot_friction
-
     if args.log:  # ordinary motion: no constant-velocity runs needed
         if args.run:
             raise ConfigError("give --run JOINT=LOG (constant-velocity runs) or --log LOG (ordinary motion), not both")
@@ -355,62 +366,87 @@ def _identify_friction(args: argparse.Namespace) -> int:
     robot = load_robot_arg(args)
     truth = None
     if args.run:
-        fits: list[FrictionFit] = []
-        for spec in args.run:
-            if "=" not in spec:
-                raise ConfigError(f"--run expects JOINT=LOG (e.g. 3=runs_j3.csv); got {spec!r}")
-            js, path = spec.split("=", 1)
-            joints = parse_joints(js, robot.n)
-            if len(joints) != 1:
-                raise ConfigError(f"--run expects one joint per log (JOINT=LOG, e.g. 3=runs_j3.csv); got {spec!r}")
-            j = joints[0]
-            if any(ft.joint == j for ft in fits):
-                raise ConfigError(
-                    f"--run: joint {j + 1} has two logs ({spec!r} and an earlier one); give one per joint"
-                )
-            log = load_log_from_args(args, path, robot)
-            from reflexarm.ident import preprocess_log
-
-            proc = preprocess_log(log)
-            intervals = segment_constant_velocity(proc.t, proc.dq[:, j], q=proc.q[:, j])
-            if not intervals:
-                raise ConfigError(
-                    f"{Path(path).name}: no constant-velocity interval of joint {j + 1} found; for a log of ordinary "
-                    f"motion give it as --log {path} (friction from the combined regression)"
-                )
-            pts = friction_points(robot, j, proc.t, proc.q, proc.dq, proc.tau, intervals)
-            fits.append(fit_friction(pts, offset=not args.no_offset, robot=robot))
-        # friction_from_fits puts 0 for the joints without a run: mark them not identified instead
-        friction = friction_from_fits(fits, robot.n).restricted_to([ft.joint for ft in fits])
+        fits, friction = _fit_logged_runs(args, robot)
         why_missing = "have no run (--run)"
     else:
-        from reflexarm.experiments.identification import hydraulic_joints, run_friction_experiments, scenario_extra
-        from reflexarm.robots import perturb_model
+        fits, friction, truth, why_missing = _simulate_friction_runs(args, robot)
+    rows = _friction_rows(robot, fits, truth)
+    _write_friction(out, robot, fits, friction, rows, truth, why_missing)
+    return 0
 
-        joints = parse_joints(args.joints, robot.n) if args.joints else list(hydraulic_joints(robot) or range(robot.n))
-        why_missing = (
-            f"were not run (--joints {args.joints})"
-            if args.joints
-            else "were not run (default on the Atlas arm: the hydraulic joints, as Fig. 4 of the paper)"
-        )
-        say(
-            args,
-            f"simulating constant-velocity runs of joints {[j + 1 for j in joints]} on the {args.scenario} plant ...",
-        )
-        exp = run_friction_experiments(
-            robot,
-            joints=joints,
-            speeds=parse_floats(args.speeds, "--speeds"),
-            offset=not args.no_offset,
-            model=perturb_model(robot, args.model_error, seed=args.seed),
-            seed=args.seed,
-            extra_joint_torque=scenario_extra(robot, args.scenario),
-            n_jobs=args.jobs,
-            progress=not args.quiet,
-        )
-        fits = list(exp.fits)
-        friction = exp.friction
-        truth = (exp.truth.coulomb, exp.truth.viscous)
+
+def _fit_logged_runs(args: argparse.Namespace, robot: Any) -> tuple[list[FrictionFit], Any]:
+    """One friction fit per ``--run JOINT=LOG``: the log's constant-velocity intervals of that joint."""
+    from reflexarm.ident.friction.joint_friction import (
+        fit_friction,
+        friction_from_fits,
+        friction_points,
+        segment_constant_velocity,
+    )
+
+    fits: list[FrictionFit] = []
+    for spec in args.run:
+        if "=" not in spec:
+            raise ConfigError(f"--run expects JOINT=LOG (e.g. 3=runs_j3.csv); got {spec!r}")
+        js, path = spec.split("=", 1)
+        joints = parse_joints(js, robot.n)
+        if len(joints) != 1:
+            raise ConfigError(f"--run expects one joint per log (JOINT=LOG, e.g. 3=runs_j3.csv); got {spec!r}")
+        j = joints[0]
+        if any(ft.joint == j for ft in fits):
+            raise ConfigError(f"--run: joint {j + 1} has two logs ({spec!r} and an earlier one); give one per joint")
+        log = load_log_from_args(args, path, robot)
+        from reflexarm.ident import preprocess_log
+
+        proc = preprocess_log(log)
+        intervals = segment_constant_velocity(proc.t, proc.dq[:, j], q=proc.q[:, j])
+        if not intervals:
+            raise ConfigError(
+                f"{Path(path).name}: no constant-velocity interval of joint {j + 1} found; for a log of ordinary "
+                f"motion give it as --log {path} (friction from the combined regression)"
+            )
+        pts = friction_points(robot, j, proc.t, proc.q, proc.dq, proc.tau, intervals)
+        fits.append(fit_friction(pts, offset=not args.no_offset, robot=robot))
+    # friction_from_fits puts 0 for the joints without a run: mark them not identified instead
+    return fits, friction_from_fits(fits, robot.n).restricted_to([ft.joint for ft in fits])
+
+
+def _simulate_friction_runs(
+    args: argparse.Namespace, robot: Any
+) -> tuple[list[FrictionFit], Any, tuple[np.ndarray, np.ndarray], str]:
+    """The constant-velocity runs simulated on the plant: fits, friction, the plant's (mu_C, d_v), why some are
+    missing."""
+    from reflexarm.experiments.identification import hydraulic_joints, run_friction_experiments, scenario_extra
+    from reflexarm.robots import perturb_model
+
+    joints = parse_joints(args.joints, robot.n) if args.joints else list(hydraulic_joints(robot) or range(robot.n))
+    why_missing = (
+        f"were not run (--joints {args.joints})"
+        if args.joints
+        else "were not run (default on the Atlas arm: the hydraulic joints, as Fig. 4 of the paper)"
+    )
+    say(
+        args,
+        f"simulating constant-velocity runs of joints {[j + 1 for j in joints]} on the {args.scenario} plant ...",
+    )
+    exp = run_friction_experiments(
+        robot,
+        joints=joints,
+        speeds=parse_floats(args.speeds, "--speeds"),
+        offset=not args.no_offset,
+        model=perturb_model(robot, args.model_error, seed=args.seed),
+        seed=args.seed,
+        extra_joint_torque=scenario_extra(robot, args.scenario),
+        n_jobs=args.jobs,
+        progress=not args.quiet,
+    )
+    return list(exp.fits), exp.friction, (exp.truth.coulomb, exp.truth.viscous), why_missing
+
+
+def _friction_rows(
+    robot: Any, fits: list[FrictionFit], truth: tuple[np.ndarray, np.ndarray] | None
+) -> list[dict[str, object]]:
+    """One row per fitted joint for friction.csv and the table, with the errors against ``truth`` if known."""
     rows = []
     for ft in fits:
         row: dict[str, object] = {
@@ -429,6 +465,21 @@ def _identify_friction(args: argparse.Namespace) -> int:
             row["d_v_true"] = float(dv)
             row["d_v_err_pct"] = 100 * (ft.viscous - dv) / dv if dv else None
         rows.append(row)
+    return rows
+
+
+def _write_friction(
+    out: Path,
+    robot: Any,
+    fits: list[FrictionFit],
+    friction: Any,
+    rows: list[dict[str, object]],
+    truth: tuple[np.ndarray, np.ndarray] | None,
+    why_missing: str,
+) -> None:
+    """friction.csv, friction_points.csv, friction.json and Fig. 4 into ``out``; the table printed."""
+    from reflexarm.ident.plots import plot_friction
+
     write_csv(out / "friction.csv", rows)
     points: list[dict[str, object]] = [
         {"joint": p.joint + 1, "velocity": p.velocity, "torque": p.torque, "torque_std": p.torque_std, "n": p.n_samples}
@@ -452,4 +503,3 @@ def _identify_friction(args: argparse.Namespace) -> int:
     if "not_identified" in doc:
         print(f"\nfriction.json: {doc['not_identified']['note']}")  # type: ignore[index]
     print(f"\nwrote {out}/ (friction.json, friction.csv, friction_points.csv, {fig.name})")
-    return 0
