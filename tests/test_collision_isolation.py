@@ -228,3 +228,17 @@ def test_bad_shapes_and_values(arms):
         ContactIdentifier(robot, iso.geometry, friction_coefficient=float("nan"))
     with pytest.raises(ConfigError, match="collision geometry has 7 links; robot"):
         ContactIsolator(arms["ur_like"], significance=1.0, geometry=iso.geometry)
+
+
+def test_noisy_isolation_names_the_link_when_its_own_joint_senses_it(arms):
+    """With the paper's noise and +-10 % model error: where the contact link's own joint carries torque above its
+    significance the link is named right (the issue's 95 %, measured on 1000 contacts with the CLI: 96-98 %;
+    200 contacts have a standard error of ~1.5 points, so 90 % here is > 3 sigma below it); where it does not,
+    the residual cannot tell the link from a more proximal one and the estimate's candidate links contain it."""
+    study = run_isolation_study(arms["panda"], contacts=200, seed=3, noise=True, model_error=0.1)
+    s = study.summary
+    assert s["link_sensed"] + s["link_not_sensed"] == s["sensed"]
+    assert s["link_not_sensed"] > 0 and s["link_sensed"] > 50, s
+    assert s["correct_link_rate_link_sensed"] >= 0.90, s
+    hidden = [r for r in study.rows if r["sensed"] and r["own_joint_insignificant"]]
+    assert all(r["true_link_in_candidates"] for r in hidden)

@@ -98,3 +98,24 @@ def test_a_tiny_study_runs_and_writes_its_files(tmp_path):
     doc = json.loads(files["json"].read_text())
     assert doc["arms"]["iiwa14_frictionless"]["plant_friction"] == "none"
     assert len(study.rows()) == 2
+
+
+def test_a_seeded_free_motion_is_another_log_of_the_same_motion():
+    """Tuning and held-out logs of one arm differ in motion: a seed reorders and moves the waypoints (within the
+    joint ranges) and rescales the segments; no seed gives the fixed cycle, one seed always the same motion."""
+    from reflexarm.experiments.collision import FREE_MOTION_JITTER_RAD, free_motion_trajectory
+
+    robot = study_arm("panda").robot
+    t = np.arange(0.0, 60.0, 0.05)
+
+    def path(seed):
+        traj = free_motion_trajectory(60.0, "loaded", robot, seed=seed)
+        return np.array([traj.sample(s).q_d for s in t])
+
+    fixed, a, a2, b = path(None), path(1), path(1), path(2)
+    np.testing.assert_array_equal(a, a2)
+    assert np.abs(a - b).max() > 0.1 and np.abs(a - fixed).max() > 0.1
+    assert np.all(a >= robot.lower_limit - 1e-12) and np.all(a <= robot.upper_limit + 1e-12)
+    # the same region: every posture of the seeded log lies within the fixed cycle's box widened by the jitter
+    lo, hi = fixed.min(axis=0) - FREE_MOTION_JITTER_RAD - 1e-9, fixed.max(axis=0) + FREE_MOTION_JITTER_RAD + 1e-9
+    assert np.all((a >= lo) & (a <= hi))

@@ -19,14 +19,17 @@ def register(sub: argparse._SubParsersAction) -> None:
         "detection-study",
         help="(k_o, zeta) pairs tuned on free motion: detection lag, contact delay, false alarms per hour, pulses",
         description="Per arm: tune per-joint levels for each detection observer gain (exact form) on free-motion "
-        "logs (seeds A), count false alarms in --heldout-minutes of free motion (seeds C), run the demo contact and "
+        "logs (seeds A, other motions and noise of the same arm), count false alarms in --heldout-minutes of free motion (seeds C), run the demo contact and "
         "the link collision with each pair and short force pulses on the links (seeds B); lag = detection - the "
         "first time the true |tau_ext_j| exceeds zeta_j. Writes JSON, CSV and the lag / false-alarm figure.",
     )
     p.add_argument("--arm", action="append", choices=_ARMS, default=None, help="an arm (repeat; default all five)")
     p.add_argument("--gains", default="5,20,50,100,200,500", metavar="K1,K2,...", help="detection gains [1/s]")
     p.add_argument("--tune-minutes", type=float, default=10.0, help="free motion per tuning model seed (default 10)")
-    p.add_argument("--tune-models", type=int, default=3, help="tuning model/noise seeds (default 3)")
+    p.add_argument("--tune-models", type=int, default=3, help="tuning logs (motion/noise seeds; default 3)")
+    p.add_argument("--model-seeds", choices=("same", "disjoint"), default="same",
+                   help="same: every run on one arm's model (tuned on its own logs, as on a robot; default); "
+                   "disjoint: tuning, held-out and contact runs each on another model's errors")  # fmt: skip
     p.add_argument("--heldout-minutes", type=float, default=60.0, help="held-out free motion (default 60)")
     p.add_argument("--pulses", type=int, default=40, help="short force pulses per arm (default 40; 0: none)")
     p.add_argument("--rate", type=float, default=0.1, help="false alarms per hour the levels are tuned for (0.1)")
@@ -68,7 +71,7 @@ def _detection_study(args: argparse.Namespace) -> int:
         study = run_detection_study(
             args.arm or _ARMS, [float(v) for v in args.gains.split(",")], progress=_print,
             tune_s=60.0 * args.tune_minutes, tune_models=args.tune_models, heldout_s=60.0 * args.heldout_minutes,
-            pulses=args.pulses, rate_per_hour=args.rate,
+            pulses=args.pulses, rate_per_hour=args.rate, model_seeds=args.model_seeds,
         )  # fmt: skip
     if args.merge:
         for name, arm in study.arms.items():

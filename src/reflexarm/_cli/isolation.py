@@ -65,6 +65,12 @@ def _isolation_study(args: argparse.Namespace) -> int:
             f"link explains the residual: {sm['wrong_more_proximal_explained']}, own joint below its level: "
             f"{sm['wrong_axis_crossing']})"
         )
+        ls = sm["correct_link_rate_link_sensed"]
+        print(
+            f"         link sensed (own joint above its level) {sm['link_sensed']}: correct link "
+            f"{'-' if ls is None else f'{100 * ls:.1f} %'}; own joint below its level {sm['link_not_sensed']}: "
+            f"true link among the candidate links {sm['link_not_sensed_true_in_candidates']}"
+        )
         pe, fe, de = sm["point_error_m"], sm["force_error_pct"], sm["direction_error_deg"]
         if pe["count"]:
             print(

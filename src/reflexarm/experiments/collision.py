@@ -187,7 +187,9 @@ HYDRAULIC_WAYPOINTS = np.array(
 )
 
 
-def free_motion_trajectory(duration: float, motion: str = "demo", robot: RobotModel | None = None) -> JointTrajectory:
+def free_motion_trajectory(
+    duration: float, motion: str = "demo", robot: RobotModel | None = None, *, seed: int | None = None
+) -> JointTrajectory:
     """A trajectory of at least ``duration`` s that cycles through the waypoints of ``motion`` (see
     :data:`FREE_MOTIONS`), starting and ending each cycle at :data:`EE_START`.
 
@@ -195,6 +197,11 @@ def free_motion_trajectory(duration: float, motion: str = "demo", robot: RobotMo
     (:func:`~reflexarm.experiments.any_arm.ee_swing_plan`), "loaded" moves its four most loaded joints
     (:func:`~reflexarm.experiments.any_arm.loaded_waypoints`), starting at the swing's start (demo) or
     the arm's start posture; segments of EE_MOVE_TIME + 0.5 s or the swing's move time.
+
+    ``seed`` (None: the fixed cycle) makes another log of the same motion: every cycle visits its
+    waypoints in a seeded order, each moved by up to :data:`FREE_MOTION_JITTER_RAD` (or 5 % of the joint's
+    range, whichever is smaller; clipped to the range), with segment times scaled by 0.85-1.2. Tuning and
+    held-out logs of one arm then differ in motion as well as in noise.
     """
     if motion not in FREE_MOTIONS:
         raise ConfigError(f"unknown free motion {motion!r}; choose one of: {', '.join(FREE_MOTIONS)}")
@@ -211,10 +218,37 @@ def free_motion_trajectory(duration: float, motion: str = "demo", robot: RobotMo
         start = start_posture(robot)
         cycle = list(loaded_waypoints(robot, start))
     k = max(1, int(np.ceil(duration / (seg * (len(cycle) + 1)))))
+    if seed is not None:
+        return _varied_cycles(np.asarray(start, float), np.asarray(cycle, float), seg, duration, seed, robot)
     way = [start]
     for _ in range(k):
         way += [*cycle, start]
     return JointTrajectory(np.array(way), np.full(len(way) - 1, seg))
+
+
+#: Largest waypoint offset of a seeded free motion [rad] (:func:`free_motion_trajectory`).
+FREE_MOTION_JITTER_RAD = 0.15
+
+
+def _varied_cycles(
+    start: np.ndarray, cycle: np.ndarray, seg: float, duration: float, seed: int, robot: RobotModel | None
+) -> JointTrajectory:
+    """The cycle ``start -> cycle -> start`` repeated for ``duration``, varied by ``seed`` (see
+    :func:`free_motion_trajectory`)."""
+    rng = np.random.default_rng(seed)
+    if robot is None:
+        lo, hi = np.full(start.size, -np.inf), np.full(start.size, np.inf)
+    else:
+        lo, hi = robot.lower_limit, robot.upper_limit
+    amp = np.minimum(FREE_MOTION_JITTER_RAD, 0.05 * np.where(np.isfinite(hi - lo), hi - lo, np.inf))
+    way, times, total = [start], [], 0.0
+    while total < duration:
+        for q in (*cycle[rng.permutation(len(cycle))], start):
+            moved = start if q is start else np.clip(q + rng.uniform(-amp, amp), lo, hi)
+            way.append(moved)
+            times.append(seg * rng.uniform(0.85, 1.2))
+            total += times[-1]
+    return JointTrajectory(np.array(way), np.array(times))
 
 
 def link_collision_trajectory() -> JointTrajectory:

@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from reflexarm.control import Controller
+from reflexarm.errors import ConfigError
 from reflexarm.experiments.collision import CollisionSetting, controller_model, free_motion_trajectory
 from reflexarm.experiments.reaction_study import STUDY_ARMS, StudyArm, study_arm
 from reflexarm.robots import CoulombViscousFriction
@@ -56,6 +57,11 @@ TARGET_LAG_S = 0.010
 PULSE_GRACE_S = 0.010
 #: Seed offsets of the three disjoint sets: tuning (A), contacts and pulses (B), the false-alarm hour (C).
 SEEDS = {"A": 1000, "B": 2000, "C": 3000}
+#: How the runs' model errors are drawn (``model_seeds=``): one arm for all, or one model per seed.
+MODEL_SEEDS = ("same", "disjoint")
+#: The model seed of "the arm" when every run shares one (``model_seeds="same"``): disjoint from every
+#: noise and motion seed of :data:`SEEDS`.
+ARM_MODEL_SEED = 7
 
 
 @dataclass(frozen=True)
@@ -82,15 +88,17 @@ def free_motion_residuals(
     chunk_s: float = 300.0,
     scene: Any = None,
     keep: Callable[[Trace], None] | None = None,
+    motion_seed: int | None = None,
 ) -> list[ResidualReplay]:
     """Free motion of ``arm`` for ``duration`` [s] (model errors +-10 % of ``model_seed``, noise ``seed``),
     compiled, the detection observer at ``gain`` (exact), in chunks of ``chunk_s``: one replay per chunk
     (the controller's online residual; :func:`~reflexarm.tuning.refilter` gives other gains). ``keep`` sees
-    each chunk's trace (e.g. the true external torque of a ``scene``)."""
+    each chunk's trace (e.g. the true external torque of a ``scene``); ``motion_seed`` varies the motion
+    (:func:`~reflexarm.experiments.collision.free_motion_trajectory`; None: the fixed cycle)."""
     from reflexarm.sim.compiled_loop import run_fast
 
     model, _ = controller_model(arm.robot, 0.1, model_seed, None)
-    traj = free_motion_trajectory(duration, motion, arm.robot)
+    traj = free_motion_trajectory(duration, motion, arm.robot, seed=motion_seed)
     plant = _plant(arm, seed, scene)
     plant.reset(traj.sample(0.0).q_d)
     ctrl = Controller(
@@ -102,7 +110,8 @@ def free_motion_residuals(
         span = min(chunk_s, duration - done)
         trace = run_fast(plant, ctrl, traj, span)
         name = (
-            f"{arm.name} free motion {motion} model seed {model_seed} noise seed {seed} [{done:g}, {done + span:g}] s"
+            f"{arm.name} free motion {motion} (motion seed {motion_seed}) model seed {model_seed} noise seed {seed}"
+            f" [{done:g}, {done + span:g}] s"
         )
         dt = float(np.median(np.diff(trace.t)))
         out.append(ResidualReplay(name, trace.t.copy(), trace.residual.copy(), dt, 0, (), gain, "exact"))
@@ -226,8 +235,9 @@ def plot_tradeoff(study: DetectionStudy, path: str | Path) -> Path:
     return Path(path)
 
 
-def _contact_runs(arm: StudyArm, gain: float, levels: np.ndarray, seed: int) -> dict[str, Any]:
-    """The demo contact and the link collision with the pair (gain, levels), seeds B; lag and delay each."""
+def _contact_runs(arm: StudyArm, gain: float, levels: np.ndarray, seed: int, model_seed: int) -> dict[str, Any]:
+    """The demo contact and the link collision with the pair (gain, levels), noise seed ``seed`` (B) on the
+    model of ``model_seed``; lag and delay each."""
     from reflexarm.experiments.collision import run_ee_collision, run_link_collision
     from reflexarm.experiments.collision_events import collision_outcome
 
@@ -235,7 +245,7 @@ def _contact_runs(arm: StudyArm, gain: float, levels: np.ndarray, seed: int) -> 
         "Coll.Det", stiffness=300.0, observer_gain=5.0, detection_observer_gain=gain,
         threshold=tuple(float(v) for v in levels), reaction="gravity",
     )  # fmt: skip
-    kw: dict[str, Any] = {"robot": arm.robot, "model_error": 0.1, "model_seed": seed, "seed": seed,
+    kw: dict[str, Any] = {"robot": arm.robot, "model_error": 0.1, "model_seed": model_seed, "seed": seed,
           "plant_friction": arm.plant_friction}  # fmt: skip
     out = {}
     for scen, run in (("demo", run_ee_collision), ("link", run_link_collision)):
@@ -269,14 +279,16 @@ def _pulse_scene(arm: StudyArm, count: int, rng: np.random.Generator) -> tuple[l
     return scenes, specs
 
 
-def _pulses(arm: StudyArm, pairs: Any, model_error: np.ndarray, count: int, seed: int) -> dict[str, Any]:
+def _pulses(
+    arm: StudyArm, pairs: Any, model_error: np.ndarray, count: int, seed: int, model_seed: int
+) -> dict[str, Any]:
     """Short impacts during free motion: the share caught by each pair, among pulses whose true joint torque
     peaks above 3x the model error of some joint ("eligible") and among all."""
     scenes, specs = _pulse_scene(arm, count, np.random.default_rng(seed))
     traces: list[Trace] = []
     gains = [p.gain for p in pairs.pairs]
-    (rep,) = free_motion_residuals(arm, 2.0 + 1.5 * count + 1.0, gain=max(gains), model_seed=seed, seed=seed,
-                                   chunk_s=1e9, scene=scenes, keep=traces.append)  # fmt: skip
+    (rep,) = free_motion_residuals(arm, 2.0 + 1.5 * count + 1.0, gain=max(gains), model_seed=model_seed, seed=seed,
+                                   chunk_s=1e9, scene=scenes, keep=traces.append, motion_seed=seed)  # fmt: skip
     t, tau_ext = traces[0].t, traces[0].tau_ext
     caught: dict[str, dict[str, Any]] = {}
     for p in pairs.pairs:
@@ -307,17 +319,32 @@ def study_arm_detection(
     rate_per_hour: float = 0.1,
     chunk_s: float = 300.0,
     motion: str = "loaded",
+    model_seeds: str = "same",
 ) -> dict[str, Any]:
-    """One arm of the study (module docstring): pairs, false alarms, noise growth, contacts, pulses."""
+    """One arm of the study (module docstring): pairs, false alarms, noise growth, contacts, pulses.
+
+    ``model_seeds``: "same" (default) gives every run the model of one seed (:data:`ARM_MODEL_SEED`): one
+    arm with its model errors, tuned on its own logs (other motion and noise seeds) as a user tunes on the
+    robot; "disjoint" gives the tuning, held-out and contact runs models of their own seeds (the levels must
+    then cover another arm's model errors too)."""
     import warnings
 
     from reflexarm.tuning import ThresholdWarning, propose_detection_pairs
 
+    if model_seeds not in MODEL_SEEDS:
+        raise ConfigError(f"model_seeds must be one of {', '.join(MODEL_SEEDS)}; got {model_seeds!r}")
+    same = model_seeds == "same"
+
+    def model_of(seed: int) -> int:
+        return ARM_MODEL_SEED if same else seed
+
     ref = max(gains)
     fm = {"gain": ref, "motion": motion, "chunk_s": chunk_s}
     tune = [r for i in range(tune_models) for r in free_motion_residuals(
-        arm, tune_s, model_seed=SEEDS["A"] + i, seed=SEEDS["A"] + i, **fm)]  # type: ignore[arg-type]  # fmt: skip
-    held = free_motion_residuals(arm, heldout_s, model_seed=SEEDS["C"], seed=SEEDS["C"], **fm)  # type: ignore[arg-type]
+        arm, tune_s, model_seed=model_of(SEEDS["A"] + i), seed=SEEDS["A"] + i, motion_seed=SEEDS["A"] + i,
+        **fm)]  # type: ignore[arg-type]  # fmt: skip
+    held = free_motion_residuals(arm, heldout_s, model_seed=model_of(SEEDS["C"]), seed=SEEDS["C"],
+                                 motion_seed=SEEDS["C"], **fm)  # type: ignore[arg-type]  # fmt: skip
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ThresholdWarning)
         pairs = propose_detection_pairs(tune, arm.robot, gains, heldout=held, rate_per_hour=rate_per_hour,
@@ -327,8 +354,11 @@ def study_arm_detection(
     out: dict[str, Any] = {"plant_friction": arm.plant_friction, "joints": arm.robot.joint_names,
                            "pairs": pairs.as_dict(), "noise_growth": noise_growth(held[:1], gains),
                            "warnings": sorted({str(w.message) for w in caught})[:20]}  # fmt: skip
-    out["contacts"] = {str(p.gain): _contact_runs(arm, p.gain, p.collision, SEEDS["B"]) for p in pairs.pairs}
-    out["pulses"] = _pulses(arm, pairs, model_error, pulses, SEEDS["B"] + 1) if pulses else {}
+    out["model_seeds"] = {"mode": model_seeds, "arm_model_seed": ARM_MODEL_SEED if same else None}
+    out["contacts"] = {str(p.gain): _contact_runs(arm, p.gain, p.collision, SEEDS["B"], model_of(SEEDS["B"]))
+                       for p in pairs.pairs}  # fmt: skip
+    out["pulses"] = (_pulses(arm, pairs, model_error, pulses, SEEDS["B"] + 1, model_of(SEEDS["B"] + 1))
+                     if pulses else {})  # fmt: skip
     return out
 
 

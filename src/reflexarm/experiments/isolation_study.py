@@ -22,7 +22,13 @@ Variants:
   weighted by the isolator's W = min(level) / level.
 
 A contact is *sensed* if some joint's residual exceeds its significance; the correct-link rate is taken
-among sensed contacts. Point and force errors are taken on contacts isolated to the right link where the
+among sensed contacts. Its *link is sensed* if the true torque on the contact link's own joint (the most
+distal joint the contact moves) exceeds that joint's significance: otherwise that joint's residual is
+indistinguishable from model error and noise, the residual carries no information on whether the contact is
+on that link or on a more proximal one that explains the rest of the residual, and the isolator can only name
+the range of links it examined (``ContactEstimate.candidate_links``: from the most distal significant joint's
+link on). The summary gives the correct-link rate among link-sensed contacts beside the rate among all
+sensed ones, and for the others how often the true link is among the candidates. Point and force errors are taken on contacts isolated to the right link where the
 estimate says ``point_and_force``; force errors also where it says ``force_only``.
 """
 
@@ -192,11 +198,19 @@ def _summarise(rows: list[dict[str, Any]], n: int, names: list[str]) -> dict[str
         pf = [r for r in correct if r["determined"] == Determined.POINT_AND_FORCE.value]
         ff = [r for r in correct if r["determined"] in (Determined.POINT_AND_FORCE.value, Determined.FORCE_ONLY.value)]
         wrong = [r for r in sensed if not r["correct"]]
+        link_sensed = [r for r in sensed if not r["own_joint_insignificant"]]
+        hidden = [r for r in sensed if r["own_joint_insignificant"]]
         return {
             "contacts": len(sub),
             "sensed": len(sensed),
             "not_sensed": len(sub) - len(sensed),
             "correct_link_rate": len(correct) / len(sensed) if sensed else None,
+            "link_sensed": len(link_sensed),
+            "correct_link_rate_link_sensed": (
+                sum(1 for r in link_sensed if r["correct"]) / len(link_sensed) if link_sensed else None
+            ),
+            "link_not_sensed": len(hidden),
+            "link_not_sensed_true_in_candidates": sum(1 for r in hidden if r["true_link_in_candidates"]),
             "wrong_link": len(wrong),
             "wrong_more_proximal_explained": sum(
                 1 for r in wrong if int(r["estimated_link"]) < int(r["link"]) and r["explained"]
@@ -321,6 +335,7 @@ def _row(index: int, c: Contact, est: ContactEstimate, link_name: str, significa
         "determined": est.determined.value,
         "explained": "no single contact" not in est.reason,
         "own_joint_insignificant": bool(abs(c.torque[c.link]) <= significance[c.link]),
+        "true_link_in_candidates": c.link in est.candidate_links,
         "force_true_N": f_true,
         "fit_error_Nm": est.fit_error,
         "point_error": float(np.linalg.norm(est.point - c.point)) if est.point is not None else float("nan"),
