@@ -19,8 +19,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "detection-study",
         help="(k_o, zeta) pairs tuned on free motion: detection lag, contact delay, false alarms per hour, pulses",
         description="Per arm: tune per-joint levels for each detection observer gain (exact form) on free-motion "
-        "logs (seeds A, other motions and noise of the same arm), count false alarms in --heldout-minutes of free motion (seeds C), run the demo contact and "
-        "the link collision with each pair and short force pulses on the links (seeds B); lag = detection - the "
+        "logs (seeds A: other motions and noise of the same arm), count false alarms in --heldout-minutes of free "
+        "motion (seeds C), run the demo contact and the link collision with each pair and short force pulses on the "
+        "links (seeds B); lag = detection - the "
         "first time the true |tau_ext_j| exceeds zeta_j. Writes JSON, CSV and the lag / false-alarm figure.",
     )
     p.add_argument("--arm", action="append", choices=_ARMS, default=None, help="an arm (repeat; default all five)")

@@ -28,8 +28,9 @@ indistinguishable from model error and noise, the residual carries no informatio
 on that link or on a more proximal one that explains the rest of the residual, and the isolator can only name
 the range of links it examined (``ContactEstimate.candidate_links``: from the most distal significant joint's
 link on). The summary gives the correct-link rate among link-sensed contacts beside the rate among all
-sensed ones, and for the others how often the true link is among the candidates. Point and force errors are taken on contacts isolated to the right link where the
-estimate says ``point_and_force``; force errors also where it says ``force_only``.
+sensed ones, and for the others how often the true link is among the candidates. Point and force errors are
+taken on contacts isolated to the right link where the estimate says ``point_and_force``; force errors also
+where it says ``force_only``.
 """
 
 from __future__ import annotations
