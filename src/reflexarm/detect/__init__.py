@@ -9,8 +9,9 @@ them together. Names are imported from their modules on first use (the command l
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING
+
+from reflexarm._lazy import lazy_names
 
 if TYPE_CHECKING:
     from reflexarm.detect.coverage import JointCoverage, Outside, check_coverage, measure_coverage
@@ -47,14 +48,4 @@ _SOURCES = {
 }
 
 
-def __getattr__(name: str) -> object:
-    module = _SOURCES.get(name)
-    if module is None:
-        raise AttributeError(f"module 'reflexarm.detect' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"reflexarm.detect.{module}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+__getattr__, __dir__ = lazy_names(__name__, _SOURCES, globals())

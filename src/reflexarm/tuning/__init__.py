@@ -14,8 +14,9 @@ identification package, while ``reflexarm tune-thresholds`` registers its option
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING
+
+from reflexarm._lazy import lazy_names
 
 if TYPE_CHECKING:
     from reflexarm.tuning.defaults import DEFAULT_CONTACT_RATE, DEFAULT_METHOD, DEFAULT_RATE
@@ -110,14 +111,4 @@ _SOURCES = {
 }
 
 
-def __getattr__(name: str) -> object:
-    module = _SOURCES.get(name)
-    if module is None:
-        raise AttributeError(f"module 'reflexarm.tuning' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"reflexarm.tuning.{module}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+__getattr__, __dir__ = lazy_names(__name__, _SOURCES, globals())
