@@ -109,30 +109,50 @@ def load_log(
     if columns and (bag or suffix == ".npz"):
         raise DataError(f"{where}: a column mapping applies to CSV and Parquet logs only")
     _check_torque_source(torque_from, gains, n_joints, where)  # before reading a large file
-    notes: list[str] = []
-    if bag:
-        data, notes = read_bag(
-            p, joint_names=names, n_joints=n_joints, joint_topic=joint_topic, wrench_topic=wrench_topic,
-            time_unit=time_unit,
-        )  # fmt: skip
-    elif suffix == ".npz":
-        data = _read_npz(p, "current" if torque_from == "current" else "tau")
-        data["t"], note = relative_seconds(data["t"], where=where, unit=time_unit)
-        notes = [note] if note else []
-    elif suffix in (".csv", ".parquet", ".pq"):
-        data, notes = read_table(
-            p, n_joints=n_joints, joint_names=names, columns=None if columns is None else dict(columns),
-            time_unit=time_unit, torque_from=torque_from,
-        )  # fmt: skip
-    else:
-        raise DataError(
-            f"{where}: unknown log format {suffix!r}; use .csv, .parquet, .npz, or a ROS 2 bag (.db3, .mcap, folder)"
-        )
+    data, notes = _read_by_format(
+        p, bag=bag, n_joints=n_joints, joint_names=names, columns=columns, time_unit=time_unit,
+        joint_topic=joint_topic, wrench_topic=wrench_topic, torque_from=torque_from,
+    )  # fmt: skip
     if torque_from == "current":
         current = data.pop("current" if "current" in data else "tau")  # a bag's effort field holds the currents
         data["tau"], note = torque_from_current(current, gains, where)
         notes.append(note)
     return _finish(data, where, n_joints, repair, period, notes=tuple(notes))
+
+
+def _read_by_format(
+    p: Path,
+    *,
+    bag: bool,
+    n_joints: int | None,
+    joint_names: tuple[str, ...] | None,
+    columns: Mapping[str, str] | None,
+    time_unit: str | None,
+    joint_topic: str | None,
+    wrench_topic: str | None,
+    torque_from: str,
+) -> tuple[dict[str, np.ndarray], list[str]]:
+    """The arrays of a bag, an npz file or a table, times relative to the first sample, and the reader's notes
+    (arguments as :func:`load_log` takes them, checked there)."""
+    where = p.name
+    suffix = p.suffix.lower()
+    if bag:
+        return read_bag(
+            p, joint_names=joint_names, n_joints=n_joints, joint_topic=joint_topic, wrench_topic=wrench_topic,
+            time_unit=time_unit,
+        )  # fmt: skip
+    if suffix == ".npz":
+        data = _read_npz(p, "current" if torque_from == "current" else "tau")
+        data["t"], note = relative_seconds(data["t"], where=where, unit=time_unit)
+        return data, [note] if note else []
+    if suffix in (".csv", ".parquet", ".pq"):
+        return read_table(
+            p, n_joints=n_joints, joint_names=joint_names, columns=None if columns is None else dict(columns),
+            time_unit=time_unit, torque_from=torque_from,
+        )  # fmt: skip
+    raise DataError(
+        f"{where}: unknown log format {suffix!r}; use .csv, .parquet, .npz, or a ROS 2 bag (.db3, .mcap, folder)"
+    )
 
 
 def _check_torque_source(torque_from: str, gains: npt.ArrayLike | None, n_joints: int | None, where: str) -> None:
