@@ -120,15 +120,7 @@ def place_cinderblock(
     """
     if not (math.isfinite(depth) and depth > 0.0):
         raise ConfigError(f"depth must be a positive distance [m]; got {depth!r}")
-    t = np.linspace(0.0, trajectory.duration, samples)
-    qs = np.array([trajectory.sample(float(ti)).q_d for ti in t])
-    P = np.array([robot.compute_frame_pose(q)[1] for q in qs])
-    seg = np.linalg.norm(np.diff(P, axis=0), axis=1)
-    s = np.concatenate([[0.0], np.cumsum(seg)])
-    if s[-1] <= depth:
-        raise ConfigError(f"the end effector's path is {s[-1]:.3f} m long; the block needs more than depth {depth} m")
-    i = int(np.searchsorted(s, s[-1] - depth))
-    i = min(max(i, 1), samples - 2)
+    t, qs, P, i = _path_point(robot, trajectory, depth, samples)
     up = up_direction(robot)
     u = horizontal(P[i + 1] - P[i - 1], up)
     nu = float(np.linalg.norm(u))
@@ -142,6 +134,55 @@ def place_cinderblock(
     w = np.cross(up, u)
     outward = 1.0 if float(w @ horizontal(P[i], up)) >= 0.0 else -1.0
     centre = P[i] + u * (padding + sy / 2.0) + w * outward * (OUTSIDE_SHARE - 0.5) * sx
+    # the table: a square of side sx + 0.1 m, world-aligned, centred under the block
+    table_half = (sx + 0.1) / 2.0
+    height = float(P[i] @ up)
+    table, sz = _block_heights(robot, qs, centre, (u, w, up), height, size, padding, table_half)
+    yaw = math.atan2(u[1], u[0]) - math.pi / 2.0
+    return {
+        "position": (float(centre[0]), float(centre[1])),
+        "size": (sx, sy, sz),
+        "padding": padding,
+        "table_height": table,
+        "table_size": (2.0 * table_half, 2.0 * table_half),
+        "yaw": yaw,
+        "contact_time_s": float(t[i]),
+        "depth": depth,
+        "ee_height_m": height,
+    }
+
+
+def _path_point(
+    robot: RobotModel, trajectory: JointTrajectory, depth: float, samples: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """The end effector's path at ``samples`` times (times, postures, positions) and the index of the point
+    from which the rest of the path is ``depth`` long (ConfigError if the path is not longer)."""
+    t = np.linspace(0.0, trajectory.duration, samples)
+    qs = np.array([trajectory.sample(float(ti)).q_d for ti in t])
+    P = np.array([robot.compute_frame_pose(q)[1] for q in qs])
+    seg = np.linalg.norm(np.diff(P, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    if s[-1] <= depth:
+        raise ConfigError(f"the end effector's path is {s[-1]:.3f} m long; the block needs more than depth {depth} m")
+    i = int(np.searchsorted(s, s[-1] - depth))
+    return t, qs, P, min(max(i, 1), samples - 2)
+
+
+def _block_heights(
+    robot: RobotModel,
+    qs: np.ndarray,
+    centre: np.ndarray,
+    axes: tuple[np.ndarray, np.ndarray, np.ndarray],
+    height: float,
+    size: tuple[float, float, float],
+    padding: float,
+    table_half: float,
+) -> tuple[float, float]:
+    """The table's height and the block core's height [m] under the arm's geoms swept along ``qs`` (``axes``:
+    the path's horizontal direction u, the block's long side w, up; ``height``: the end effector's at the face);
+    ConfigError if the arm passes above the block."""
+    u, w, up = axes
+    sx, sy, sz = size
     # the arm's geoms (bounding boxes) over the block's padded footprint along the path
     centres, halves, beyond, wrist = _arm_geoms_along(robot, qs)
     rel = centres - centre
@@ -149,13 +190,10 @@ def place_cinderblock(
         np.abs(rel @ w) < sx / 2 + padding + np.abs(halves) @ np.abs(w)
     )
     bottoms = (centres @ up) - np.abs(halves) @ np.abs(up)
-    # the table: a square of side sx + 0.1 m, world-aligned, centred under the block
-    table_half = (sx + 0.1) / 2.0
     over_table = (np.abs(rel[..., 0]) < table_half + halves[..., 0]) & (
         np.abs(rel[..., 1]) < table_half + halves[..., 1]
     )
     lowest = float(bottoms[over_table].min()) if over_table.any() else math.inf
-    height = float(P[i] @ up)
     # first the bodies beyond the wrist sensor must meet the block first (as Atlas' hand); if the links
     # before them hang too low for that, the last two links may as well
     for distal in (beyond, wrist):
@@ -174,16 +212,4 @@ def place_cinderblock(
             f"the arm passes above the block (its top at {block_top:.3f} m, the wrist no lower than "
             f"{lowest_distal:.3f} m); choose another start posture"
         )
-    sz = core
-    yaw = math.atan2(u[1], u[0]) - math.pi / 2.0
-    return {
-        "position": (float(centre[0]), float(centre[1])),
-        "size": (sx, sy, sz),
-        "padding": padding,
-        "table_height": table,
-        "table_size": (2.0 * table_half, 2.0 * table_half),
-        "yaw": yaw,
-        "contact_time_s": float(t[i]),
-        "depth": depth,
-        "ee_height_m": height,
-    }
+    return table, core
