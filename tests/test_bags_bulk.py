@@ -359,3 +359,37 @@ def test_a_bag_whose_own_joint_state_definition_differs_is_a_data_error(tmp_path
                            r"not decode as sensor_msgs/msg/JointState: not the standard sensor_msgs/msg/JointState "
                            r"fields: .*velocity"):  # fmt: skip
             read_bag(p, joint_names=tuple(ARM), n_joints=None, joint_topic=None, wrench_topic=None, bulk=bulk)
+
+
+def test_sqlite_rows_fetched_in_pieces_and_equal_receive_times_in_the_reference_order(tmp_path, monkeypatch):
+    """The sqlite3 rows read from the messages table a few at a time (7 rows per fetch, 50 per block: pieces
+    joined, blocks across fetches), with receive times shared by three messages each (ties, where the order
+    is the storage order of rosbags' own query): the reference's messages, bit for bit, in its order."""
+    from reflexarm.logs import _bag_messages
+
+    rng = np.random.default_rng(3)
+    p, n = tmp_path / "bag", 400
+    values = rng.normal(size=(n, 3, 7))
+    with Writer(p, version=9, storage_plugin=StoragePlugin.SQLITE3) as w:
+        arm = w.add_connection("/joint_states", JS, typestore=STORE)
+        ft = w.add_connection("/ft", WS, typestore=STORE)  # another topic's rows between the arm's
+        for k in range(n):
+            s = EPOCH_NS + k * PERIOD_NS
+            names = ARM if k % 5 else ARM[::-1]
+            msg = _joint_state(s, names, *values[k])
+            w.write(arm, EPOCH_NS + (k // 3) * PERIOD_NS, _ser(msg, JS, k, "mixed"))
+            w.write(ft, s, _ser(_wrench(s, values[k, 0, :6], "ft_sensor"), WS, k, "little"))
+    monkeypatch.setattr(_bag_messages, "SQLITE_FETCH", 7)
+    monkeypatch.setattr(_bag_messages, "BLOCK", 50)
+    bulk, ref = _topic(p, "/joint_states", _cdr.JOINT_STATE, True), _topic(p, "/joint_states", _cdr.JOINT_STATE, False)
+    assert bulk.received.size == n and bulk.n_bulk == n
+    _assert_same_bits(bulk.received, ref.received, "receive times")
+    assert [b.key for b in bulk.batches] == [b.key for b in ref.batches]
+    for b, r in zip(bulk.batches, ref.batches, strict=True):
+        for x, y in zip((b.msg_index, b.stamp, *b.arrays), (r.msg_index, r.stamp, *r.arrays), strict=True):
+            _assert_same_bits(x, y, str(b.key))
+    # the header stamps tell the ties apart: message k is the k-th written, in both
+    stamps = np.concatenate([b.stamp for b in bulk.batches])[
+        np.argsort(np.concatenate([b.msg_index for b in bulk.batches]))
+    ]
+    np.testing.assert_array_equal(stamps, EPOCH_NS + np.arange(n) * PERIOD_NS)

@@ -9,9 +9,12 @@ where the result is the same:
   time and offset per message, read with numpy), each record checked against its index entry (opcode,
   channel, log time, length) before its bytes are used; a chunk whose records do not match goes through
   rosbags' own chunk reader (``msgsrc``). Chunks are merged by log time as rosbags merges them.
-* **sqlite3** (without per-message compression): each storage file's rows are read with rosbags' own
-  query on the database connection rosbags opened, in blocks, without its per-message generator,
-  connection remapping and merge layers.
+* **sqlite3** (without per-message compression): each storage file's rows are read from the ``messages``
+  table on the database connection rosbags opened (apsw; ``SELECT timestamp, data ... WHERE topic_id IN (...)
+  ORDER BY timestamp``: rosbags' own query without its join to ``topics``, which only checks that the
+  topic exists; both scan the ``timestamp`` index, so ties come in the same storage order), fetched
+  :data:`SQLITE_FETCH` rows at a time and joined while they are in the cache, without rosbags'
+  per-message generator, connection remapping and merge layers.
 
 Anything else (per-message compression, unchunked MCAP files, several bags) is read through
 ``AnyReader.messages`` itself.
@@ -34,6 +37,9 @@ __all__ = ["BLOCK", "ChunkError", "raw_blocks"]
 
 #: Messages per block: bounds the memory of the raw bytes held at once.
 BLOCK = 1 << 16
+#: Rows fetched from sqlite3 at once (their bytes joined while still in the cache: with 8192 rows of a 7-joint
+#: JointState, 2.9 MB, the rows read 1.25x faster than fetched BLOCK at a time).
+SQLITE_FETCH = 1 << 13
 _INDEX = np.dtype([("time", "<u8"), ("offset", "<u8")])
 
 
@@ -54,21 +60,39 @@ def raw_blocks(reader: Any, topic: str, *, direct: bool = True) -> Iterator[RawB
         chunks = _mcap_chunks(storage, conns) if isinstance(storage, McapReader) else None
         if chunks is not None:
             yield from _mcap_blocks(storage, conns, chunks)
+        elif isinstance(storage, Sqlite3Reader):
+            yield from _sqlite_blocks(storage, conns)
         else:
-            yield from _blocks(
-                _sqlite_rows(storage, conns) if isinstance(storage, Sqlite3Reader) else storage.messages(conns)
-            )
+            yield from _blocks(storage.messages(conns))
 
 
-def _sqlite_rows(storage: Any, conns: list[Any]) -> Iterable[tuple[Any, int, Any]]:
-    """The rows of rosbags' own message query (``Sqlite3Reader.messages`` without start / stop), read
-    from the database connection rosbags opened, without a Python generator step per message."""
-    ids = tuple({c.id for c in conns})
-    query = (
-        "SELECT topics.id,messages.timestamp,messages.data FROM messages JOIN topics ON messages.topic_id=topics.id "
-        f"WHERE topics.id IN ({','.join('?' for _ in ids)}) ORDER BY timestamp"
-    )
-    return storage.dbconn.execute(query, ids)  # type: ignore[no-any-return]
+def _sqlite_blocks(storage: Any, conns: list[Any]) -> Iterator[RawBlock]:
+    """The rows of rosbags' message query (``Sqlite3Reader.messages`` without start / stop) in blocks of
+    :data:`BLOCK`, read from the database connection rosbags opened, :data:`SQLITE_FETCH` rows at a time."""
+    ids = tuple(sorted({c.id for c in conns}))
+    query = f"SELECT timestamp,data FROM messages WHERE topic_id IN ({','.join('?' for _ in ids)}) ORDER BY timestamp"
+    rows_of = iter(storage.dbconn.execute(query, ids))  # an apsw cursor: no fetchmany, islice takes its rows
+    while True:
+        parts: list[bytes] = []
+        stamps: list[np.ndarray] = []
+        sizes: list[np.ndarray] = []
+        count = 0
+        with _no_gc():
+            while count < BLOCK:
+                rows = list(islice(rows_of, min(SQLITE_FETCH, BLOCK - count)))
+                if not rows:
+                    break
+                received, raws = zip(*rows, strict=True)
+                stamps.append(np.fromiter(received, dtype=np.int64, count=len(rows)))
+                sizes.append(np.fromiter(map(len, raws), dtype=np.int64, count=len(rows)))
+                parts.append(b"".join(raws))
+                count += len(rows)
+                del rows, received, raws
+        if not count:
+            return
+        size = np.concatenate(sizes)
+        data = np.frombuffer(parts[0] if len(parts) == 1 else b"".join(parts), dtype=np.uint8)
+        yield RawBlock(data, np.cumsum(size) - size, size, np.concatenate(stamps))
 
 
 def _blocks(messages: Iterable[tuple[Any, int, Any]]) -> Iterator[RawBlock]:
