@@ -71,37 +71,130 @@ def identify_dynamics_command(args: argparse.Namespace) -> int:
 
 def _identify_from_logs(args: argparse.Namespace) -> int:
     """``identify dynamics --log ...``: identify, project if needed, validate, then write."""
-    from reflexarm.ident import (
-        compute_base_parameters,
-        identify_dynamics,
-        preprocess_log,
-        validate_model,
-    )
-    from reflexarm.ident.export.model_file import save_identified_model
-    from reflexarm.ident.plots import plot_torque_validation
+    from reflexarm.ident import compute_base_parameters
 
     out = out_dir(args)
     robot = load_robot_arg(args)
     base = compute_base_parameters(robot)
     print(f"{robot.name}: {base.n_base} base parameters of {base.n_standard}")
+    tables = _scan_logs(args, robot)
+    if tables is None:
+        ident, val_raw, states = _load_logs(args, robot)
+    else:
+        ident, val_raw, states = [], None, None
+        if args.validation_log is not None:
+            val_raw, states = _load_validation_log(args, robot)
+    friction = load_friction(args.friction, robot)
+    methods, not_run = _methods(args, friction, robot, base.n_base)
+    if tables is None:
+        estimates = {m: _identify(args, robot, base, ident, m, friction) for m in methods}
+    else:
+        estimates = _identify_streamed(args, robot, base, tables, methods, friction)
+    results = {}  # the models as saved: what the validation below scores
+    for m, estimate in estimates.items():
+        results[m] = for_controller(estimate, robot, robot, args)
+        if estimate.inertia_determinacy is not None:
+            print(f"{m}: {estimate.inertia_determinacy.describe()}")
+        for note in estimate.notes:  # whether the wrist wrench entered the regression, and why
+            if note.startswith("wrist wrench"):
+                print(f"{m}: {note}")
+    _write_results(args, out, robot, base.n_base, results, not_run, val_raw, states)
+    return 0
+
+
+#: Table logs larger than this [bytes] are read in blocks unless ``--block-rows`` says otherwise (a 7-joint
+#: CSV log holds about 300 bytes a row: 100 MB is some 3e5 rows, which take about 0.5 GB read whole).
+STREAM_MIN_BYTES = 100 << 20
+
+
+def _scan_logs(args: argparse.Namespace, robot: Any) -> list[Any] | None:
+    """The ``--log`` files scanned for reading in blocks, or None to read them whole: ``--block-rows 0``,
+    ``--split``, a log that is not a plain CSV/Parquet table, or (by default) logs below
+    :data:`STREAM_MIN_BYTES`. The reader's notes are printed as :func:`load_log_from_args` prints them."""
+    from reflexarm.logs.blocks import DEFAULT_BLOCK_ROWS, NotStreamable
+
+    rows = getattr(args, "block_rows", None)
+    if rows == 0 or args.split is not None:
+        return None
+    if rows is not None and rows < 0:
+        raise ConfigError(f"--block-rows must be a positive number of rows (0: read whole); got {rows}")
+    if rows is None and all(_size(p) < STREAM_MIN_BYTES for p in args.log):
+        return None
+    block_rows = rows or DEFAULT_BLOCK_ROWS
+    tables = []
+    for p in args.log:
+        try:
+            tables.append(_scan_log(args, p, robot, block_rows))
+        except NotStreamable as e:
+            print(f"log: {e}; all logs are read whole")
+            return None
+    args.block_rows = block_rows
+    return tables
+
+
+def _size(path: str) -> int:
+    p = Path(path)
+    return p.stat().st_size if p.is_file() else 0
+
+
+def _scan_log(args: argparse.Namespace, path: str, robot: Any, block_rows: int) -> Any:
+    """One log scanned (:func:`~reflexarm.logs.block_scan.scan_table`) with the log options of ``args``."""
+    import warnings
+
+    from reflexarm._cli.ident_common import parse_floats
+    from reflexarm.logs import parse_column_mapping
+    from reflexarm.logs.block_scan import scan_table
+
+    torque_from = getattr(args, "torque_from", "torque") or "torque"
+    gains = parse_floats(getattr(args, "gains", None), "--gains")
+    if gains is not None and torque_from != "current":
+        raise ConfigError("--gains [Nm/A] turn motor currents into torques: give them with --torque-from current")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        table = scan_table(
+            path, joint_names=tuple(robot.joint_names), columns=parse_column_mapping(getattr(args, "columns", None)),
+            time_unit=getattr(args, "time_unit", None), torque_from=torque_from, gains=gains, block_rows=block_rows,
+        )  # fmt: skip
+    cores = [str(w.message).split(": ", 1)[-1] for w in caught]
+    for note in table.notes:
+        print(("warning: " if any(c in note for c in cores) else "log: ") + note)
+    for w, core in zip(caught, cores, strict=True):  # warnings that are not in the notes are passed on
+        if not any(core in note for note in table.notes):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return table
+
+
+def _load_logs(args: argparse.Namespace, robot: Any) -> tuple[list[Any], Any, Any]:
+    """(the preprocessed identification logs, the raw validation log or None, its states or None), read whole."""
+    from reflexarm.ident import preprocess_log
+
     logs = [load_log_from_args(args, p, robot) for p in args.log]
-    val_raw = None
+    val_raw = states = None
     if args.split is not None:
         if len(logs) != 1:
             raise ConfigError("--split needs exactly one --log")
         full = preprocess_log(logs[0], cutoff_hz=args.cutoff)
-        raw_ident, val_raw = logs[0].split(args.split)
-        t_split = val_raw.t[0]
-        ident = [full.select(full.t < t_split)]
+        _, val_raw = logs[0].split(args.split)
+        ident = [full.select(full.t < val_raw.t[0])]
         states = full
     else:
         ident = [preprocess_log(lg, cutoff_hz=args.cutoff) for lg in logs]
-        states = None
     if args.validation_log is not None:
-        val_raw = load_log_from_args(args, args.validation_log, robot)
-        states = preprocess_log(val_raw, cutoff_hz=args.cutoff)
-    friction = load_friction(args.friction, robot)
-    not_run: dict[str, str] = {}  # a method --method asked for that cannot run, and why (said, and in the summary)
+        val_raw, states = _load_validation_log(args, robot)
+    return ident, val_raw, states
+
+
+def _load_validation_log(args: argparse.Namespace, robot: Any) -> tuple[Any, Any]:
+    from reflexarm.ident import preprocess_log
+
+    val_raw = load_log_from_args(args, args.validation_log, robot)
+    return val_raw, preprocess_log(val_raw, cutoff_hz=args.cutoff)
+
+
+def _methods(args: argparse.Namespace, friction: Any, robot: Any, n_base: int) -> tuple[list[str], dict[str, str]]:
+    """The methods to run, and those ``--method`` asked for that cannot run with the reason (said, and in the
+    summary)."""
+    not_run: dict[str, str] = {}
     methods = ["combined", "sequential"] if args.method == "both" else [args.method]
     if "sequential" in methods and friction is None:
         if args.method == "sequential":
@@ -113,36 +206,73 @@ def _identify_from_logs(args: argparse.Namespace) -> int:
         )
         print(f"--method both: only the combined model is written; sequential {not_run['sequential']}")
     if "sequential" in methods and friction.missing:
-        print(_partial_friction_line(args.friction, friction, robot, base.n_base))
-    results = {}  # the models as saved: what the validation below scores
-    for m in methods:
-        estimate = identify_dynamics(
-            robot,
-            ident,
-            method=m,  # type: ignore[arg-type]
-            friction=friction,
-            offset=args.offset,
-            base=base,
-            noise_variance=_noise_variance(args.noise_variance),
-            min_speed=0.0 if args.min_speed is None else args.min_speed,
-            progress=not args.quiet,
-            threads=None,  # set for the whole command by --threads
-            filter_cutoff_hz=args.cutoff,
-        )
-        results[m] = for_controller(estimate, robot, robot, args)
-        if estimate.inertia_determinacy is not None:
-            print(f"{m}: {estimate.inertia_determinacy.describe()}")
-        for note in estimate.notes:  # whether the wrist wrench entered the regression, and why
-            if note.startswith("wrist wrench"):
-                print(f"{m}: {note}")
-    # what can still fail on the logs (validation times against the states) runs before anything is written
+        print(_partial_friction_line(args.friction, friction, robot, n_base))
+    return methods, not_run
+
+
+def _estimator_options(args: argparse.Namespace, base: Any, friction: Any) -> dict[str, Any]:
+    return {
+        "friction": friction,
+        "offset": args.offset,
+        "base": base,
+        "noise_variance": _noise_variance(args.noise_variance),
+        "min_speed": 0.0 if args.min_speed is None else args.min_speed,
+    }
+
+
+def _identify(args: argparse.Namespace, robot: Any, base: Any, ident: list[Any], method: str, friction: Any) -> Any:
+    from reflexarm.ident import identify_dynamics
+
+    return identify_dynamics(
+        robot,
+        ident,
+        method=method,  # type: ignore[arg-type]
+        progress=not args.quiet,
+        threads=None,  # set for the whole command by --threads
+        filter_cutoff_hz=args.cutoff,
+        **_estimator_options(args, base, friction),
+    )
+
+
+def _identify_streamed(
+    args: argparse.Namespace, robot: Any, base: Any, tables: list[Any], methods: list[str], friction: Any
+) -> dict[str, Any]:
+    from reflexarm.ident.estimation.streaming import identify_dynamics_streamed
+
+    say(args, f"reading {', '.join(t.source for t in tables)} in blocks of {args.block_rows:,} rows ...")
+    return identify_dynamics_streamed(
+        robot,
+        tables,
+        methods,
+        cutoff_hz=args.cutoff,
+        block_rows=args.block_rows,
+        threads=None,  # set for the whole command by --threads
+        **_estimator_options(args, base, friction),
+    )
+
+
+def _write_results(
+    args: argparse.Namespace,
+    out: Path,
+    robot: Any,
+    n_base: int,
+    results: dict[str, Any],
+    not_run: dict[str, str],
+    val_raw: Any,
+    states: Any,
+) -> None:
+    """Validate (what can still fail on the logs runs before anything is written), then write the models, their
+    robot copies, the validation table and plot, and identification.json."""
+    from reflexarm.ident import validate_model
+    from reflexarm.ident.export.model_file import save_identified_model
+
     vals = {} if val_raw is None else {m: validate_model(r, robot, val_raw, states=states) for m, r in results.items()}
     copies, copy_notes = [], {}
     for m, r in results.items():
         save_identified_model(r, robot, out / f"model_{m}.json")
         name, copy_notes[m] = write_robot_copy(r, robot, out, args)
         copies.append(name)
-    summary: dict[str, Any] = {"robot": robot.name, "n_base": base.n_base, "methods": {}, "not_run": not_run}
+    summary: dict[str, Any] = {"robot": robot.name, "n_base": n_base, "methods": {}, "not_run": not_run}
     for (m, r), name in zip(results.items(), copies, strict=True):
         summary["methods"][m] = {
             "robot_copy": {"file": name, "notes": copy_notes[m]},
@@ -154,36 +284,41 @@ def _identify_from_logs(args: argparse.Namespace) -> int:
             "notes": r.notes,
             "timings": r.timings,
         }
-    if val_raw is not None:
-        rows = []
-        for j in range(robot.n):
-            row: dict[str, object] = {"joint": f"{j + 1} ({robot.joint_names[j]})"}
-            for m, v in vals.items():
-                row[f"rmse_{m}"] = float(v.rmse[j])
-                row[f"nrmse_{m}"] = float(v.nrmse[j])
-                row[f"mse_{m}"] = float(v.mse[j])
-            rows.append(row)
-        write_csv(out / "validation.csv", rows)
-        for m, v in vals.items():
-            summary["methods"][m]["validation"] = {
-                "rmse": v.rmse,
-                "nrmse": v.nrmse,
-                "pooled_rmse": v.pooled_rmse,
-                "samples": int(v.t.size),
-            }
-        cols = [("joint", "joint", "{}")]
-        for m in vals:
-            cols += [(f"rmse_{m}", f"RMSE {m} [Nm]", "{:.3f}"), (f"nrmse_{m}", f"RMSE/std {m}", "{:.3f}")]
-        print(format_table(rows, cols))
-        for m, v in vals.items():
-            print(f"pooled validation RMSE ({m}): {v.pooled_rmse:.4f} Nm over {v.t.size:,} samples")
-        plot_torque_validation(vals, out / "fig6_torques.png", joint_names=robot.joint_names)
+    if vals:
+        _write_validation(out, robot, vals, summary)
     write_json(out / "identification.json", summary)
     print(
         f"\nwrote {out}/ ({', '.join([f'model_{m}.json' for m in results] + [c for c in copies if c])}, "
-        "identification.json" + (", validation.csv, fig6_torques.png)" if val_raw is not None else ")")
+        "identification.json" + (", validation.csv, fig6_torques.png)" if vals else ")")
     )
-    return 0
+
+
+def _write_validation(out: Path, robot: Any, vals: dict[str, Any], summary: dict[str, Any]) -> None:
+    from reflexarm.ident.plots import plot_torque_validation
+
+    rows = []
+    for j in range(robot.n):
+        row: dict[str, object] = {"joint": f"{j + 1} ({robot.joint_names[j]})"}
+        for m, v in vals.items():
+            row[f"rmse_{m}"] = float(v.rmse[j])
+            row[f"nrmse_{m}"] = float(v.nrmse[j])
+            row[f"mse_{m}"] = float(v.mse[j])
+        rows.append(row)
+    write_csv(out / "validation.csv", rows)
+    for m, v in vals.items():
+        summary["methods"][m]["validation"] = {
+            "rmse": v.rmse,
+            "nrmse": v.nrmse,
+            "pooled_rmse": v.pooled_rmse,
+            "samples": int(v.t.size),
+        }
+    cols = [("joint", "joint", "{}")]
+    for m in vals:
+        cols += [(f"rmse_{m}", f"RMSE {m} [Nm]", "{:.3f}"), (f"nrmse_{m}", f"RMSE/std {m}", "{:.3f}")]
+    print(format_table(rows, cols))
+    for m, v in vals.items():
+        print(f"pooled validation RMSE ({m}): {v.pooled_rmse:.4f} Nm over {v.t.size:,} samples")
+    plot_torque_validation(vals, out / "fig6_torques.png", joint_names=robot.joint_names)
 
 
 def _partial_friction_line(path: str, friction: Any, robot: Any, n_base: int) -> str:

@@ -78,10 +78,14 @@ def _consistency(t: np.ndarray, q: np.ndarray, dq: np.ndarray) -> list[tuple[int
     if edges.size < MIN_WINDOWS + 1:
         return []
     integral = np.r_[np.zeros((1, q.shape[1])), np.cumsum(0.5 * (dq[1:] + dq[:-1]) * np.diff(t)[:, None], axis=0)]
-    moved = np.diff(q[edges], axis=0)
-    expected = np.diff(integral[edges], axis=0)
+    return judge_consistency(np.diff(q[edges], axis=0), np.diff(integral[edges], axis=0))
+
+
+def judge_consistency(moved: np.ndarray, expected: np.ndarray) -> list[tuple[int, float]]:
+    """:func:`_consistency` from the windows' delta q (``moved``) and integrals of dq (``expected``), (windows, n):
+    a log read in blocks (:mod:`reflexarm.logs.blocks`) sums them block by block."""
     bad = []
-    for j in range(q.shape[1]):
+    for j in range(moved.shape[1]):
         a, b = moved[:, j], expected[:, j]
         use = np.abs(b) > MIN_MOTION
         if use.sum() < MIN_WINDOWS:
@@ -132,19 +136,30 @@ def check_units(
     ddq: np.ndarray | None = None,
 ) -> None:
     """Raise :class:`ImplausibleDataError` for a unit error the module docstring describes."""
-    for j, ratio in _consistency(t, q, dq):
-        sample = BadSample(source, 0, float(t[0]), f"q_{j + 1}", ratio, 1.0)
+    refuse_inconsistent(source, robot, float(t[0]), _consistency(t, q, dq))
+    rows, acc = _samples(t, dq, ddq)
+    check_model_samples(source, robot, float(t[rows[0]]), q[rows], dq[rows], tau[rows], acc)
+
+
+def refuse_inconsistent(source: str, robot: RobotModel, t0: float, bad: list[tuple[int, float]]) -> None:
+    """Raise for the first joint of ``bad`` (:func:`judge_consistency`), if any."""
+    for j, ratio in bad:
+        sample = BadSample(source, 0, t0, f"q_{j + 1}", ratio, 1.0)
         raise ImplausibleDataError(
             f"{source}: q_{j + 1} ({robot.joint_names[j]}) changes {abs(ratio):.4g} times as much as the integral "
             f"of dq_{j + 1} over {WINDOW:g} s windows (expected 1; {_cause(ratio)}): convert the column to rad and "
             "rad/s (or scale it: --columns q=NAME*0.0174533 for degrees)",
             (sample,),
         )
-    rows, acc = _samples(t, dq, ddq)
-    Q, DQ, TAU = q[rows], dq[rows], tau[rows]
+
+
+def check_model_samples(
+    source: str, robot: RobotModel, t0: float, Q: np.ndarray, DQ: np.ndarray, TAU: np.ndarray, acc: np.ndarray
+) -> None:
+    """The model checks (degrees on continuous joints, the torque's scale) on the samples of :func:`_samples`."""
     model = _model_torque(robot, Q, DQ, acc)
-    _check_degrees(source, robot, Q, DQ, acc, TAU, model, float(t[rows[0]]))
-    _check_torque_scale(source, robot, TAU, model, float(t[rows[0]]))
+    _check_degrees(source, robot, Q, DQ, acc, TAU, model, t0)
+    _check_torque_scale(source, robot, TAU, model, t0)
 
 
 def _rms(x: np.ndarray) -> float:

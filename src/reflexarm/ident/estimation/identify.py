@@ -35,41 +35,28 @@ its predictions.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Sequence
-from dataclasses import replace
 from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
 
-from reflexarm.errors import IdentificationError, NonFiniteEstimateError
+from reflexarm.errors import IdentificationError
 from reflexarm.ident._blas_threads import DEFAULT_BLAS_THREADS, blas_threads
-from reflexarm.ident.estimation._weighted_least_squares import _GramAccumulator
-from reflexarm.ident.estimation.base_parameters import (
-    BaseParameters,
-    compute_base_parameters,
-    warn_if_ill_conditioned,
-)
-from reflexarm.ident.estimation.inertia_determinacy import (
-    assess_inertia_determinacy,
-    filtered_rows_factor,
-    warn_if_poorly_determined,
-)
-from reflexarm.ident.estimation.known_terms import KnownJointTerms
-from reflexarm.ident.estimation.regressor import BatchRegressor
+from reflexarm.ident.estimation._estimate import estimate
+from reflexarm.ident.estimation._regression import METHODS, check_logs, setup_problem
+from reflexarm.ident.estimation.base_parameters import BaseParameters
+from reflexarm.ident.estimation.inertia_determinacy import filtered_rows_factor
+from reflexarm.ident.estimation.known_terms import KnownJointTerms  # noqa: F401  (tests patch it here)
 from reflexarm.ident.estimation.result import (
-    _CHUNK,
     DynamicsIdentification,
     PhysicalConsistencyWarning,
     mass_matrix_margin,
     save_identification,
 )
 from reflexarm.ident.estimation.validation import TorqueValidation, validate_model
-from reflexarm.ident.estimation.wrist_wrench import WristWrenchDecision, decide_wrist_wrench
-from reflexarm.ident.friction.parameters import FrictionParameters, check_friction_against_robot, format_joints
-from reflexarm.logs._measured_torque import _rhs
-from reflexarm.logs.plausibility import check_log_against_robot, likely_bad_rows
+from reflexarm.ident.friction.parameters import FrictionParameters
+from reflexarm.logs.plausibility import likely_bad_rows
 from reflexarm.logs.robot_log import RobotLog
 from reflexarm.robots.friction import CoulombViscousFriction
 from reflexarm.robots.robot_model import RobotModel
@@ -88,9 +75,6 @@ __all__ = [
     "save_identification",
     "validate_model",
 ]
-
-#: The two estimation methods of Sec. II-D.
-METHODS = ("sequential", "combined")
 
 #: Condition number of the column-normalised weighted regressor above which identification warns.
 #: Column normalisation makes the number independent of parameter units; above ~1e3 a 1 % torque error
@@ -184,275 +168,24 @@ def _identify_dynamics(
     filter_cutoff_hz: float | None = None,
     wrench: str = "auto",
 ) -> DynamicsIdentification:
-    """:func:`identify_dynamics` with BLAS threads set."""
+    """:func:`identify_dynamics` with BLAS threads set: the rows of every log reduced to the normal equations
+    (:mod:`._regression`), then weighted, solved and reported (:mod:`._estimate`)."""
     if method not in METHODS:
         raise IdentificationError(f"unknown identification method {method!r}; choose one of: {', '.join(METHODS)}")
     logs = [log] if isinstance(log, RobotLog) else list(log)
     if not logs:
         raise IdentificationError("no log given")
-    n = robot.n
+    check_logs(logs, robot, check_limits)
+    has_any_wrench = any(lg.wrench is not None for lg in logs)
+    pb = setup_problem(robot, method, friction, offset, noise_variance, base, min_speed, wrench, has_any_wrench)
     for lg in logs:
-        if lg.n != n:
-            raise IdentificationError(f"{lg.source}: log has {lg.n} joints; robot {robot.name!r} has {n}")
-        if lg.ddq is None:
-            raise IdentificationError(
-                f"{lg.source}: log has no ddq; run reflexarm.ident.preprocess_log first (filtering and differentiation)"
-            )
-        if check_limits:
-            check_log_against_robot(lg, robot)
-    fixed: FrictionParameters | None = None
-    if method == "sequential":
-        if friction is None:
-            raise IdentificationError(
-                "method 'sequential' needs the pre-identified friction (friction=...; see identify_joint_friction)"
-            )
-        fixed = FrictionParameters.from_model(friction) if isinstance(friction, CoulombViscousFriction) else friction
-        if fixed.n != n:
-            raise IdentificationError(f"friction has {fixed.n} joints; robot {robot.name!r} has {n}")
-        if fixed.missing and fixed.offset is not None:
-            raise IdentificationError(
-                f"the given friction has offsets but no friction for joint(s) "
-                f"{format_joints(fixed.missing, robot.joint_names)}: give it without offsets (offset=True then "
-                "estimates every joint's offset) or with every joint's friction and offset"
-            )
-    # joints whose d_v, mu_C are columns of (19): every joint (combined); those the given friction does not
-    # know (sequential: no single-joint run), whose torque would otherwise be corrected with 0 friction
-    fric_est = tuple(range(n)) if fixed is None else fixed.missing
-    n_fe = len(fric_est)
-    fe = np.asarray(fric_est, dtype=int)
-    base = base if base is not None else compute_base_parameters(robot)
-    reg = BatchRegressor(robot)
-    known = KnownJointTerms.from_robot(robot)
-    nb = base.n_base
-    est_offset = offset and (fixed is None or fixed.offset is None)
-    p = nb + 2 * n_fe + (n if est_offset else 0)
-    if wrench not in ("auto", "include", "exclude"):
-        raise IdentificationError(f"wrench must be 'auto', 'include' or 'exclude'; got {wrench!r}")
-    # the wrist wrench's torque -J^T F is one more column while its use is decided (wrist_wrench)
-    has_wrench = any(lg.wrench is not None for lg in logs) and wrench != "exclude"
-    p_acc = p + int(has_wrench)
-    if fixed is not None:  # eq. (16) on the joints with given friction; the others' friction is estimated
-        given = ~np.isnan(fixed.viscous)
-        fixed_viscous = np.where(given, fixed.viscous, 0.0)
-        fixed_coulomb = np.where(given, fixed.coulomb, 0.0)
-
-    def rows(lg: RobotLog, b_all: np.ndarray, w_all: np.ndarray | None, sl: slice, Y: np.ndarray) -> np.ndarray:
-        """Rows [Phi_b (Phi_f) (offsets) (-J^T F) | b] of (19), per joint: (n, m, p_acc + 1)."""
-        m = Y.shape[0]
-        M = np.zeros((n, m, p_acc + 1))
-        M[:, :, :nb] = np.take(Y, base.independent, axis=2).transpose(1, 0, 2)
-        b = b_all[sl]
-        dq = lg.dq[sl]
-        k = nb
-        idx = np.arange(n)
-        if n_fe:  # eq. (15): each joint's friction columns act on its own rows only
-            i = np.arange(n_fe)
-            M[fe, :, k + i] = dq[:, fe].T
-            M[fe, :, k + n_fe + i] = np.sign(dq[:, fe]).T
-            k += 2 * n_fe
-        if fixed is not None:
-            b = b - (fixed_viscous * dq + fixed_coulomb * np.sign(dq))  # eq. (16)
-            if fixed.offset is not None:
-                b = b - fixed.offset
-        if est_offset:
-            M[idx, :, k + idx] = 1.0
-        if has_wrench and w_all is not None:
-            M[:, :, p] = -w_all[sl].T
-        M[:, :, p_acc] = b.T
-        return M
-
-    # weights: given, estimated from an unweighted pass, or none
-    given = None
-    if isinstance(noise_variance, str):
-        if noise_variance != "estimate":
-            raise IdentificationError(
-                f"noise_variance must be per-joint variances, 'estimate' or None; got {noise_variance!r}"
-            )
-    elif noise_variance is not None:
-        nv = np.asarray(noise_variance, dtype=float).reshape(-1)
-        if nv.size not in (1, n):
-            raise IdentificationError(
-                f"noise_variance must be one variance or one per joint ({n}); got {nv.size}: {nv.tolist()}"
-            )
-        given = np.broadcast_to(nv, (n,)).copy()
-        if not np.all(np.isfinite(given)) or np.any(given <= 0):
-            raise IdentificationError(f"noise_variance must be positive per joint; got {given.tolist()}")
-    total = sum(len(lg) for lg in logs)
-    acc = _GramAccumulator(n, p_acc)
-    t_reg = t_solve = 0.0
-    for lg in logs:
-        assert lg.ddq is not None  # checked above
-        clock = time.perf_counter()
-        b_all = lg.tau.copy()
-        w_all = None if lg.wrench is None else _rhs(robot, lg) - lg.tau  # J^T F per sample
-        if w_all is not None and wrench == "exclude":
-            w_all = None
-        if not known.is_zero:  # the file's armature and springs are given, not identified
-            b_all -= known.compute_torque(lg.q, lg.ddq)
-        t_reg += time.perf_counter() - clock
-        chunks = _progress(reg.iter_chunks(lg.q, lg.dq, lg.ddq, _CHUNK), progress, lg)
-        while True:
-            clock = time.perf_counter()
-            try:
-                sl, Y = next(chunks)
-            except StopIteration:
-                break
-            M = rows(lg, b_all, w_all, sl, Y)
-            keep = np.abs(lg.dq[sl]) >= min_speed if min_speed > 0 else None
-            t_reg += time.perf_counter() - clock
-            clock = time.perf_counter()
-            acc.add(M, keep)
-            t_solve += time.perf_counter() - clock
-    _refuse_non_finite({"entries of the information matrix": acc.G}, logs)
-    if np.any(acc.rows == 0):  # only min_speed removes rows: no equation of the joint is left
-        empty = tuple(int(j) for j in np.flatnonzero(acc.rows == 0))
-        raise IdentificationError(
-            f"joint(s) {format_joints(empty, robot.joint_names)}: no sample left with |dq_j| >= min_speed = "
-            f"{min_speed:g} rad/s in {total:,} samples; their torque would not enter the fit. Lower min_speed or "
-            "log motion of these joints"
-        )
-    clock = time.perf_counter()
-    notes: list[str] = [] if known.is_zero else [known.describe()]
-    if has_wrench:
-        row_corr = filtered_rows_factor([float(np.median(np.diff(lg.t))) for lg in logs], filter_cutoff_hz)
-        acc, decision = _settle_wrench(acc, p, wrench, row_corr)
-        notes.append(decision.reason)
-    elif any(lg.wrench is not None for lg in logs):
-        notes.append("wrist wrench left out as asked (wrench='exclude')")
-    if given is not None:
-        sigma2 = given
-        notes.append(
-            "Sigma from the given per-joint noise variances: " + ", ".join(f"{s:.3g}" for s in sigma2) + " Nm^2"
-        )
-    elif noise_variance is None:
-        sigma2 = np.ones(n)
-        notes.append("unweighted least squares (Sigma = I)")
-    else:
-        # per-joint residual variance of an unweighted fit -> Sigma of (18)
-        x0 = acc.solve(np.ones(n)).x
-        sigma2 = np.maximum(acc.residual_ss(x0) / np.maximum(acc.rows - p / n, 1.0), 1e-12)
-        _refuse_non_finite({"unweighted parameters": x0, "noise variances": sigma2}, logs)
-        notes.append(
-            "Sigma from the per-joint residual variances of an unweighted pass: "
-            + ", ".join(f"{s:.3g}" for s in sigma2)
-            + " Nm^2"
-        )
-    sol = acc.solve(1.0 / np.sqrt(sigma2))
-    x, cond = sol.x, sol.condition_number
-    t_solve += time.perf_counter() - clock
-    what = f"the identification regressor ({p} parameters, {int(acc.rows.max()):,} samples)"
-    warn_if_ill_conditioned(cond, what, condition_limit, sol.rank_deficiency)
-    if sol.rank_deficiency:
-        notes.append(
-            f"rank deficient by {sol.rank_deficiency}: the unexcited parameter combinations got the minimum-norm "
-            "estimate (in column-normalised coordinates)"
-        )
-    # parameter standard deviations: s^2 (F^T W F)^+ with s^2 the weighted residual variance
-    dof = max(int(acc.rows.sum()) - p, 1)
-    s2 = sol.residual_norm**2 / dof
-    std = np.sqrt(np.maximum(s2 * np.diag(sol.covariance), 0.0))
-    residual_rms = np.sqrt(acc.residual_ss(x) / np.maximum(acc.rows, 1))
-    _refuse_non_finite({"parameters": x, "standard deviations": std, "residual RMS": residual_rms}, logs)
-    if min_speed > 0:
-        notes.append(
-            f"rows with |dq_j| < {min_speed:g} rad/s left out: "
-            + ", ".join(f"{100 * (1 - r / total):.0f} %" for r in acc.rows)
-            + " of each joint's samples"
-        )
-    beta_b = x[:nb]
-    # how well M(q) is determined, from the covariance s^2 (F^T W F)^+ of beta_b (inertia_determinacy)
-    determinacy = assess_inertia_determinacy(
-        robot, base, beta_b, s2 * sol.covariance[:nb, :nb], armature=known.armature,
+        pb.add_log(lg, lambda it, lg: _progress(it, progress, lg))
+    return estimate(
+        pb,
+        condition_limit=condition_limit,
         row_correlation=filtered_rows_factor([float(np.median(np.diff(lg.t))) for lg in logs], filter_cutoff_hz),
-    )  # fmt: skip
-    warn_if_poorly_determined(determinacy, f"{method} identification", stacklevel=4)
-    k = nb
-    viscous = np.zeros(n) if fixed is None else fixed.viscous.copy()  # combined: every entry estimated below
-    coulomb = np.zeros(n) if fixed is None else fixed.coulomb.copy()
-    viscous[fe], coulomb[fe] = x[k : k + n_fe], x[k + n_fe : k + 2 * n_fe]
-    fr = FrictionParameters(viscous, coulomb, None if fixed is None else fixed.offset)
-    k += 2 * n_fe
-    if est_offset:
-        fr = replace(fr, offset=x[k : k + n])
-    if n_fe:
-        v_std, c_std = np.zeros(n), np.zeros(n)
-        v_std[fe], c_std[fe] = std[nb : nb + n_fe], std[nb + n_fe : nb + 2 * n_fe]
-        check_friction_against_robot(
-            fr,
-            robot,
-            joints=fric_est,
-            std=FrictionParameters(v_std, c_std),
-            source=f"{method} identification",
-            stacklevel=4,
-        )
-    if method == "sequential" and n_fe:
-        notes.append(
-            f"the given friction has none for joint(s) {format_joints(fric_est, robot.joint_names)} (not identified): "
-            f"their d_v, mu_C were estimated with beta_b ({nb} + {2 * n_fe} unknowns); the other joints' friction "
-            "is the given one (eq. 16)"
-        )
-    return DynamicsIdentification(
-        method=method,
-        robot_name=robot.name,
-        joint_names=tuple(robot.joint_names),
-        base=base,
-        beta_b=beta_b,
-        friction=fr,
-        beta_std=std,
-        noise_variance=sigma2,
-        condition_number=cond,
-        n_samples=total,
-        residual_rms=residual_rms,
-        notes=tuple(notes),
-        timings={"regressor_s": t_reg, "solve_s": t_solve},
-        information=sol.information,
-        known_terms=known,
-        friction_estimated=fric_est,
-        inertia_determinacy=determinacy,
-    )
-
-
-def _settle_wrench(
-    acc: _GramAccumulator, p: int, wrench: str, row_correlation: float
-) -> tuple[_GramAccumulator, WristWrenchDecision]:
-    """Estimate alpha (the column p of ``acc``, two-step weighted), decide (:mod:`.wrist_wrench`) and return
-    the accumulator with the wrench moved into b (included: b = tau + J^T F) or dropped."""
-    x0 = acc.solve(np.ones(acc.n)).x
-    sigma2 = np.maximum(acc.residual_ss(x0) / np.maximum(acc.rows - (p + 1) / acc.n, 1.0), 1e-12)
-    sol = acc.solve(1.0 / np.sqrt(sigma2))
-    dof = max(int(acc.rows.sum()) - p - 1, 1)
-    alpha = float(sol.x[p])
-    alpha_std = float(np.sqrt(max(sol.residual_norm**2 / dof * sol.covariance[p, p] * row_correlation, 0.0)))
-    decision = decide_wrist_wrench(alpha, alpha_std)
-    if wrench != "auto":
-        included = wrench == "include"
-        decision = decision._replace(
-            included=included, reason=f"wrist wrench {'included' if included else 'left out'} as asked ({wrench=}; "
-            f"the data give alpha = {alpha:.3g} +- {alpha_std:.2g})",
-        )  # fmt: skip
-    # [A, -J^T F, tau] -> [A, tau + J^T F] (included) or [A, tau] (left out)
-    T = np.zeros((p + 2, p + 1))
-    T[:p, :p] = np.eye(p)
-    T[p + 1, p] = 1.0
-    T[p, p] = -1.0 if decision.included else 0.0
-    return acc.transformed(T), decision
-
-
-def _refuse_non_finite(values: dict[str, np.ndarray], logs: Sequence[RobotLog]) -> None:
-    """Raise :class:`NonFiniteEstimateError` naming the likely bad rows if any of ``values`` is NaN/inf."""
-    bad = {name: int(np.sum(~np.isfinite(v))) for name, v in values.items() if not np.all(np.isfinite(v))}
-    if not bad:
-        return
-    suspects = likely_bad_rows(logs)
-    what = ", ".join(f"{k} of {values[name].size} {name}" for name, k in bad.items())
-    if suspects:
-        listed = "; ".join(f"{s.source} {s} (its column's 99th percentile {s.reference:.3g})" for s in suspects)
-        cause = f"the rows that stand out most from their columns (likely bad rows): {listed}. Remove or repair them"
-    else:
-        cause = "no row stands out from its column; check the given noise variances (tiny ones overflow the weights)"
-    raise NonFiniteEstimateError(
-        f"identification gave non-finite results ({what}): the weighted least-squares problem overflowed; {cause}",
-        tuple(suspects),
+        suspects=lambda: likely_bad_rows(logs),
+        has_any_wrench=has_any_wrench,
     )
 
 
