@@ -76,12 +76,26 @@ def _add_link_collision(ssub: argparse._SubParsersAction) -> None:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``demo`` and ``simulate`` to the top-level parser."""
-    p = sub.add_parser(
+    _add_ee_collision(
+        sub,
         "demo",
-        help="end-effector collision with a cinderblock (Atlas arm by default, or --robot): Stiff / Compliant / "
+        "end-effector collision with a cinderblock (Atlas arm by default, or --robot): Stiff / Compliant / "
         "Coll.Det (Figs. 7-8)",
+        "results/demo",
     )
-    add_common(p, default_out="results/demo")
+    s = sub.add_parser("simulate", help="run one of the paper's simulated collision experiments")
+    ssub = s.add_subparsers(dest="experiment", metavar="EXPERIMENT")
+    ssub.required = True
+    _add_ee_collision(ssub, "ee-collision", "the demo's experiment (Figs. 7-8)", "results/ee-collision")
+    _add_link_collision(ssub)
+    _add_free_motion(ssub)
+    _add_velocity_tracking(ssub)
+
+
+def _add_ee_collision(sub: argparse._SubParsersAction, name: str, help: str, default_out: str) -> None:
+    """``demo`` and ``simulate ee-collision`` (the same experiment and options under two names)."""
+    p = sub.add_parser(name, help=help)
+    add_common(p, default_out=default_out)
     add_model_options(p)
     add_robot_options(p)
     add_output_options(p)
@@ -91,20 +105,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_detection_options(p, note="the Coll.Det run; Stiff and Compliant run without detection")
     p.set_defaults(func=_demo)
 
-    s = sub.add_parser("simulate", help="run one of the paper's simulated collision experiments")
-    ssub = s.add_subparsers(dest="experiment", metavar="EXPERIMENT")
-    ssub.required = True
-    e = ssub.add_parser("ee-collision", help="the demo's experiment (Figs. 7-8)")
-    add_common(e, default_out="results/ee-collision")
-    add_model_options(e)
-    add_robot_options(e)
-    add_output_options(e)
-    e.add_argument("--block", choices=("paper", "tipping"), default="paper", help=_BLOCK_HELP)
-    e.add_argument("--depth", type=float, default=0.12, help=_DEPTH_HELP)
-    e.add_argument("--plant-friction", choices=("file", "none"), default="file", help=_FRICTION_HELP)
-    add_detection_options(e, note="the Coll.Det run; Stiff and Compliant run without detection")
-    e.set_defaults(func=_demo)
-    _add_link_collision(ssub)
+
+def _add_free_motion(ssub: argparse._SubParsersAction) -> None:
+    """``simulate free-motion``."""
     fm = ssub.add_parser("free-motion", help="false-alarm check: the demo trajectory without obstacle")
     add_common(fm, default_out="results/free-motion")
     add_model_options(fm)
@@ -136,6 +139,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "load move together (on Atlas the hydraulic ones; 'hydraulic' is its Atlas-only alias) (default demo)",
     )
     fm.set_defaults(func=_free)
+
+
+def _add_velocity_tracking(ssub: argparse._SubParsersAction) -> None:
+    """``simulate velocity-tracking``."""
     vt = ssub.add_parser(
         "velocity-tracking",
         help="constant-velocity run of one joint: PD position control vs impedance control (2) (Fig. 5)",
