@@ -71,36 +71,10 @@ def relative_seconds(
     Raises:
         DataError: an unknown ``unit``, non-finite stamps, or (inferring) a spacing no unit explains.
     """
-    if unit is not None and unit not in TIME_UNITS:
-        raise DataError(
-            f"{where}: unknown time unit {unit!r}; choose one of {', '.join(TIME_UNITS)}",
-            source=where,
-            value=unit,
-            expected=tuple(TIME_UNITS),
-        )
-    arr = np.asarray(raw)
-    if arr.size == 0:
-        raise DataError(f"{where}: the log has no samples")
-    if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
-        row = int(np.argmax(~np.isfinite(arr)))
-        raise DataError(
-            f"{where}: column {column!r} row {row} is {arr[row]!r}; time stamps must be finite",
-            source=where,
-            column=column,
-            row=row,
-            value=float(arr[row]),
-            expected="a finite number",
-        )
+    arr = _checked_stamps(raw, where=where, column=column, unit=unit)
     integer = arr.dtype.kind in "iu"
-    if integer:
-        offset_raw: float = float(arr[0])
-        offset_text = str(int(arr[0]))
-        rel = (arr.astype(np.int64) - np.int64(arr[0])).astype(float)
-    else:
-        arr = arr.astype(float)
-        offset_raw = float(arr[0])
-        offset_text = f"{offset_raw:.17g}"
-        rel = arr - arr[0]
+    arr, rel, offset_raw, offset_text = _from_first(arr)
+    # the unit: given, else stated by the column name, else inferred
     how = "given"
     if unit is None:
         unit = unit_from_name(column)
@@ -114,6 +88,7 @@ def relative_seconds(
         rel, shift = snapped
     t = rel * scale
     offset_s = offset_raw * scale
+    # the note: what was inferred, subtracted and snapped
     parts = []
     if unit != "s" or ambiguous or how.startswith("inferred: the first"):
         parts.append(f"in {unit} ({how})")
@@ -139,6 +114,43 @@ def relative_seconds(
         parts.append(msg.split(": ", 1)[1])
     note = f"{where}: time stamps ({column}): " + "; ".join(parts) if parts else None
     return t, note
+
+
+def _checked_stamps(raw: np.ndarray, *, where: str, column: str, unit: str | None) -> np.ndarray:
+    """``raw`` as an array, after checking ``unit`` is known and the stamps are there and finite (DataError)."""
+    if unit is not None and unit not in TIME_UNITS:
+        raise DataError(
+            f"{where}: unknown time unit {unit!r}; choose one of {', '.join(TIME_UNITS)}",
+            source=where,
+            value=unit,
+            expected=tuple(TIME_UNITS),
+        )
+    arr = np.asarray(raw)
+    if arr.size == 0:
+        raise DataError(f"{where}: the log has no samples")
+    if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
+        row = int(np.argmax(~np.isfinite(arr)))
+        raise DataError(
+            f"{where}: column {column!r} row {row} is {arr[row]!r}; time stamps must be finite",
+            source=where,
+            column=column,
+            row=row,
+            value=float(arr[row]),
+            expected="a finite number",
+        )
+    return arr
+
+
+def _from_first(arr: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, str]:
+    """(the stamps, as floats unless integers; the stamps less the first, in the stamps' unit; the first stamp;
+    the first stamp as text for the note). Integer stamps are subtracted in integer arithmetic before
+    converting, so a nanosecond epoch stamp loses nothing."""
+    if arr.dtype.kind in "iu":
+        offset_text = str(int(arr[0]))
+        return arr, (arr.astype(np.int64) - np.int64(arr[0])).astype(float), float(arr[0]), offset_text
+    arr = arr.astype(float)
+    offset_raw = float(arr[0])
+    return arr, arr - arr[0], offset_raw, f"{offset_raw:.17g}"
 
 
 def _snap_quantized(rel: np.ndarray, resolution: float) -> tuple[np.ndarray, float] | None:
