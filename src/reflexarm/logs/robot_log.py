@@ -284,16 +284,8 @@ def _repair_time(
     return t
 
 
-def _finish(
-    data: dict[str, np.ndarray],
-    where: str,
-    n_joints: int | None,
-    repair: bool,
-    period: float | None,
-    notes: tuple[str, ...] = (),
-) -> RobotLog:
-    t = np.asarray(data["t"], dtype=float).reshape(-1)
-    N = t.size
+def _check_shapes(data: dict[str, np.ndarray], N: int, where: str, n_joints: int | None) -> None:
+    """Every joint signal (N, n) with the n of q, the wrench (N, 6), n the robot's ``n_joints`` if given."""
     q = data["q"]
     n = q.shape[1] if q.ndim == 2 else 1
     for k in ("q", "dq", "tau", "ddq"):
@@ -313,6 +305,10 @@ def _finish(
             value=n,
             expected=n_joints,
         )
+
+
+def _check_finite(data: dict[str, np.ndarray], where: str) -> None:
+    """The first NaN or inf, by column and row, is a DataError."""
     for k, a in data.items():
         bad = ~np.isfinite(a)
         if bad.any():
@@ -326,7 +322,11 @@ def _finish(
                 value=float(a[tuple(pos)]),
                 expected="a finite number",
             )
-    check_absolute_bounds(where, t, {k: v for k, v in data.items() if k != "t"})
+
+
+def _check_time_order(t: np.ndarray, where: str) -> None:
+    """At least 2 samples, and time never going backwards (equal stamps are left to the repairs)."""
+    N = t.size
     if N < 2:
         raise DataError(f"{where}: a log needs at least 2 samples; got {N}")
     steps = np.diff(t)
@@ -342,25 +342,50 @@ def _finish(
             value=float(t[r]),
             expected=f">= {t[r - 1]:.9g} s",
         )
-    notes_out: list[str] = list(notes)
-    # exact repeats: every value but the time equals the previous row
+
+
+def _drop_repeats(
+    data: dict[str, np.ndarray], N: int, where: str, repair: bool, notes: list[str]
+) -> dict[str, np.ndarray]:
+    """``data`` without its exact repeats (every value but the time equals the previous row), said in ``notes``
+    and a :class:`LogRepairWarning`; with ``repair=False`` a repeat is a DataError."""
     values = np.column_stack([data[k] for k in ("q", "dq", "tau", "ddq", "wrench") if k in data])
     repeat = np.r_[False, np.all(values[1:] == values[:-1], axis=1)]
-    if repeat.any():
-        if not repair:
-            r = int(np.argmax(repeat))
-            raise DataError(
-                f"{where}: row {r} repeats row {r - 1} exactly ({int(repeat.sum())} such rows); "
-                "load with repair=True to drop them"
-            )
-        keep = ~repeat
-        data = {k: v[keep] for k, v in data.items()}
-        msg = (
-            f"{where}: dropped {int(repeat.sum()):,} rows that exactly repeat the previous row (same q, dq, tau: "
-            f"the host read one robot sample twice); {int(keep.sum()):,} of {N:,} rows remain"
+    if not repeat.any():
+        return data
+    if not repair:
+        r = int(np.argmax(repeat))
+        raise DataError(
+            f"{where}: row {r} repeats row {r - 1} exactly ({int(repeat.sum())} such rows); "
+            "load with repair=True to drop them"
         )
-        warnings.warn(msg, LogRepairWarning, stacklevel=3)
-        notes_out.append(msg)
+    keep = ~repeat
+    msg = (
+        f"{where}: dropped {int(repeat.sum()):,} rows that exactly repeat the previous row (same q, dq, tau: "
+        f"the host read one robot sample twice); {int(keep.sum()):,} of {N:,} rows remain"
+    )
+    warnings.warn(msg, LogRepairWarning, stacklevel=4)
+    notes.append(msg)
+    return {k: v[keep] for k, v in data.items()}
+
+
+def _finish(
+    data: dict[str, np.ndarray],
+    where: str,
+    n_joints: int | None,
+    repair: bool,
+    period: float | None,
+    notes: tuple[str, ...] = (),
+) -> RobotLog:
+    """The log of ``data``: checked (shapes, finite values, absolute bounds, time order), then repaired (exact
+    repeats dropped, irregular time re-timed or kept), each repair said in its notes after ``notes``."""
+    t = np.asarray(data["t"], dtype=float).reshape(-1)
+    _check_shapes(data, t.size, where, n_joints)
+    _check_finite(data, where)
+    check_absolute_bounds(where, t, {k: v for k, v in data.items() if k != "t"})
+    _check_time_order(t, where)
+    notes_out: list[str] = list(notes)
+    data = _drop_repeats(data, t.size, where, repair, notes_out)
     data["t"] = _repair_time(data, where, repair, period, notes_out)
     log = RobotLog(
         t=data["t"],
