@@ -214,14 +214,30 @@ def contact_result(
     )
 
 
-def _check_choices(mode: str, reaction: str, plant_friction: str, region: str) -> None:
-    if mode not in CONTACT_MODES:
-        raise ConfigError(f"unknown contact mode {mode!r}; choose one of: {', '.join(CONTACT_MODES)}")
-    if reaction not in PFL_REACTIONS:
-        raise ConfigError(f"unknown reaction {reaction!r}; choose one of: {', '.join(PFL_REACTIONS)}")
-    if plant_friction not in ("file", "none"):
-        raise ConfigError(f"unknown plant_friction {plant_friction!r}; choose one of: file, none")
-    body_region(region)
+@dataclass(frozen=True)
+class _ContactRun:
+    """How one contact run is simulated (the keyword arguments :func:`run_region_contact` and
+    :func:`run_motion_contact` share), checked once: the contact mode, the reaction, detection on/off, the
+    controller's model (``model_error``, ``model_seed``), the sensor noise and its seed, the plant's friction
+    (``"file"`` or ``"none"``) and the controller ``setting``."""
+
+    mode: str
+    reaction: str
+    detection: bool
+    model_error: float | None
+    model_seed: int
+    noise: SensorNoise
+    seed: int
+    plant_friction: str
+    setting: CollisionSetting
+
+    def __post_init__(self) -> None:
+        if self.mode not in CONTACT_MODES:
+            raise ConfigError(f"unknown contact mode {self.mode!r}; choose one of: {', '.join(CONTACT_MODES)}")
+        if self.reaction not in PFL_REACTIONS:
+            raise ConfigError(f"unknown reaction {self.reaction!r}; choose one of: {', '.join(PFL_REACTIONS)}")
+        if self.plant_friction not in ("file", "none"):
+            raise ConfigError(f"unknown plant_friction {self.plant_friction!r}; choose one of: file, none")
 
 
 def _simulate(
@@ -230,16 +246,16 @@ def _simulate(
     trajectory: TrajectoryLike,
     start: tuple[np.ndarray, np.ndarray | None],
     duration: float,
-    kw: dict[str, Any],
+    run: _ContactRun,
 ) -> Trace:
-    """Run the study's controller (``kw``: reaction, detection, model_error, model_seed, noise, seed,
-    plant_friction, setting) on the plant with ``scene`` from state ``start`` (q, dq) for ``duration`` [s]."""
-    friction = CoulombViscousFriction.zeros(robot.n) if kw["plant_friction"] == "none" else None
-    plant = Plant(robot, scene=scene, noise=kw["noise"], seed=kw["seed"], true_friction=friction)
+    """Run the study's controller (``run``'s setting, reaction, detection and model) on the plant (``run``'s noise,
+    seed and friction) with ``scene`` from state ``start`` (q, dq) for ``duration`` [s]."""
+    friction = CoulombViscousFriction.zeros(robot.n) if run.plant_friction == "none" else None
+    plant = Plant(robot, scene=scene, noise=run.noise, seed=run.seed, true_friction=friction)
     plant.reset(*start)
-    ctrl_model, model_info = controller_model(robot, kw["model_error"], kw["model_seed"])
-    setting = kw["setting"]
-    chosen = replace(setting, reaction=kw["reaction"], threshold=setting.threshold if kw["detection"] else None)
+    ctrl_model, model_info = controller_model(robot, run.model_error, run.model_seed)
+    setting = run.setting
+    chosen = replace(setting, reaction=run.reaction, threshold=setting.threshold if run.detection else None)
     trace = run_fast(plant, chosen.controller(ctrl_model), trajectory, duration)
     trace.meta.update(
         {
@@ -247,7 +263,7 @@ def _simulate(
             "robot": robot.name,
             "setting": asdict(chosen),
             "controller_model": model_info,
-            "plant_friction": kw["plant_friction"],
+            "plant_friction": run.plant_friction,
         }
     )
     return trace
@@ -278,16 +294,16 @@ def run_region_contact(
         ConfigError: an unknown region, mode, reaction or plant friction; a speed the swing cannot reach; a
             region the arm's path cannot take (another link would hit it first).
     """
-    _check_choices(mode, reaction, plant_friction, region)
-    kw = dict(
-        reaction=reaction, detection=detection, model_error=model_error, model_seed=model_seed, noise=noise,
-        seed=seed, plant_friction=plant_friction, setting=setting,
+    run = _ContactRun(
+        mode=mode, reaction=reaction, detection=detection, model_error=model_error, model_seed=model_seed,
+        noise=noise, seed=seed, plant_friction=plant_friction, setting=setting,
     )  # fmt: skip
+    body_region(region)
     trajectory, _ = swing_at_speed(robot, speed)
     placement = place_region(robot, trajectory)
     scene = HumanContact(region, placement.surface, placement.normal, mode=mode)
     start = (trajectory.sample(0.0).q_d, None)
-    trace = _simulate(robot, scene, trajectory, start, placement.contact_time + RUN_AFTER_CONTACT_S[mode], kw)
+    trace = _simulate(robot, scene, trajectory, start, placement.contact_time + RUN_AFTER_CONTACT_S[mode], run)
     trace.meta.update({"placement": placement.describe(), "reference_speed_m_s": placement.reference_speed})
     return contact_result(robot, trace, scene, reaction, detection), trace
 
@@ -322,11 +338,11 @@ def run_motion_contact(
             scaling needs a joint beyond its velocity limit (the message names the joint and the largest speed
             the motion reaches within the limits).
     """
-    _check_choices(mode, reaction, plant_friction, region)
-    kw = dict(
-        reaction=reaction, detection=detection, model_error=model_error, model_seed=model_seed, noise=noise,
-        seed=seed, plant_friction=plant_friction, setting=setting,
+    run = _ContactRun(
+        mode=mode, reaction=reaction, detection=detection, model_error=model_error, model_seed=model_seed,
+        noise=noise, seed=seed, plant_friction=plant_friction, setting=setting,
     )  # fmt: skip
+    body_region(region)
     base = motion.played(1.0)
     placement = place_region_on_motion(robot, base, point)
     scale = 1.0 if speed is None else _time_scale(robot, base, placement.reference_speed, speed, point)
@@ -337,7 +353,7 @@ def run_motion_contact(
     )  # fmt: skip
     start = played.sample(0.0)
     t_contact = (placement.contact_time - placement.start_time) / scale
-    trace = _simulate(robot, scene, played, (start.q_d, start.dq_d), t_contact + RUN_AFTER_CONTACT_S[mode], kw)
+    trace = _simulate(robot, scene, played, (start.q_d, start.dq_d), t_contact + RUN_AFTER_CONTACT_S[mode], run)
     trace.meta.update(
         {
             "placement": placement.describe(),
