@@ -232,39 +232,10 @@ def fit_tail(
         raise DataError(f"a tail fit needs at least 2 finite samples; got {pooled.size} samples ({bad} NaN/inf)")
     gap = int(math.ceil(gap_s / dt - 1e-9))
     duration_h = sum(p.size for p in parts) * dt / _SECONDS_PER_HOUR
-
-    def maxima(level: float) -> np.ndarray:
-        return np.concatenate([cluster_maxima(p, level, gap) for p in parts])
-
-    best: tuple[float, float, np.ndarray] | None = None
-    counts = []
-    for qu in TAIL_QUANTILES:
-        u = float(np.quantile(pooled, qu))
-        m = maxima(u)
-        counts.append((qu, m.size))
-        if m.size >= min_clusters:
-            best = (qu, u, m)
-            break
-    if best is None:
-        found = ", ".join(f"{c} above the {100 * q:g} %" for q, c in counts)
-        raise DataError(
-            f"too few separate excursions of |residual| to fit a tail: need {min_clusters} clusters above the "
-            f"fit threshold; found {found} quantile (a longer log, more varied motion, or a shorter gap_s={gap_s:g} s)"
-        )
-    qu, u, m = best
-    if m.size > tail_clusters:
-        top = np.sort(m)[::-1]
-        u = float(0.5 * (top[tail_clusters - 1] + top[tail_clusters]))
-        m = maxima(u)
-        qu = float(np.mean(pooled <= u))
+    qu, u, m = _threshold(parts, pooled, gap, gap_s, min_clusters, tail_clusters)
     excess = m - u
     sigma, xi = _fit(excess, method)
-    # counted cluster rates below u, for levels that a rate above lambda_u asks for (interpolation)
-    # (at low levels the excursions merge into few long ones, so the counted rate rises and then falls
-    # with the level; the rate of a level is taken as the largest counted rate at or above it)
-    lv = np.linspace(0.0, u, 101)
-    counted = np.array([maxima(v).size for v in lv], dtype=float) / duration_h
-    rates = np.maximum.accumulate(np.r_[counted, m.size / duration_h][::-1])[::-1][:-1]
+    lv, rates = _rates_below(parts, gap, u, m.size, duration_h)
     return TailFit(
         u=u,
         quantile=qu,
@@ -279,3 +250,51 @@ def fit_tail(
         x_max=float(pooled.max()),
         levels_below_u=(lv, rates),
     )
+
+
+def _pooled_maxima(parts: list[np.ndarray], level: float, gap: int) -> np.ndarray:
+    """The cluster maxima above ``level`` of every part, pooled."""
+    return np.concatenate([cluster_maxima(p, level, gap) for p in parts])
+
+
+def _threshold(
+    parts: list[np.ndarray], pooled: np.ndarray, gap: int, gap_s: float, min_clusters: int, tail_clusters: int
+) -> tuple[float, float, np.ndarray]:
+    """(the quantile of u in the pooled samples, u, the cluster maxima above u): the highest of
+    :data:`TAIL_QUANTILES` with ``min_clusters`` clusters above it, then u moved up to just below the
+    ``tail_clusters`` largest maxima; fewer clusters above every candidate is a DataError (``gap_s`` for it)."""
+    best: tuple[float, float, np.ndarray] | None = None
+    counts = []
+    for qu in TAIL_QUANTILES:
+        u = float(np.quantile(pooled, qu))
+        m = _pooled_maxima(parts, u, gap)
+        counts.append((qu, m.size))
+        if m.size >= min_clusters:
+            best = (qu, u, m)
+            break
+    if best is None:
+        found = ", ".join(f"{c} above the {100 * q:g} %" for q, c in counts)
+        raise DataError(
+            f"too few separate excursions of |residual| to fit a tail: need {min_clusters} clusters above the "
+            f"fit threshold; found {found} quantile (a longer log, more varied motion, or a shorter gap_s={gap_s:g} s)"
+        )
+    qu, u, m = best
+    if m.size > tail_clusters:
+        top = np.sort(m)[::-1]
+        u = float(0.5 * (top[tail_clusters - 1] + top[tail_clusters]))
+        m = _pooled_maxima(parts, u, gap)
+        qu = float(np.mean(pooled <= u))
+    return qu, u, m
+
+
+def _rates_below(
+    parts: list[np.ndarray], gap: int, u: float, n_clusters: int, duration_h: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(101 levels from 0 to u, the rate [1/h] of each), counted cluster rates below u, for levels that a
+    rate above lambda_u asks for (interpolation). At low levels the excursions merge into few long ones,
+    so the counted rate rises and then falls with the level; the rate of a level is taken as the largest
+    counted rate at or above it."""
+    lv = np.linspace(0.0, u, 101)
+    counted = np.array([_pooled_maxima(parts, v, gap).size for v in lv], dtype=float) / duration_h
+    rates = np.maximum.accumulate(np.r_[counted, n_clusters / duration_h][::-1])[::-1][:-1]
+    return lv, rates
