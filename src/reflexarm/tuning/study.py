@@ -328,7 +328,7 @@ def _joint_thresholds(
                 f"raised to {raised:.4g} Nm, the lowest level the logs cross no more often than that allows "
                 "(record more free motion for a fitted level)"
             )
-            warnings.warn(msg, ThresholdWarning, stacklevel=3)
+            warnings.warn(msg, ThresholdWarning, stacklevel=4)  # _fit_joints -> tune_thresholds -> its caller
             notes.append(msg)
             in_logs[f"{level}_fitted_Nm"] = zeta
             levels[level] = zeta = raised
@@ -399,29 +399,15 @@ def tune_thresholds(
         raise ConfigError("no free-motion log given")
     read = load or (lambda path: load_free_motion_log(path, robot))
     replays, posture, coverage, notes = _replay_logs(log_list, robot, s, read)
-    dt = replays[0].dt
-    for r in replays[1:]:
-        if abs(r.dt - dt) > 1e-3 * dt:
-            raise DataError(
-                f"logs of different periods cannot be pooled: {replays[0].source} {dt:g} s, {r.source} {r.dt:g} s"
-            )
+    dt = _common_period(replays)
     k_o = s.detection_gain
     time_constant = s.time_constant(dt)
     gap = GAP_TIME_CONSTANTS / k_o if gap_s is None else float(gap_s)
     duration = sum(r.duration for r in replays)
-    n = robot.n
-    _check_duration(duration, n, {"collision": rate, "contact": contact_rate}, allow_extrapolation, notes)
-    joints = []
-    for j in range(n):
-        parts = [np.abs(r.residual[:, j]) for r in replays]
-        try:
-            fit = fit_tail(parts, dt, gap_s=gap, method=method)
-        except DataError as e:
-            raise DataError(f"joint {j + 1} ({robot.joint_names[j]}): {e}") from e
-        rates = {"collision": rate / n, "contact": contact_rate / n}
-        delay = (step_torque, time_constant)
-        boot = (n_boot, seed + j)
-        joints.append(_joint_thresholds(j, robot.joint_names[j], parts, dt, fit, rates, delay, boot, notes))
+    arm_rates = {"collision": rate, "contact": contact_rate}
+    _check_duration(duration, robot.n, arm_rates, allow_extrapolation, notes)
+    delay = (step_torque, time_constant)
+    joints = _fit_joints(replays, robot, dt, gap, method, arm_rates, delay, (n_boot, seed), notes)
     proposal = ThresholdProposal(
         joints=joints,
         rate_per_hour=rate,
@@ -438,10 +424,57 @@ def tune_thresholds(
         coverage=coverage,
     )
     if step_force is not None and posture is not None:
-        proposal.step_force = float(step_force)
-        proposal.force_posture = [float(v) for v in posture]
-        proposal.force_steps = {
-            "collision": force_step_delays(robot, posture, step_force, proposal.collision, time_constant),
-            "contact": force_step_delays(robot, posture, step_force, proposal.contact, time_constant),
-        }
+        _add_force_steps(proposal, robot, posture, step_force, time_constant)
     return proposal
+
+
+def _common_period(replays: list[ResidualReplay]) -> float:
+    """The sample period [s] the replays share (to 0.1 %); logs of different periods are a DataError."""
+    dt = replays[0].dt
+    for r in replays[1:]:
+        if abs(r.dt - dt) > 1e-3 * dt:
+            raise DataError(
+                f"logs of different periods cannot be pooled: {replays[0].source} {dt:g} s, {r.source} {r.dt:g} s"
+            )
+    return dt
+
+
+def _fit_joints(
+    replays: list[ResidualReplay],
+    robot: RobotModel,
+    dt: float,
+    gap: float,
+    method: str,
+    arm_rates: dict[str, float],
+    delay: tuple[float, float],
+    boot: tuple[int, int],
+    notes: list[str],
+) -> list[JointThresholds]:
+    """Each joint's tail fit of its pooled |residual| and its two levels at its share 1/n of the arm's rates
+    ``arm_rates`` [1/h] (``delay``: step torque [Nm], time constant [s]; ``boot``: bootstrap draws and the
+    first joint's seed, the next joints' counted on from it)."""
+    n = robot.n
+    n_boot, seed = boot
+    joints = []
+    for j in range(n):
+        parts = [np.abs(r.residual[:, j]) for r in replays]
+        try:
+            fit = fit_tail(parts, dt, gap_s=gap, method=method)
+        except DataError as e:
+            raise DataError(f"joint {j + 1} ({robot.joint_names[j]}): {e}") from e
+        rates = {"collision": arm_rates["collision"] / n, "contact": arm_rates["contact"] / n}
+        name = robot.joint_names[j]
+        joints.append(_joint_thresholds(j, name, parts, dt, fit, rates, delay, (n_boot, seed + j), notes))
+    return joints
+
+
+def _add_force_steps(
+    proposal: ThresholdProposal, robot: RobotModel, posture: np.ndarray, step_force: float, time_constant: float
+) -> None:
+    """The delays of a force step of ``step_force`` [N] at the end effector at ``posture``, set on ``proposal``."""
+    proposal.step_force = float(step_force)
+    proposal.force_posture = [float(v) for v in posture]
+    proposal.force_steps = {
+        "collision": force_step_delays(robot, posture, step_force, proposal.collision, time_constant),
+        "contact": force_step_delays(robot, posture, step_force, proposal.contact, time_constant),
+    }
