@@ -11,14 +11,12 @@ from __future__ import annotations
 
 import copy
 import math
-from dataclasses import fields
-from types import ModuleType
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from reflexarm._validation import as_positive_scalar, as_switch, as_vector
+from reflexarm.control._core_params import core_params
 from reflexarm.control._setup import (
     check_discretization,
     check_period_band,
@@ -471,36 +469,3 @@ class Controller:
         fault = c.fault
         saturated = tuple(np.flatnonzero(self._saturated).tolist())
         return Command(self._tau.copy(), self._residual.copy(), bool(c.collision), (), "fault", fault, saturated, code)
-
-
-def core_params(ctrl: Controller, core: ModuleType) -> Any:
-    """The core's ControllerParams for a Controller whose Python-side checks have passed."""
-    p = core.ControllerParams()
-    robot, imp = ctrl.robot, ctrl.impedance
-    p.stiffness, p.damping_ratio = imp.gains.stiffness.copy(), imp.gains.damping_ratio.copy()
-    p.observer_gain = ctrl.observer.observer_gain.copy()
-    det = ctrl.detection_observer
-    p.detection_observer_gain = np.zeros(0) if det is None else det.observer_gain.copy()
-    p.threshold = np.zeros(0) if ctrl.detector is None else ctrl.detector.threshold.copy()
-    p.reaction = ctrl.reaction
-    p.contact_reaction = ctrl.contact_reaction
-    p.reaction_params = ctrl.reaction_settings.to_core(core)
-    p.observer_discretization = ctrl.observer_discretization
-    p.kappa_f, p.kappa_eps, p.kappa_ext = ctrl._kappa_init
-    p.residual_limit, p.switch_time, p.dt = ctrl.residual_limit, ctrl.switch_time, ctrl.dt
-    p.damping_update_period = imp.damping_update_period
-    fr = robot.friction
-    p.friction_coulomb, p.friction_viscous = fr.coulomb.copy(), fr.viscous.copy()
-    p.friction_velocity_band = fr.velocity_band
-    if robot.has_springs:
-        p.spring_stiffness = np.array(robot.spring_stiffness, dtype=float)
-        p.spring_reference = np.array(robot.spring_reference, dtype=float)
-    p.sensor_frame_id = robot.sensor_frame_id
-    p.torque_limit = ctrl.torque_limit.copy()
-    p.torque_rate_limit = np.zeros(0) if ctrl.torque_rate_limit is None else ctrl.torque_rate_limit.copy()
-    bounds = core.InputBounds()
-    for f in fields(ctrl.input_bounds):
-        setattr(bounds, f.name, getattr(ctrl.input_bounds, f.name))
-    p.input_bounds = bounds
-    p.period_band_low, p.period_band_high = ctrl.period_band
-    return p
