@@ -22,6 +22,7 @@ BENCHES = (
     "bench_closed_loop",
     "bench_long_runs",
     "bench_ident",
+    "bench_ident_memory",
     "bench_sweeps",
     "bench_bags",
     "bench_ros",

@@ -239,7 +239,7 @@ def _identify_streamed(
 ) -> dict[str, Any]:
     from reflexarm.ident.estimation.streaming import identify_dynamics_streamed
 
-    say(args, f"reading {', '.join(t.source for t in tables)} in blocks of {args.block_rows:,} rows ...")
+    print(f"reading {', '.join(t.source for t in tables)} in blocks of {args.block_rows:,} rows ...")
     return identify_dynamics_streamed(
         robot,
         tables,

@@ -111,28 +111,51 @@ class RegressionProblem:
 
     def add_log(self, lg: RobotLog, chunks: Callable[[Iterator[Any], RobotLog], Iterator[Any]] | None = None) -> None:
         """Reduce the rows of one preprocessed log (or one block of it) into the normal equations."""
+        add_rows([self], lg, chunks)
+
+    def _targets(self, lg: RobotLog) -> tuple[np.ndarray, np.ndarray | None]:
+        """(b before eq. (16): the measured torque less the known terms, J^T F per sample or None)."""
         assert lg.ddq is not None  # checked by check_logs
-        clock = time.perf_counter()
         b_all = lg.tau.copy()
         w_all = None if lg.wrench is None or self.wrench == "exclude" else _rhs(self.robot, lg) - lg.tau  # J^T F
         if not self.known.is_zero:  # the file's armature and springs are given, not identified
             b_all -= self.known.compute_torque(lg.q, lg.ddq)
-        self.t_reg += time.perf_counter() - clock
-        it = self.reg.iter_chunks(lg.q, lg.dq, lg.ddq, _CHUNK)
-        it = chunks(it, lg) if chunks is not None else it
-        while True:
+        return b_all, w_all
+
+
+def add_rows(
+    problems: Sequence[RegressionProblem],
+    lg: RobotLog,
+    chunks: Callable[[Iterator[Any], RobotLog], Iterator[Any]] | None = None,
+) -> None:
+    """Reduce the rows of one preprocessed log (or a block of it) into each problem's normal equations, the
+    regressor evaluated once for all of them (same robot)."""
+    assert lg.ddq is not None  # checked by check_logs
+    clock = time.perf_counter()
+    targets = [pb._targets(lg) for pb in problems]
+    share = (time.perf_counter() - clock) / len(problems)
+    for pb in problems:
+        pb.t_reg += share
+    it = problems[0].reg.iter_chunks(lg.q, lg.dq, lg.ddq, _CHUNK)
+    it = chunks(it, lg) if chunks is not None else it
+    while True:
+        clock = time.perf_counter()
+        try:
+            sl, Y = next(it)
+        except StopIteration:
+            break
+        dq = lg.dq[sl]
+        share = (time.perf_counter() - clock) / len(problems)
+        for pb, (b_all, w_all) in zip(problems, targets, strict=True):
             clock = time.perf_counter()
-            try:
-                sl, Y = next(it)
-            except StopIteration:
-                break
-            M = self.rows(lg.dq[sl], b_all[sl], None if w_all is None else w_all[sl], Y)
-            keep = np.abs(lg.dq[sl]) >= self.min_speed if self.min_speed > 0 else None
-            self.t_reg += time.perf_counter() - clock
+            M = pb.rows(dq, b_all[sl], None if w_all is None else w_all[sl], Y)
+            keep = np.abs(dq) >= pb.min_speed if pb.min_speed > 0 else None
+            pb.t_reg += share + time.perf_counter() - clock
             clock = time.perf_counter()
-            self.acc.add(M, keep)
-            self.t_solve += time.perf_counter() - clock
-        self.total += len(lg)
+            pb.acc.add(M, keep)
+            pb.t_solve += time.perf_counter() - clock
+    for pb in problems:
+        pb.total += len(lg)
 
 
 def check_logs(logs: Sequence[RobotLog], robot: RobotModel, check_limits: bool) -> None:

@@ -26,7 +26,7 @@ import numpy.typing as npt
 
 from reflexarm.ident._blas_threads import DEFAULT_BLAS_THREADS, blas_threads
 from reflexarm.ident.estimation._estimate import estimate
-from reflexarm.ident.estimation._regression import check_log, setup_problem
+from reflexarm.ident.estimation._regression import add_rows, check_log, setup_problem
 from reflexarm.ident.estimation.base_parameters import BaseParameters
 from reflexarm.ident.estimation.inertia_determinacy import filtered_rows_factor
 from reflexarm.ident.estimation.result import DynamicsIdentification
@@ -78,8 +78,7 @@ def identify_dynamics_streamed(
             grid = _grid(plan)
             steps.append(float(np.median(np.diff(grid))))
             for block in checked_blocks(tb, plan, robot, block_rows, grid):
-                for pb in problems:
-                    pb.add_log(block)
+                add_rows(problems, block)
         row_corr = filtered_rows_factor(steps, cutoff_hz)
         return {
             pb.method: estimate(
