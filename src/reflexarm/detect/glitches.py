@@ -31,6 +31,7 @@ a stated limit of telling them apart from one sample.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -83,45 +84,79 @@ class Glitch:
                 "logged": self.logged, "repaired": self.repaired}  # fmt: skip
 
 
-def _robust_std(x: np.ndarray, floor: float) -> np.ndarray:
-    """1.4826 x median absolute deviation per column, at least ``floor``."""
-    med = np.median(x, axis=0)
-    return np.maximum(1.4826 * np.median(np.abs(x - med), axis=0), floor)
+def _robust_std(d: np.ndarray, floor: float) -> np.ndarray:
+    """1.4826 x median absolute deviation of each row of ``d`` (n, m), at least ``floor``."""
+    deviation = d.copy()
+    med = np.median(deviation, axis=1, overwrite_input=True)
+    np.subtract(d, med[:, None], out=deviation)
+    np.abs(deviation, out=deviation)
+    return np.maximum(1.4826 * np.median(deviation, axis=1, overwrite_input=True), floor)
 
 
-def _one_sample_outliers(x: np.ndarray, floor: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(mask, d, sigma, peak) over the interior samples of ``x`` (N, n) (rows 1..N-2): ``mask`` those that stand out
-    of the line through their neighbours by more than OUTLIER_FACTOR robust standard deviations and SPIKE_RATIO
-    times the neighbours' own; ``peak`` those whose |d| is at least their neighbours' (a local peak of |d|)."""
-    d = x[1:-1] - 0.5 * (x[:-2] + x[2:])
+class _Outliers(NamedTuple):
+    """A signal's one-sample outliers: ``a`` (n, N-2) the |one-sample inconsistency| of every joint at every
+    interior sample, ``sigma`` (n,) its robust standard deviation per joint, ``peak`` (n, N-2) where |d| is at
+    least its neighbours' (a local peak), and the outliers' ``joint`` and interior ``sample`` (rows 1..N-2 of
+    the log are 0..N-3 here)."""
+
+    a: np.ndarray
+    sigma: np.ndarray
+    joint: np.ndarray
+    sample: np.ndarray
+
+    def peak(self, joints: slice | np.ndarray, samples: np.ndarray) -> np.ndarray:
+        """Whether |d| at these samples is at least its neighbours' (beyond the ends: 0)."""
+        a, m = self.a, self.a.shape[1]
+        left = np.where(samples > 0, a[joints, np.maximum(samples - 1, 0)], 0.0)
+        right = np.where(samples < m - 1, a[joints, np.minimum(samples + 1, m - 1)], 0.0)
+        return a[joints, samples] >= np.maximum(left, right)  # type: ignore[no-any-return]
+
+
+def _one_sample_outliers(x: np.ndarray, floor: float) -> _Outliers:
+    """The interior samples of ``x`` (N, n) that stand out of the line through their neighbours by more than
+    OUTLIER_FACTOR robust standard deviations and SPIKE_RATIO times the neighbours' own. The signal is worked on
+    joint by joint (transposed: the medians partition contiguous rows) and the outliers are few: the spike test
+    looks at the samples beyond OUTLIER_FACTOR only (the same numbers as over every sample)."""
+    xt = np.ascontiguousarray(x.T)
+    d = np.add(xt[:, :-2], xt[:, 2:])  # x[k] - 0.5 * (x[k-1] + x[k+1]), the same operations in place
+    d *= 0.5
+    np.subtract(xt[:, 1:-1], d, out=d)
+    del xt
     sigma = _robust_std(d, floor)
-    a = np.abs(d)
-    beside = np.zeros_like(a)
-    beside[1:] = a[:-1]
-    beside[:-1] = np.maximum(beside[:-1], a[1:])
-    mask = (a > OUTLIER_FACTOR * sigma) & (a > SPIKE_RATIO * beside)
-    return mask, d, sigma, a >= beside
+    a = np.abs(d, out=d)
+    joint, sample = np.nonzero(a > OUTLIER_FACTOR * sigma[:, None])
+    m = a.shape[1]
+    left = np.where(sample > 0, a[joint, np.maximum(sample - 1, 0)], 0.0)
+    right = np.where(sample < m - 1, a[joint, np.minimum(sample + 1, m - 1)], 0.0)
+    spike = a[joint, sample] > SPIKE_RATIO * np.maximum(left, right)
+    return _Outliers(a, sigma, joint[spike], sample[spike])
 
 
-def _velocity_glitches(log: RobotLog) -> np.ndarray:
-    return _one_sample_outliers(log.dq, _FLOOR["velocity"])[0]
+def _velocity_glitches(log: RobotLog) -> tuple[np.ndarray, np.ndarray]:
+    out = _one_sample_outliers(log.dq, _FLOOR["velocity"])
+    return out.joint, out.sample
 
 
-def _torque_glitches(log: RobotLog, period: float) -> np.ndarray:
-    spike, d, sigma, peak = _one_sample_outliers(log.measured_torque, _FLOOR["torque"])
+def _torque_glitches(log: RobotLog, period: float) -> tuple[np.ndarray, np.ndarray]:
+    out = _one_sample_outliers(log.measured_torque, _FLOOR["torque"])
+    joint, sample, a, sigma = out.joint, out.sample, out.a, out.sigma
     # a hit moves several joints' torques at once (J^T f), each peaking at its sample; a friction switch elsewhere
     # is far smaller than a spike; another joint's spike one sample away only shoulders this one
-    a = np.abs(d)
-    stirred = (a > CALM_FACTOR * sigma) & (a > CALM_SHARE * np.max(a, axis=1, keepdims=True)) & peak
-    spike &= stirred.sum(axis=1, keepdims=True) == 1
+    at = a[:, sample]  # (n, spikes): every joint at each spike's sample
+    everyone = np.arange(a.shape[0])[:, None]
+    peak = out.peak(everyone, np.broadcast_to(sample, at.shape))
+    stirred = (at > CALM_FACTOR * sigma[:, None]) & (at > CALM_SHARE * np.max(at, axis=0, keepdims=True)) & peak
+    alone = stirred.sum(axis=0) == 1
+    joint, sample = joint[alone], sample[alone]
     if period < 0.5 * SHORTEST_IMPACT_S:
-        return spike
+        return joint, sample
     dq = log.dq
-    slow = np.abs(dq) <= STOP_SHARE * np.max(np.abs(dq), axis=0)
-    sign = np.sign(dq)
-    reverses = (sign[:-2] * sign[2:]) < 0
-    at_stop = reverses | (slow[:-2] & slow[1:-1] & slow[2:])
-    return spike & at_stop
+    fastest = np.max(np.abs(dq), axis=0)[joint]
+    around = dq[sample[:, None] + np.arange(3), joint[:, None]]  # log samples k-1, k, k+1 of each spike
+    slow = np.abs(around) <= STOP_SHARE * fastest[:, None]
+    sign = np.sign(around)
+    at_stop = (sign[:, 0] * sign[:, 2] < 0) | slow.all(axis=1)
+    return joint[at_stop], sample[at_stop]
 
 
 def find_glitches(log: RobotLog) -> list[Glitch]:
@@ -130,14 +165,14 @@ def find_glitches(log: RobotLog) -> list[Glitch]:
         return []
     period = float(np.median(np.diff(log.t)))
     found: list[Glitch] = []
-    for kind, mask, signal in (
+    for kind, (joints, samples), signal in (
         ("velocity", _velocity_glitches(log), log.dq),
         ("torque", _torque_glitches(log, period), log.measured_torque),
     ):
-        for k, j in zip(*np.nonzero(mask), strict=True):
-            s = int(k) + 1
+        for k, j in zip(samples.tolist(), joints.tolist(), strict=True):
+            s = k + 1
             repaired = 0.5 * float(signal[s - 1, j] + signal[s + 1, j])
-            found.append(Glitch(s, float(log.t[s]), int(j), kind, float(signal[s, j]), repaired))
+            found.append(Glitch(s, float(log.t[s]), j, kind, float(signal[s, j]), repaired))
     found.sort(key=lambda g: (g.sample, g.kind != "velocity", g.joint))
     return found
 
