@@ -9,7 +9,8 @@ optional. :func:`plan_columns` finds them, in this order for each signal:
    ``{i}`` its number from 1, ``{i0}`` its index from 0; for ``wrench`` ``{axis}`` is fx fy fz mx my mz
    and ``{ros_axis}`` force.x .. torque.z; ``t`` names a column. Or **positions** in the file, 0-based with
    the end excluded (``t=0,q=1:7,dq=7:13``; header-less files have nothing else), and a **scale** after
-   ``*`` (``tau=trq_{i}*0.001``); see :mod:`reflexarm.logs.column_mapping`;
+   ``*`` (``tau=trq_{i}*0.001``); parsed by :mod:`reflexarm.logs.column_mapping`, looked up in the file by
+   :mod:`reflexarm.logs.mapped_columns`;
 2. the **schema** of :mod:`reflexarm.logs.files`: ``q_1 .. q_n`` (1-based), or ``q_0 .. q_{n-1}``
    (0-based, recognized when ``q_0`` exists, and said so);
 3. **joint-named** columns (the joint names must be known): ``position_<joint>``, ``<joint>/position``,
@@ -49,7 +50,6 @@ from reflexarm.logs._joint_state_columns import (
     _STATE_FIELD,
     JointStateLayout,
     _find_layout,
-    _norm,
     _use_layout,
 )
 from reflexarm.logs.column_mapping import (
@@ -58,6 +58,13 @@ from reflexarm.logs.column_mapping import (
     check_column_mapping,
     parse_column_mapping,
     parse_column_spec,
+)
+from reflexarm.logs.mapped_columns import (
+    ROS_AXES,
+    ColumnIndex,
+    mapped_joint_signal,
+    mapped_time,
+    mapped_wrench,
 )
 from reflexarm.logs.robot_log import WRENCH_COLUMNS
 
@@ -80,10 +87,9 @@ _WORDS = {
     "ddq": ("acceleration", "acc", "ddq"),
     "current": ("current", "cur"),
 }
-_ROS_AXES = ("force.x", "force.y", "force.z", "torque.x", "torque.y", "torque.z")
 _WRENCH_ALIASES = {
     a: (a, r, r.replace(".", "_"), f"{a[0]}_{a[1]}") + ((f"t{a[1]}",) if a[0] == "m" else ())
-    for a, r in zip(WRENCH_COLUMNS, _ROS_AXES, strict=True)
+    for a, r in zip(WRENCH_COLUMNS, ROS_AXES, strict=True)
 }
 _TIME_NAMES = ("t", "time", "timestamp", "stamp", "__time", "%time", "header.stamp", "field.header.stamp")
 _TIME_PAIRS = (("header.stamp.sec", "header.stamp.nanosec"), ("header.stamp.secs", "header.stamp.nsecs"))
@@ -108,37 +114,6 @@ class ColumnPlan:
     ignored: tuple[str, ...] = ()
     notes: tuple[str, ...] = field(default=())
     scale: dict[str, float] = field(default_factory=dict)
-
-
-class _Index:
-    """Columns by normalized name and by every normalized tail after a separator."""
-
-    def __init__(self, columns: list[str], where: str) -> None:
-        self.where = where
-        self.columns = list(columns)
-        self.by_key: dict[str, list[str]] = {}
-        self.full: dict[str, str] = {}
-        for c in columns:
-            n = _norm(c)
-            self.full.setdefault(n, c)
-            parts = n.split(".")
-            for k in range(len(parts)):
-                self.by_key.setdefault(".".join(parts[k:]), []).append(c)
-
-    def find(self, name: str) -> str | None:
-        key = _norm(name)
-        if key in self.full:
-            return self.full[key]
-        hits = self.by_key.get(key, [])
-        if len(hits) > 1:
-            raise DataError(
-                f"{self.where}: {len(hits)} columns match {name!r}: {', '.join(map(repr, hits))}; "
-                "name the one to use with a column mapping (--columns)",
-                source=self.where,
-                column=tuple(hits),
-                expected=name,
-            )
-        return hits[0] if hits else None
 
 
 def plan_columns(
@@ -170,7 +145,7 @@ def plan_columns(
         if n_joints is not None and n_joints != len(joint_names):
             raise ConfigError(f"n_joints {n_joints} but {len(joint_names)} joint names given")
         n_joints = len(joint_names)
-    idx = _Index(columns, where)
+    idx = ColumnIndex(columns, where)
     notes: list[str] = []
     used: set[str] = set()
     time, unit = _find_time(idx, columns, specs.get("t"), where, notes)
@@ -218,7 +193,7 @@ def plan_columns(
 def _joint_signals(
     signals: tuple[str, ...],
     required: tuple[str, ...],
-    idx: _Index,
+    idx: ColumnIndex,
     n: int,
     joint_names: tuple[str, ...] | None,
     specs: dict[str, ColumnSpec],
@@ -288,7 +263,7 @@ def _layout_field(s: str) -> str:
 
 
 def _refuse_schema_count(
-    idx: _Index, columns: list[str], count: int, n: int, required: tuple[str, ...], where: str
+    idx: ColumnIndex, columns: list[str], count: int, n: int, required: tuple[str, ...], where: str
 ) -> None:
     for s in required:  # a column missing among the log's own joints is named first
         for j in range(1, count + 1):
@@ -308,52 +283,11 @@ def _refuse_schema_count(
     )
 
 
-def _by_position(key: str, spec: ColumnSpec, idx: _Index, where: str, expected: int | None) -> tuple[str, ...]:
-    """The columns at ``spec.positions`` (0-based, as they stand in the file), ``expected`` of them."""
-    assert spec.positions is not None
-    names = idx.columns
-    positions = spec.positions
-    if positions[-1] >= len(names):
-        raise DataError(
-            f"{where}: column mapping {key}={spec.describe()} reaches column {positions[-1]} (counted from 0); the "
-            f"file has {len(names)} columns (0..{len(names) - 1})",
-            source=where,
-            column=key,
-            value=positions[-1],
-            expected=len(names),
-        )
-    if expected is not None and len(positions) != expected:
-        what = "joints" if key != "wrench" else "wrench components (fx fy fz mx my mz)"
-        raise DataError(
-            f"{where}: column mapping {key}={spec.describe()} names {len(positions)} column(s) "
-            f"({', '.join(str(k) for k in positions)}); there are {expected} {what}: give one column each "
-            "(positions START:STOP, 0-based, STOP excluded)",
-            source=where,
-            column=key,
-            value=len(positions),
-            expected=expected,
-        )
-    return tuple(names[k] for k in positions)
-
-
 def _find_time(
-    idx: _Index, columns: list[str], spec: ColumnSpec | None, where: str, notes: list[str]
+    idx: ColumnIndex, columns: list[str], spec: ColumnSpec | None, where: str, notes: list[str]
 ) -> tuple[tuple[str, ...], str | None]:
-    if spec is not None and spec.positions is not None:
-        (at,) = _by_position("t", spec, idx, where, 1)
-        notes.append(f"{where}: time from column {spec.describe()} ({at!r})")
-        return (at,), None
     if spec is not None:
-        explicit = str(spec.template)
-        named = idx.find(explicit)
-        if named is None:
-            raise DataError(
-                f"{where}: time column {explicit!r} (column mapping t=) missing; found: {', '.join(columns)}",
-                source=where,
-                column=explicit,
-                expected=tuple(columns),
-            )
-        return (named,), None
+        return mapped_time(idx, columns, spec, where, notes), None
     if "t" in columns:
         return ("t",), None
     for sec, nsec in _TIME_PAIRS:
@@ -405,36 +339,15 @@ def _infer_n(columns: list[str], layout: JointStateLayout | None, where: str) ->
 
 def _find_joint_signal(
     s: str,
-    idx: _Index,
+    idx: ColumnIndex,
     n: int,
     joint_names: tuple[str, ...] | None,
     spec: ColumnSpec | None,
     where: str,
     notes: list[str],
 ) -> tuple[str, ...] | None:
-    scaled = "" if spec is None or spec.scale == 1.0 else f", times {spec.scale:g}"
-    if spec is not None and spec.positions is not None:
-        cols = _by_position(s, spec, idx, where, n)
-        notes.append(f"{where}: {_MEANING[s]} from columns {spec.describe()} by position ({', '.join(cols)}){scaled}")
-        return cols
     if spec is not None:
-        template = str(spec.template)
-        if joint_names is None and "{joint}" in template:
-            raise ConfigError(f"column mapping {s}={template!r} uses {{joint}} but no joint names are known")
-        names = joint_names or tuple("" for _ in range(n))
-        wanted = [template.format(joint=names[j], i=j + 1, i0=j) for j in range(n)]
-        found = [idx.find(w) for w in wanted]
-        missing = [w for w, f in zip(wanted, found, strict=True) if f is None]
-        if missing:
-            raise DataError(
-                f"{where}: column(s) {', '.join(map(repr, missing))} of the mapping {s}={template!r} missing; "
-                f"found: {', '.join(idx.full.values())}",
-                source=where,
-                column=tuple(missing),
-                expected=tuple(idx.full.values()),
-            )
-        notes.append(f"{where}: {_MEANING[s]} from columns {template!r} (mapping){scaled}")
-        return tuple(f for f in found if f is not None)
+        return mapped_joint_signal(s, idx, n, joint_names, spec, where, notes)
     schema = [idx.full.get(f"{s}_{j}") for j in range(1, n + 1)]
     zero = [idx.full.get(f"{s}_{j}") for j in range(n)]
     if zero[0] is not None and all(c is not None for c in zero):
@@ -506,18 +419,9 @@ def _missing(
     )
 
 
-def _find_wrench(idx: _Index, spec: ColumnSpec | None, where: str) -> list[str] | None:
-    if spec is not None and spec.positions is not None:
-        return list(_by_position("wrench", spec, idx, where, len(WRENCH_COLUMNS)))
+def _find_wrench(idx: ColumnIndex, spec: ColumnSpec | None, where: str) -> list[str] | None:
     if spec is not None:
-        template = str(spec.template)
-        wanted = [template.format(axis=a, ros_axis=r) for a, r in zip(WRENCH_COLUMNS, _ROS_AXES, strict=True)]
-        found = [idx.find(w) for w in wanted]
-        missing = [w for w, f in zip(wanted, found, strict=True) if f is None]
-        if missing:
-            raise DataError(f"{where}: wrench column(s) {', '.join(map(repr, missing))} of the mapping "
-                            f"wrench={template!r} missing")  # fmt: skip
-        return [f for f in found if f is not None]
+        return mapped_wrench(idx, spec, where)
     found = []
     for a in WRENCH_COLUMNS:
         hit = None
