@@ -145,3 +145,59 @@ def test_a_recorded_run_that_leaves_the_trajectory_is_reported(gen3):
     assert lines[0].startswith("WARNING: recorded run vs the trajectory: largest deviation 0.2 rad on joint 3")
     assert lines[1].startswith("WARNING: measured torque at >= 97 % of the effort limit: 10 % of the samples on")
     assert lines[2].startswith("WARNING: lowest point of the arm in the run:") and "below the base plane" in lines[2]
+
+
+def _one_joint_swing(robot, peak_velocity):
+    """Joint 1 swings as dq = s (cos(2 w t) - cos(w t)) (at rest at t = 0), the other joints stay at 0: its
+    speed peaks once, at t = T / 2 (|dq| = 2 s there), scaled to ``peak_velocity``; returns (par, x)."""
+    from reflexarm.ident.excitation.cost import Parametrisation
+
+    par = Parametrisation(robot.n, 2, 2 * np.pi * 0.1)  # a 10 s period
+    a = np.zeros((robot.n, 2))
+    a[0, 1] = 0.5 * peak_velocity
+    return par, par.pack(a, np.zeros((robot.n, 2)), np.zeros(robot.n))
+
+
+def test_the_constraint_grid_adds_the_time_of_a_peak_between_its_points(gen3):
+    """A velocity peak between the grid's points passes the grid; refining the grid at 1 kHz adds the
+    peak's sample time, and the refined grid no longer passes it. Within the limit at 1 kHz: no refinement."""
+    from reflexarm.ident.excitation.constraints import CHECK_STEP, ConstraintGrid
+    from reflexarm.ident.excitation.limits import LimitEvaluator
+
+    _, robot = gen3
+    limits, _ = excitation_limits(robot, torque_fraction=None, floor=None, self_collision=False)
+    evaluator = LimitEvaluator(robot, limits, None)
+    vmax = limits.max_velocity[0]
+    # 8 points at (k + 1/2) T / 8: the nearest to the peak (t = 5 s) see cos(2 phi) - cos(phi) = 0.815 of it
+    par, x = _one_joint_swing(robot, 1.05 * vmax)
+    grid = ConstraintGrid(par, limits, evaluator, (np.arange(8) + 0.5) * 10.0 / 8, np.zeros(0))
+    assert grid.feasible(x)
+    refined = grid.refined(x)
+    assert refined is not None
+    added = np.setdiff1d(refined.t_linear, grid.t_linear)
+    np.testing.assert_allclose(added, [5.0], atol=0.5 * CHECK_STEP)  # the peak, to the sampling's resolution
+    assert not refined.feasible(x)
+    # 1 % within the limit at 1 kHz: nothing to add
+    assert grid.refined(_one_joint_swing(robot, 0.99 * vmax)[1]) is None
+
+
+def test_dense_margins_match_the_optimizers_margins(gen3):
+    """LimitEvaluator.margin_samples (vectorised, for the 1 kHz check) gives the values of .margins (per
+    sample, with derivatives, what the optimizer sees) for the torque, floor and self-collision bounds."""
+    from reflexarm.ident.excitation.cost import Parametrisation
+    from reflexarm.ident.excitation.limits import LimitEvaluator, arm_geometry
+
+    _, robot = gen3
+    limits, _ = excitation_limits(robot, floor=0.0)
+    geometry = arm_geometry(robot, np.zeros(robot.n))
+    evaluator = LimitEvaluator(robot, limits, geometry)
+    assert evaluator.torque_joints.size and evaluator.use_floor and evaluator.pairs
+    par = Parametrisation(robot.n, 3, 2 * np.pi * 0.1)
+    rng = np.random.default_rng(4)
+    x = 0.3 * rng.normal(size=par.size)
+    t = np.linspace(0.0, 10.0, 7)
+    q, dq, ddq = par.trajectory(x).evaluate(t)
+    values, _ = evaluator.margins(q, dq, ddq, *par.linear_maps(t))
+    dense = evaluator.margin_samples(q, dq, ddq)
+    # the same quantities along two code paths (loops vs vectorised): agreement to round-off of O(1) margins
+    np.testing.assert_allclose(dense, values.reshape(t.size, -1), rtol=0, atol=1e-12)

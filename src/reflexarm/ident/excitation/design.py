@@ -15,12 +15,14 @@ candidate is at rest at both ends by construction.
 of one period (``scipy.optimize.minimize``, SLSQP) subject to joint position (with a margin), velocity and
 acceleration limits evaluated on a dense time grid (linear in the coefficients), and to the model's joint
 torques, a workspace bound and self-collision (:mod:`.limits`: nonlinear, with exact derivatives) on a
-coarser grid; it finally checks every limit on the trajectory sampled at 1 kHz (scaling the amplitudes
-down if a peak fell between grid points). Its steps: :func:`excitation_limits` (the bounds), a start inside
-them (:func:`_start`), the linear and nonlinear constraints, the SLSQP run with its progress recorded
-(:func:`_minimise`), the 1 kHz check (:func:`_check_at_1khz`) and the diagnosis of a run that stalled
-(:func:`_diagnose`: the optimizer's own message, and which base-parameter combination the motion fails to
-excite).
+coarser grid (:class:`~.constraints.ConstraintGrid`). A peak of a limit between grid points is found by
+checking the best iterate at 1 kHz; its time joins the grid and the optimization goes on
+(:data:`REFINEMENTS`), so the trajectory meets the limits at 1 kHz by construction; the final 1 kHz check
+(:func:`~.constraints.best_at_1khz`) still scales the amplitudes down if a peak is left. Its steps:
+:func:`excitation_limits` (the bounds), a start inside them (:func:`_start`), the SLSQP run with its progress
+recorded and the refinements (:func:`_minimise_and_refine`), the 1 kHz check and the diagnosis of a run
+that stalled (:func:`~.diagnosis.diagnose_stall`: the optimizer's own message, and which base-parameter
+combination the motion fails to excite).
 
 Repeatability: a seeded call gives the same trajectory bit for bit on one machine with the same BLAS
 library and thread count. On another CPU (OpenBLAS picks its kernels per CPU) or with another number
@@ -43,8 +45,13 @@ import numpy as np
 import numpy.typing as npt
 import scipy.optimize
 
-from reflexarm.errors import ConfigError, IdentificationError, ModelError
+from reflexarm.errors import ConfigError, ModelError
 from reflexarm.ident.estimation.base_parameters import BaseParameters, compute_base_parameters
+from reflexarm.ident.excitation.constraints import (
+    ConstraintGrid,
+    best_at_1khz,
+    shrink_into_limits,
+)
 from reflexarm.ident.excitation.cost import Parametrisation, log_condition, log_condition_gradient
 from reflexarm.ident.excitation.diagnosis import (  # noqa: F401  (re-exported: importable from here as before)
     STALLED_CONDITION,
@@ -78,13 +85,17 @@ DEFAULT_MAX_VELOCITY = 1.5
 DEFAULT_MAX_ACCELERATION = 5.0
 #: Default margin kept from the joint position limits [rad].
 DEFAULT_POSITION_MARGIN = 0.1
-#: Scaled constraint margin (O(1) units, see :func:`_linear_margins`) an iterate may miss and still count
-#: as feasible: the 1 kHz check that follows removes what is left.
-FEASIBILITY_TOLERANCE = 1e-6
 #: The best feasible iterates (by the cost on the optimization's grid) checked at 1 kHz after the run; the one
 #: with the lowest condition number after that check is kept (a peak between grid points shrinks an iterate's
 #: amplitudes, and the last iterate is not always the best one after that: measured 17.0 vs 15.6 on a 7-DoF arm).
 CANDIDATES_AT_1KHZ = 5
+#: Refinements of the constraint grid after the run: each adds the times of the peaks the 1 kHz check finds
+#: on the best iterate (:meth:`~.constraints.ConstraintGrid.refined`) and optimizes on from there for at most
+#: :data:`REFINEMENT_ITERATIONS` iterations; the run stops refining once the best iterate meets every
+#: limit at 1 kHz.
+REFINEMENTS = 3
+#: SLSQP iterations after each refinement (it restarts with a fresh quasi-Newton matrix).
+REFINEMENT_ITERATIONS = 10
 
 
 @dataclass(frozen=True)
@@ -282,14 +293,13 @@ def optimize_excitation(
     period = 2 * np.pi / base_frequency
     t_cost = np.arange(n_samples) * period / n_samples
     log_cond = log_condition(robot, base, par, t_cost)
-    linear = _linear_margins(par, limits, np.arange(n_grid) * period / n_grid)
     evaluator = LimitEvaluator(robot, limits, geometry)
-    nonlinear = _nonlinear_margins(par, evaluator, np.arange(n_grid_dynamics) * period / n_grid_dynamics)
-    x0 = _start(par, limits, evaluator, mid, seed, initial, np.arange(n_grid) * period / n_grid)
+    grid = ConstraintGrid.uniform(par, limits, evaluator, n_grid, n_grid_dynamics)
+    x0 = _start(par, limits, evaluator, mid, seed, initial, grid.t_linear)
     start = par.trajectory(x0)
     gradient = log_condition_gradient(robot, base, par, t_cost)
-    res, history, candidates = _minimise(log_cond, gradient, x0, linear, nonlinear, maxiter, progress)
-    x, report = _best_at_1khz(par, candidates, limits, evaluator, log_cond)
+    res, history, candidates = _minimise_and_refine(log_cond, gradient, x0, grid, maxiter, progress)
+    x, report = best_at_1khz(par, candidates, limits, evaluator, log_cond)
     best = par.trajectory(x)
     cond1 = float(np.exp(log_cond(x)))
     return ExcitationDesign(
@@ -308,42 +318,6 @@ def _bounds(limits: ExcitationLimits) -> dict[str, list[float]]:
         "max_velocity": limits.max_velocity.tolist(),
         "max_acceleration": limits.max_acceleration.tolist(),
     }
-
-
-_Margins = tuple[Callable[[np.ndarray], np.ndarray], Callable[[np.ndarray], np.ndarray]]
-
-
-def _linear_margins(par: Parametrisation, limits: ExcitationLimits, t_grid: np.ndarray) -> _Margins:
-    """Position, velocity and acceleration limits on the grid: linear in x, margins A x + b >= 0 scaled to O(1)."""
-    n_grid = t_grid.size
-    Gq, Gv, Ga = par.linear_maps(t_grid)
-    G = np.concatenate([Gq.reshape(-1, par.size), Gv.reshape(-1, par.size), Ga.reshape(-1, par.size)])
-    lo, hi, vmax, amax = limits.lower, limits.upper, limits.max_velocity, limits.max_acceleration
-    rows_hi = np.concatenate([np.tile(hi, n_grid), np.tile(vmax, n_grid), np.tile(amax, n_grid)])
-    rows_lo = np.concatenate([np.tile(lo, n_grid), -np.tile(vmax, n_grid), -np.tile(amax, n_grid)])
-    scale = np.concatenate([np.tile(0.5 * (hi - lo), n_grid), np.tile(vmax, n_grid), np.tile(amax, n_grid)])
-    # margins >= 0 inside the limits, scaled to O(1): (upper - s) / scale and (s - lower) / scale
-    A = np.vstack([-G / scale[:, None], G / scale[:, None]])
-    b = np.concatenate([rows_hi / scale, -rows_lo / scale])
-    return (lambda x: A @ x + b), (lambda x: A)
-
-
-def _nonlinear_margins(par: Parametrisation, evaluator: LimitEvaluator, t_grid: np.ndarray) -> _Margins | None:
-    """Torque, workspace and self-collision margins on the (coarser) grid and their exact derivatives."""
-    if not evaluator.active:
-        return None
-    Gq, Gv, Ga = par.linear_maps(t_grid)
-    cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
-
-    def both(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        key = x.tobytes()
-        if key not in cache:
-            cache.clear()
-            q, dq, ddq = par.trajectory(x).evaluate(t_grid)
-            cache[key] = evaluator.margins(q, dq, ddq, Gq, Gv, Ga)
-        return cache[key]
-
-    return (lambda x: both(x)[0]), (lambda x: both(x)[1])
 
 
 def _start(
@@ -376,66 +350,55 @@ def _start(
         if initial.n != n or initial.n_harmonics != L:
             raise ConfigError(f"initial trajectory has n={initial.n}, L={initial.n_harmonics}; expected n={n}, L={L}")
         x0 = par.pack(initial.a, initial.b, initial.offset)
-    return _shrink_into_limits(par, x0, evaluator, t_grid)
+    return shrink_into_limits(par, x0, evaluator, t_grid)
 
 
-def _within(report: dict[str, dict[str, Any]]) -> bool:
-    ok = True
-    if "torque" in report:
-        ok &= float(report["torque"]["use"]) <= 1.0  # type: ignore[arg-type]
-    for key in ("workspace", "self_collision"):
-        if key in report:
-            ok &= float(report[key]["clearance_m"]) >= 0.0  # type: ignore[arg-type]
-    return bool(ok)
-
-
-def _shrink_into_limits(par: Parametrisation, x: np.ndarray, evaluator: LimitEvaluator, t: np.ndarray) -> np.ndarray:
-    """x with its amplitudes scaled down (bisection on s in [0, 1], 10 steps: s to 1e-3) until the
-    nonlinear bounds hold at the times ``t``; the rest pose q0 (s = 0) must meet them."""
-    if not evaluator.active:
-        return x
-
-    def report(s: float) -> dict[str, dict[str, Any]]:
-        q, dq, ddq = par.trajectory(par.scaled(x, s)).evaluate(t)
-        return evaluator.report(t, q, dq, ddq)
-
-    if _within(report(1.0)):
-        return x
-    at_rest = report(0.0)
-    if not _within(at_rest):
-        raise IdentificationError(
-            f"no excitation can meet the limits: at rest in the centre pose {np.round(par.unpack(x)[2], 3).tolist()} "
-            f"already {at_rest} (choose another --floor, a larger --torque-fraction, or a centre pose)"
-        )
-    good, bad = 0.0, 1.0
-    for _ in range(10):
-        s = 0.5 * (good + bad)
-        good, bad = (s, bad) if _within(report(s)) else (good, s)
-    return par.scaled(x, good)
+def _minimise_and_refine(
+    log_cond: Callable[[np.ndarray], float],
+    gradient: Callable[[np.ndarray], np.ndarray],
+    x0: np.ndarray,
+    grid: ConstraintGrid,
+    maxiter: int,
+    progress: bool,
+) -> tuple[scipy.optimize.OptimizeResult, list[float], list[np.ndarray]]:
+    """:func:`_minimise` on ``grid``, then up to :data:`REFINEMENTS` times: refine the grid at the best
+    iterate's 1 kHz peaks and optimize on from it. Returns the last result (``nit``: all iterations), the
+    history and the candidates for the 1 kHz check: the best feasible iterates on the finest grid reached,
+    and the best iterate of each grid before it (checked too, shrunk where it misses a limit)."""
+    res, history, candidates = _minimise(log_cond, gradient, x0, grid, maxiter, progress)
+    candidates = candidates or [x0]  # the start meets the limits on the grid (see _start)
+    nit = int(res.get("nit", 0))
+    earlier: list[np.ndarray] = []
+    for _ in range(REFINEMENTS if maxiter > 0 else 0):
+        refined = grid.refined(candidates[0])
+        if refined is None:
+            break
+        more, steps, found = _minimise(log_cond, gradient, candidates[0], refined, REFINEMENT_ITERATIONS, progress)
+        history += steps
+        nit += int(more.get("nit", 0))
+        if not found:  # no iterate met the refined grid: keep what we have
+            break
+        grid, res, earlier = refined, more, [*earlier, candidates[0]]
+        candidates = found
+    res["nit"] = nit
+    return res, history, candidates + earlier
 
 
 def _minimise(
     log_cond: Callable[[np.ndarray], float],
     gradient: Callable[[np.ndarray], np.ndarray],
     x0: np.ndarray,
-    linear: _Margins,
-    nonlinear: _Margins | None,
+    grid: ConstraintGrid,
     maxiter: int,
     progress: bool,
 ) -> tuple[scipy.optimize.OptimizeResult, list[float], list[np.ndarray]]:
-    """SLSQP over the constraints, recording the condition number after each iteration. Returns the
-    result, the history and the best feasible iterates, best first (at most :data:`CANDIDATES_AT_1KHZ`; SLSQP
-    may end outside the nonlinear constraints, and the start is always one of them)."""
+    """SLSQP over the grid's constraints from x0, recording the condition number after each iteration.
+    Returns the result, the history and the best iterates that meet the grid's constraints, x0 among them
+    if it does, best first (at most :data:`CANDIDATES_AT_1KHZ`; SLSQP may end outside the nonlinear ones)."""
     from reflexarm._progress import show_progress
 
-    def feasible(x: np.ndarray) -> bool:
-        if not np.all(np.isfinite(x)) or np.min(linear[0](x)) < -FEASIBILITY_TOLERANCE:
-            return False
-        return nonlinear is None or bool(np.min(nonlinear[0](x)) >= -FEASIBILITY_TOLERANCE)
-
     history: list[float] = []
-    best: list[float | np.ndarray] = [float(log_cond(x0)), x0]
-    feasible_iterates: list[tuple[float, np.ndarray]] = [(float(log_cond(x0)), x0)]
+    feasible_iterates = [(float(log_cond(x0)), x0)] if grid.feasible(x0) else []
     bar = None
     if show_progress(progress) and maxiter > 0:
         from tqdm import tqdm
@@ -445,79 +408,26 @@ def _minimise(
     def step(x: np.ndarray) -> None:
         value = float(log_cond(x))
         history.append(float(np.exp(value)))
-        if feasible(x):
+        if grid.feasible(x):
             feasible_iterates.append((value, x.copy()))
-            if value < float(best[0]):  # type: ignore[arg-type]
-                best[:] = [value, x.copy()]
         if bar is not None:
             bar.update(1)
             bar.set_postfix(cond=f"{history[-1]:.3g}")
 
-    constraints = [{"type": "ineq", "fun": linear[0], "jac": linear[1]}]
-    if nonlinear is not None:
-        constraints.append({"type": "ineq", "fun": nonlinear[0], "jac": nonlinear[1]})
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             res = scipy.optimize.minimize(
-                log_cond, x0, jac=gradient, method="SLSQP", constraints=constraints,
+                log_cond, x0, jac=gradient, method="SLSQP", constraints=grid.scipy_constraints,
                 options={"maxiter": int(maxiter), "ftol": 1e-6}, callback=step,
             )  # fmt: skip
     finally:
         if bar is not None:
             bar.close()
-    if np.all(np.isfinite(res.x)) and feasible(res.x):
+    if np.all(np.isfinite(res.x)) and grid.feasible(res.x):
         feasible_iterates.append((float(log_cond(res.x)), np.asarray(res.x)))
     feasible_iterates.sort(key=lambda c: c[0])
     return res, history, [x for _, x in feasible_iterates[:CANDIDATES_AT_1KHZ]]
-
-
-def _best_at_1khz(
-    par: Parametrisation,
-    candidates: list[np.ndarray],
-    limits: ExcitationLimits,
-    evaluator: LimitEvaluator,
-    log_cond: Callable[[np.ndarray], float],
-) -> tuple[np.ndarray, dict[str, dict[str, Any]]]:
-    """Of the candidate iterates, the one with the lowest condition number after the 1 kHz check (which may
-    shrink it), with that check's report; IdentificationError if none meets the limits at 1 kHz."""
-    checked = []
-    errors = []
-    for x in candidates:
-        try:
-            xk, report = _check_at_1khz(par, x, limits, evaluator)
-        except IdentificationError as e:
-            errors.append(e)
-            continue
-        checked.append((float(log_cond(xk)), xk, report))
-    if not checked:
-        raise errors[0]
-    _, x, report = min(checked, key=lambda c: c[0])
-    return x, report
-
-
-def _check_at_1khz(
-    par: Parametrisation, x: np.ndarray, limits: ExcitationLimits, evaluator: LimitEvaluator
-) -> tuple[np.ndarray, dict[str, dict[str, Any]]]:
-    """Every limit on the trajectory sampled at 1 kHz; amplitudes shrunk about q0 if a peak fell between
-    grid points. Returns x and the nonlinear bounds' report."""
-    best = par.trajectory(x)
-    period = best.period
-    lo, hi = limits.lower, limits.upper
-    uses = best.check_limits(lo, hi, limits.max_velocity, limits.max_acceleration)
-    if max(uses.values()) > 1.0:
-        a, b, q0 = par.unpack(x)
-        q, _, _ = best.evaluate(np.arange(0.0, period, 1e-3))
-        s_pos = np.min(np.minimum(hi - q0, q0 - lo) / np.maximum(np.abs(q - q0).max(axis=0), 1e-12))
-        s = min(1.0 / max(uses["velocity"], uses["acceleration"], 1e-12), s_pos) * 0.999
-        x = par.scaled(x, min(s, 1.0))
-        uses = par.trajectory(x).check_limits(lo, hi, limits.max_velocity, limits.max_acceleration)
-    if max(uses.values()) > 1.0 + 1e-9:
-        raise IdentificationError(f"excitation optimization could not meet the limits: {uses}")
-    t = np.arange(0.0, period, 1e-3)
-    x = _shrink_into_limits(par, x, evaluator, t)
-    q, dq, ddq = par.trajectory(x).evaluate(t)
-    return x, evaluator.report(t, q, dq, ddq)
 
 
 def _limit_uses(

@@ -302,6 +302,39 @@ class LimitEvaluator:
         grad = normal @ (self._point_velocity_rows(data, i, p) - self._point_velocity_rows(data, j, pq))
         return (d - self.limits.clearance) / self.SCALE, grad @ Gq_k / self.SCALE
 
+    def margin_samples(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
+        """The scaled margins of :meth:`margins` at every sample, (N, m) (one row per sample, >= 0 inside; the
+        columns need not follow :meth:`margins`' order), without derivatives: for a dense check."""
+        columns: list[np.ndarray] = []
+        if self.torque_joints.size:
+            tj = self.torque_joints
+            tmax = self.limits.max_torque[tj]
+            tau = self.torque(q, dq, ddq)[:, tj]
+            columns += [(tmax - tau) / tmax, (tmax + tau) / tmax]
+        if self.use_floor or self.pairs:
+            assert self.geometry is not None
+            R, p = self._poses(q)
+            if self.use_floor:
+                assert self.limits.floor is not None
+                z = np.stack([np.min(R[:, j, 2, :] @ pts.T + p[:, j, 2:3], axis=1) for j, pts in
+                              enumerate(self.geometry.points)], axis=1)  # fmt: skip
+                columns.append((z - self.limits.floor - self.limits.clearance) / self.SCALE)
+            if self.pairs:
+                d = self._pair_distances(R, p)
+                columns.append((d.T - self.limits.clearance) / self.SCALE)
+        return np.concatenate(columns, axis=1) if columns else np.zeros((q.shape[0], 0))
+
+    def _pair_distances(self, R: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """Surface distances (pairs, N) [m] of the kept-apart capsule pairs, given the joint poses of :meth:`_poses`."""
+        assert self.geometry is not None
+        ends = {}
+        for j, cap in enumerate(self.geometry.capsules):
+            if cap is not None:
+                ends[j] = (R[:, j] @ cap[0] + p[:, j], R[:, j] @ cap[1] + p[:, j], cap[2])
+        return np.stack(
+            [_segment_distances(*ends[i][:2], *ends[j][:2]) - ends[i][2] - ends[j][2] for i, j in self.pairs]
+        )
+
     def report(self, t: np.ndarray, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> dict[str, dict[str, Any]]:
         """Per bound, its worst sample: ``{"torque": {"use", "joint", "time", "value", "limit"}, "workspace":
         {"clearance_m", "joint", "time"}, "self_collision": {"clearance_m", "pair", "time"}}`` (only the bounds
@@ -327,13 +360,7 @@ class LimitEvaluator:
             out["workspace"] = {"clearance_m": float(z[jz, kz]) - self.limits.floor, "joint": int(jz),
                                 "time": float(t[kz])}  # fmt: skip
         if self.pairs:
-            ends = {}
-            for j, cap in enumerate(self.geometry.capsules):
-                if cap is not None:
-                    ends[j] = (R[:, j] @ cap[0] + p[:, j], R[:, j] @ cap[1] + p[:, j], cap[2])
-            d = np.stack(
-                [_segment_distances(*ends[i][:2], *ends[j][:2]) - ends[i][2] - ends[j][2] for i, j in self.pairs]
-            )
+            d = self._pair_distances(R, p)
             c, k = np.unravel_index(int(np.argmin(d)), d.shape)
             out["self_collision"] = {"clearance_m": float(d[c, k]), "pair": self.pairs[c], "time": float(t[k])}
         return out

@@ -1,0 +1,242 @@
+"""The limits as the optimizer's constraints: imposed on a grid of times, refined where a 1 kHz check finds a
+peak between its points, and the final 1 kHz check of a trajectory.
+
+The limits hold at every instant, a semi-infinite set of constraints; the optimizer sees them on a grid
+(:class:`ConstraintGrid`: the linear position, velocity and acceleration limits on one, the torque,
+workspace and self-collision bounds of :class:`~.limits.LimitEvaluator` on a coarser one). A peak of a
+margin between grid points is caught by the check at 1 kHz. :meth:`ConstraintGrid.refined` adds those
+peaks' 1 kHz sample times to the grid (the exchange method of semi-infinite programming, Hettich and
+Kortanek 1993): optimizing on, the trajectory meets the limits at those instants by construction instead
+of having its amplitudes scaled down afterwards. :func:`best_at_1khz` is the final check, which still
+shrinks an iterate that misses a limit at 1 kHz (the guard: no trajectory leaves with a limit exceeded).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from reflexarm.errors import IdentificationError
+from reflexarm.ident.excitation.cost import Parametrisation
+from reflexarm.ident.excitation.limits import ExcitationLimits, LimitEvaluator
+
+__all__ = [
+    "CHECK_STEP",
+    "FEASIBILITY_TOLERANCE",
+    "PEAKS_PER_REFINEMENT",
+    "ConstraintGrid",
+    "best_at_1khz",
+    "shrink_into_limits",
+]
+
+#: Scaled constraint margin (O(1) units, see :meth:`ConstraintGrid.linear`) an iterate may miss and still
+#: count as feasible: the 1 kHz check that follows removes what is left.
+FEASIBILITY_TOLERANCE = 1e-6
+#: Sampling step of the final check [s] (1 kHz, a torque controller's rate).
+CHECK_STEP = 1e-3
+#: Most sample times one refinement adds to each of the two grids (the deepest peaks first): each added
+#: time of the coarse grid costs one more set of RNEA derivatives per constraint evaluation.
+PEAKS_PER_REFINEMENT = 20
+
+Margins = tuple[Callable[[np.ndarray], np.ndarray], Callable[[np.ndarray], np.ndarray]]
+
+
+class ConstraintGrid:
+    """The limits imposed at the times ``t_linear`` (position, velocity, acceleration: linear in x) and
+    ``t_dynamics`` (torque, workspace, self-collision: nonlinear, with exact derivatives), as SLSQP
+    constraints with margins >= 0 inside, scaled to O(1)."""
+
+    def __init__(
+        self,
+        par: Parametrisation,
+        limits: ExcitationLimits,
+        evaluator: LimitEvaluator,
+        t_linear: np.ndarray,
+        t_dynamics: np.ndarray,
+    ) -> None:
+        self.par, self.limits, self.evaluator = par, limits, evaluator
+        self.t_linear, self.t_dynamics = np.asarray(t_linear, float), np.asarray(t_dynamics, float)
+        self.linear = self._linear_margins()
+        self.nonlinear = self._nonlinear_margins()
+
+    @classmethod
+    def uniform(
+        cls, par: Parametrisation, limits: ExcitationLimits, evaluator: LimitEvaluator, n_linear: int, n_dynamics: int
+    ) -> ConstraintGrid:
+        """The grids of ``n_linear`` and ``n_dynamics`` equally spaced times over one period."""
+        period = 2 * np.pi / par.base_frequency
+        return cls(
+            par, limits, evaluator, np.arange(n_linear) * period / n_linear, np.arange(n_dynamics) * period / n_dynamics
+        )
+
+    @property
+    def scipy_constraints(self) -> list[dict[str, Any]]:
+        """The constraints in ``scipy.optimize.minimize``'s form."""
+        out = [{"type": "ineq", "fun": self.linear[0], "jac": self.linear[1]}]
+        if self.nonlinear is not None:
+            out.append({"type": "ineq", "fun": self.nonlinear[0], "jac": self.nonlinear[1]})
+        return out
+
+    def feasible(self, x: np.ndarray) -> bool:
+        """Whether x meets every constraint of the grid (within :data:`FEASIBILITY_TOLERANCE`)."""
+        if not np.all(np.isfinite(x)) or np.min(self.linear[0](x)) < -FEASIBILITY_TOLERANCE:
+            return False
+        return self.nonlinear is None or bool(np.min(self.nonlinear[0](x)) >= -FEASIBILITY_TOLERANCE)
+
+    def refined(self, x: np.ndarray) -> ConstraintGrid | None:
+        """This grid plus the 1 kHz sample times at which a margin of x has a local minimum below
+        -:data:`FEASIBILITY_TOLERANCE` (at most :data:`PEAKS_PER_REFINEMENT` per grid, the deepest first);
+        None when x meets every limit at 1 kHz."""
+        trajectory = self.par.trajectory(x)
+        t = np.arange(0.0, trajectory.period, CHECK_STEP)
+        q, dq, ddq = trajectory.evaluate(t)
+        new_linear = _peak_times(t, self._linear_samples(q, dq, ddq))
+        new_dynamics = np.zeros(0)
+        if self.evaluator.active:
+            new_dynamics = _peak_times(t, self.evaluator.margin_samples(q, dq, ddq))
+        if new_linear.size == 0 and new_dynamics.size == 0:
+            return None
+        return ConstraintGrid(
+            self.par, self.limits, self.evaluator,
+            np.union1d(self.t_linear, new_linear), np.union1d(self.t_dynamics, new_dynamics),
+        )  # fmt: skip
+
+    def _linear_samples(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
+        """The linear margins (N, 6 n) at samples (N, n), scaled as :meth:`_linear_margins` scales them."""
+        lim = self.limits
+        lo, hi, vmax, amax = lim.lower, lim.upper, lim.max_velocity, lim.max_acceleration
+        half = 0.5 * (hi - lo)
+        return np.concatenate(
+            [(hi - q) / half, (q - lo) / half, (vmax - dq) / vmax, (vmax + dq) / vmax, (amax - ddq) / amax,
+             (amax + ddq) / amax], axis=1,
+        )  # fmt: skip
+
+    def _linear_margins(self) -> Margins:
+        """Position, velocity and acceleration limits on the grid: linear in x, margins A x + b >= 0 scaled to O(1)."""
+        par, limits, n_grid = self.par, self.limits, self.t_linear.size
+        Gq, Gv, Ga = par.linear_maps(self.t_linear)
+        G = np.concatenate([Gq.reshape(-1, par.size), Gv.reshape(-1, par.size), Ga.reshape(-1, par.size)])
+        lo, hi, vmax, amax = limits.lower, limits.upper, limits.max_velocity, limits.max_acceleration
+        rows_hi = np.concatenate([np.tile(hi, n_grid), np.tile(vmax, n_grid), np.tile(amax, n_grid)])
+        rows_lo = np.concatenate([np.tile(lo, n_grid), -np.tile(vmax, n_grid), -np.tile(amax, n_grid)])
+        scale = np.concatenate([np.tile(0.5 * (hi - lo), n_grid), np.tile(vmax, n_grid), np.tile(amax, n_grid)])
+        # margins >= 0 inside the limits, scaled to O(1): (upper - s) / scale and (s - lower) / scale
+        A = np.vstack([-G / scale[:, None], G / scale[:, None]])
+        b = np.concatenate([rows_hi / scale, -rows_lo / scale])
+        return (lambda x: A @ x + b), (lambda x: A)
+
+    def _nonlinear_margins(self) -> Margins | None:
+        """Torque, workspace and self-collision margins on the (coarser) grid and their exact derivatives."""
+        if not self.evaluator.active:
+            return None
+        par, evaluator, t_grid = self.par, self.evaluator, self.t_dynamics
+        Gq, Gv, Ga = par.linear_maps(t_grid)
+        cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+
+        def both(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            key = x.tobytes()
+            if key not in cache:
+                cache.clear()
+                q, dq, ddq = par.trajectory(x).evaluate(t_grid)
+                cache[key] = evaluator.margins(q, dq, ddq, Gq, Gv, Ga)
+            return cache[key]
+
+        return (lambda x: both(x)[0]), (lambda x: both(x)[1])
+
+
+def _peak_times(t: np.ndarray, margins: np.ndarray) -> np.ndarray:
+    """The times of the local minima in time (periodic) of each column of ``margins`` (N, m) that lie below
+    -FEASIBILITY_TOLERANCE, at most PEAKS_PER_REFINEMENT, the deepest first."""
+    if margins.shape[1] == 0:
+        return np.zeros(0)
+    peak = (margins <= np.roll(margins, 1, axis=0)) & (margins <= np.roll(margins, -1, axis=0))
+    peak &= margins < -FEASIBILITY_TOLERANCE
+    rows = np.flatnonzero(peak.any(axis=1))
+    depth = np.where(peak[rows], margins[rows], np.inf).min(axis=1)
+    return np.sort(t[rows[np.argsort(depth)[:PEAKS_PER_REFINEMENT]]])
+
+
+def within(report: dict[str, dict[str, Any]]) -> bool:
+    """Whether a :meth:`LimitEvaluator.report` is within the torque limit and above the floor and apart."""
+    ok = True
+    if "torque" in report:
+        ok &= float(report["torque"]["use"]) <= 1.0  # type: ignore[arg-type]
+    for key in ("workspace", "self_collision"):
+        if key in report:
+            ok &= float(report[key]["clearance_m"]) >= 0.0  # type: ignore[arg-type]
+    return bool(ok)
+
+
+def shrink_into_limits(par: Parametrisation, x: np.ndarray, evaluator: LimitEvaluator, t: np.ndarray) -> np.ndarray:
+    """x with its amplitudes scaled down (bisection on s in [0, 1], 10 steps: s to 1e-3) until the
+    nonlinear bounds hold at the times ``t``; the rest pose q0 (s = 0) must meet them."""
+    if not evaluator.active:
+        return x
+
+    def report(s: float) -> dict[str, dict[str, Any]]:
+        q, dq, ddq = par.trajectory(par.scaled(x, s)).evaluate(t)
+        return evaluator.report(t, q, dq, ddq)
+
+    if within(report(1.0)):
+        return x
+    at_rest = report(0.0)
+    if not within(at_rest):
+        raise IdentificationError(
+            f"no excitation can meet the limits: at rest in the centre pose {np.round(par.unpack(x)[2], 3).tolist()} "
+            f"already {at_rest} (choose another --floor, a larger --torque-fraction, or a centre pose)"
+        )
+    good, bad = 0.0, 1.0
+    for _ in range(10):
+        s = 0.5 * (good + bad)
+        good, bad = (s, bad) if within(report(s)) else (good, s)
+    return par.scaled(x, good)
+
+
+def best_at_1khz(
+    par: Parametrisation,
+    candidates: list[np.ndarray],
+    limits: ExcitationLimits,
+    evaluator: LimitEvaluator,
+    log_cond: Callable[[np.ndarray], float],
+) -> tuple[np.ndarray, dict[str, dict[str, Any]]]:
+    """Of the candidate iterates, the one with the lowest condition number after the 1 kHz check (which may
+    shrink it), with that check's report; IdentificationError if none meets the limits at 1 kHz."""
+    checked = []
+    errors = []
+    for x in candidates:
+        try:
+            xk, report = check_at_1khz(par, x, limits, evaluator)
+        except IdentificationError as e:
+            errors.append(e)
+            continue
+        checked.append((float(log_cond(xk)), xk, report))
+    if not checked:
+        raise errors[0]
+    _, x, report = min(checked, key=lambda c: c[0])
+    return x, report
+
+
+def check_at_1khz(
+    par: Parametrisation, x: np.ndarray, limits: ExcitationLimits, evaluator: LimitEvaluator
+) -> tuple[np.ndarray, dict[str, dict[str, Any]]]:
+    """Every limit on the trajectory sampled at 1 kHz; amplitudes shrunk about q0 if a peak fell between
+    grid points. Returns x and the nonlinear bounds' report."""
+    best = par.trajectory(x)
+    period = best.period
+    lo, hi = limits.lower, limits.upper
+    uses = best.check_limits(lo, hi, limits.max_velocity, limits.max_acceleration)
+    if max(uses.values()) > 1.0:
+        a, b, q0 = par.unpack(x)
+        q, _, _ = best.evaluate(np.arange(0.0, period, CHECK_STEP))
+        s_pos = np.min(np.minimum(hi - q0, q0 - lo) / np.maximum(np.abs(q - q0).max(axis=0), 1e-12))
+        s = min(1.0 / max(uses["velocity"], uses["acceleration"], 1e-12), s_pos) * 0.999
+        x = par.scaled(x, min(s, 1.0))
+        uses = par.trajectory(x).check_limits(lo, hi, limits.max_velocity, limits.max_acceleration)
+    if max(uses.values()) > 1.0 + 1e-9:
+        raise IdentificationError(f"excitation optimization could not meet the limits: {uses}")
+    t = np.arange(0.0, period, CHECK_STEP)
+    x = shrink_into_limits(par, x, evaluator, t)
+    q, dq, ddq = par.trajectory(x).evaluate(t)
+    return x, evaluator.report(t, q, dq, ddq)
