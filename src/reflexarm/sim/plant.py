@@ -18,7 +18,7 @@ from reflexarm.robots.friction import CoulombViscousFriction
 from reflexarm.robots.loader import load_robot
 from reflexarm.robots.robot_model import RobotModel
 from reflexarm.sim import _kernels
-from reflexarm.sim._builder import SENSOR_FORCE, SENSOR_TORQUE, build_robot_spec
+from reflexarm.sim._builder import SENSOR_FORCE, SENSOR_TORQUE, BuildInfo, build_robot_spec
 from reflexarm.sim._plant_forces import _AppliedForce, _PlantForces
 from reflexarm.sim._plant_sensors import _PlantSensors, step_sensing_last
 from reflexarm.sim.noise import PAPER_NOISE, SensorNoise
@@ -91,8 +91,32 @@ class Plant(_PlantSensors, _PlantForces):
         if not isinstance(robot, RobotModel):
             robot = load_robot(robot)
         self.robot = robot
-        self.n = n = robot.n
+        self.n = robot.n
         self.timestep, self.control_period, self.substeps = _check_timing(timestep, control_period)
+        self._check_arguments(scene, noise, seed, true_friction, extra_joint_torque, smooth_friction)
+        info = self._compile(true_friction)
+        self._map_indices(info)
+        self._cache_views()
+        self._forces: dict[int, _AppliedForce] = {}
+        self._next_force = 0
+        self._failed: str | None = None
+        self._tick = 0
+        # one run at a time (in_use): MuJoCo's data stepped by two threads at once crashes the process
+        self._user_lock = threading.Lock()
+        self._user: str | None = None  # who runs the plant now ("... in thread 'name'")
+        self._user_thread: int | None = None
+        self.reset(robot.home)
+
+    def _check_arguments(
+        self,
+        scene: Scene | Sequence[Scene] | None,
+        noise: SensorNoise | None,
+        seed: int,
+        true_friction: CoulombViscousFriction | None,
+        extra_joint_torque: ExtraTorque | None,
+        smooth_friction: CoulombViscousFriction | None,
+    ) -> None:
+        """The noise, seed, friction and scene arguments, checked (ConfigError naming the argument) and kept."""
         if noise is None:
             noise = PAPER_NOISE
         if not isinstance(noise, SensorNoise):
@@ -120,6 +144,9 @@ class Plant(_PlantSensors, _PlantForces):
                     raise ConfigError(f"scene must be a Scene or a sequence of Scenes; got {type(s).__name__}")
         self.scenes = scenes
 
+    def _compile(self, true_friction: CoulombViscousFriction | None) -> BuildInfo:
+        """The MuJoCo model of the file with the wrist sensor and the scenes, and its data; the build's info."""
+        robot, scenes, smooth_friction = self.robot, self.scenes, self.smooth_friction
         spec, info = build_robot_spec(
             robot, true_friction=true_friction, timestep=self.timestep, smooth_friction=smooth_friction
         )
@@ -135,13 +162,15 @@ class Plant(_PlantSensors, _PlantForces):
         except Exception as e:
             raise ModelError(f"MuJoCo cannot compile the plant of {str(robot.source)!r} with its scene: {e}") from e
         self._spec = spec
-        m = self._model
-        self._data = mujoco.MjData(m)
+        self._data = mujoco.MjData(self._model)
         self.is_urdf = info.is_urdf
         #: What the build removed from the file (actuators, gravcomp), each also given as a RobotFileWarning.
         self.notes = tuple(info.notes)
+        return info
 
-        # ---- index maps (arm joints in the Pinocchio order)
+    def _map_indices(self, info: BuildInfo) -> None:
+        """Index maps from the arm's joints (in the Pinocchio order), sites and bodies into the MuJoCo model."""
+        m, robot = self._model, self.robot
         jids = np.array([m.joint(j).id for j in info.joint_names])
         bad = [info.joint_names[i] for i, j in enumerate(jids) if m.jnt_type[j] not in (2, 3)]
         if bad:
@@ -164,7 +193,9 @@ class Plant(_PlantSensors, _PlantForces):
         gravity_off = int(m.opt.disableflags) & int(mujoco.mjtDisableBit.mjDSBL_GRAVITY)
         self._gravity = np.zeros(3) if gravity_off else np.array(m.opt.gravity, dtype=float)
 
-        # ---- preallocated buffers and cached views into MjData (they share memory with it)
+    def _cache_views(self) -> None:
+        """Preallocated buffers and cached views into MjData (they share memory with it)."""
+        m, n, noise = self._model, self.n, self.noise
         d = self._data
         self._qpos, self._qvel, self._qfrc = d.qpos, d.qvel, d.qfrc_applied
         self._xfrc = d.xfrc_applied
@@ -201,15 +232,6 @@ class Plant(_PlantSensors, _PlantForces):
             ]
         )
         self._noisy = not noise.is_zero
-        self._forces: dict[int, _AppliedForce] = {}
-        self._next_force = 0
-        self._failed: str | None = None
-        self._tick = 0
-        # one run at a time (in_use): MuJoCo's data stepped by two threads at once crashes the process
-        self._user_lock = threading.Lock()
-        self._user: str | None = None  # who runs the plant now ("... in thread 'name'")
-        self._user_thread: int | None = None
-        self.reset(robot.home)
 
     # ------------------------------------------------------------------ facts
     @property
