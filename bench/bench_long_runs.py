@@ -11,9 +11,12 @@ observer replay of a whole log in one call, and one hour of 1 kHz logs through `
 2. Memory of a soak: a child process streams free motion with the default trace of an hour (every 100th tick) and
    samples its RSS; printed: after the imports, peak, the growth per simulated minute and the extrapolation to one
    simulated hour (REFLEXARM_BENCH_SOAK_S=3600 runs the whole hour instead). Target: < 400 MB, flat.
-3. Replay: a 7-joint Atlas log through reflexarm.control.replay (one call) and through Controller.step per sample
+3. Memory of ``reflexarm simulate free-motion`` (10 simulated seconds, default trace, the still and the figure) in a
+   child process, by phase: the peak RSS (VmHWM) during and the RSS after the imports, the set-up, the run, the
+   figure and the still. Target: < 400 MB.
+4. Replay: a 7-joint Atlas log through reflexarm.control.replay (one call) and through Controller.step per sample
    (what tune-thresholds did), in samples per second. Target: >= 1 M samples/s.
-4. ``reflexarm tune-thresholds`` end to end (a child process: reading the files, replay, tail fit, outputs) on one
+5. ``reflexarm tune-thresholds`` end to end (a child process: reading the files, replay, tail fit, outputs) on one
    hour of simulated 1 kHz free-motion logs (four 15-minute Parquet logs written by record_free_motion_log, kept
    in bench/out/long_logs/ for the next run). Target: < 60 s.
 """
@@ -181,6 +184,60 @@ def _soak() -> dict[str, Any]:
     return out
 
 
+_CLI_CHILD = r"""
+import json, sys
+def status():
+    out = {}
+    for line in open("/proc/self/status"):
+        if line.startswith(("VmRSS:", "VmHWM:")):
+            key, value = line.split(":")
+            out[key] = int(value.split()[0]) * 1024
+    return out
+phases = []
+def mark(name):  # RSS now and the peak since the last mark (the kernel's high-water mark, reset after reading)
+    s = status()
+    phases.append((name, s["VmRSS"], s["VmHWM"]))
+    with open("/proc/self/clear_refs", "w") as f:
+        f.write("5")
+mark("interpreter")
+from reflexarm.cli import main
+import reflexarm._cli.run_outputs as ro, reflexarm.experiments.collision as col, reflexarm.experiments.plots as pl
+mark("imports")
+def wrap(owner, name, label, before=None):
+    f = getattr(owner, name)
+    def g(*a, **k):
+        if before:
+            mark(before)
+        r = f(*a, **k)
+        mark(label)
+        return r
+    setattr(owner, name, g)
+wrap(col, "free_motion_false_alarms", "run (stream, trace written)", before="set-up (robot, options, scene capture)")
+wrap(pl, "plot_free_motion", "figure (matplotlib)", before="summary")
+wrap(ro.SceneCapture, "finish", "still (MuJoCo offscreen, EGL)")
+main(["simulate", "free-motion", "--quiet", "--duration", sys.argv[1], "--out", sys.argv[2]])
+mark("exit")
+print(json.dumps(phases))
+"""
+
+
+def _cli_memory(duration: float = 10.0) -> dict[str, Any]:
+    """Peak memory of ``reflexarm simulate free-motion`` (default trace, still and figure) by phase, in a child."""
+    out_dir = tempfile.mkdtemp()
+    res = subprocess.run([sys.executable, "-c", _CLI_CHILD, str(duration), out_dir], capture_output=True, text=True,
+                         check=True, env=os.environ | {"MPLBACKEND": "Agg"})  # fmt: skip
+    phases = json.loads(res.stdout.strip().splitlines()[-1])
+    peak = max(p[2] for p in phases)
+    print(f"reflexarm simulate free-motion --duration {duration:g} (default trace, still, figure): peak RSS "
+          f"{peak / 1e6:.0f} MB (target < 400 MB); by phase, RSS after it and the peak during it:")  # fmt: skip
+    prev = 0
+    for name, rss, hwm in phases[1:]:
+        print(f"  {name:<40} {rss / 1e6:5.0f} MB (+{(rss - prev) / 1e6:4.0f}), peak {hwm / 1e6:5.0f} MB")
+        prev = rss
+    by_phase = {name: {"rss_MB": rss / 1e6, "peak_MB": hwm / 1e6} for name, rss, hwm in phases}
+    return {"duration_s": duration, "peak_MB": peak / 1e6, "phases": by_phase}
+
+
 def _replay() -> dict[str, Any]:
     from reflexarm.control import Controller, replay
     from reflexarm.signals import Measurement, Reference
@@ -251,7 +308,8 @@ def _tune() -> dict[str, Any]:
 
 
 def main() -> dict[str, Any]:
-    return {"speed": _speed(), "soak": _soak(), "replay": _replay(), "tune_thresholds_hour": _tune()}
+    return {"speed": _speed(), "soak": _soak(), "cli_memory": _cli_memory(), "replay": _replay(),
+            "tune_thresholds_hour": _tune()}  # fmt: skip
 
 
 if __name__ == "__main__":
