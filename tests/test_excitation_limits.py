@@ -201,3 +201,34 @@ def test_dense_margins_match_the_optimizers_margins(gen3):
     dense = evaluator.margin_samples(q, dq, ddq)
     # the same quantities along two code paths (loops vs vectorised): agreement to round-off of O(1) margins
     np.testing.assert_allclose(dense, values.reshape(t.size, -1), rtol=0, atol=1e-12)
+
+
+def test_a_peak_between_grid_points_is_restored_without_shrinking(gen3):
+    """restored() moves a trajectory whose joint 1 speed peaks 5 % over the limit between grid points onto
+    the limit at 1 kHz (nothing left for the final check to shrink) and leaves joint 2, well within its
+    limits, as it was, where a uniform shrink would scale both joints by 1/1.05."""
+    from reflexarm.ident.excitation.constraints import ConstraintGrid, check_at_1khz
+    from reflexarm.ident.excitation.limits import LimitEvaluator
+
+    _, robot = gen3
+    limits, _ = excitation_limits(robot, torque_fraction=None, floor=None, self_collision=False)
+    evaluator = LimitEvaluator(robot, limits, None)
+    vmax = limits.max_velocity[0]
+    par, x = _one_joint_swing(robot, 1.05 * vmax)
+    a, b, q0 = par.unpack(x)
+    a[1] = 0.5 * a[0] / 1.05 * 0.5  # joint 2: the same swing at half the speed limit
+    x = par.pack(a, b, q0)
+    grid = ConstraintGrid(par, limits, evaluator, (np.arange(8) + 0.5) * 10.0 / 8, np.zeros(0))
+    y = grid.restored(x)
+    assert grid.refined(y) is None  # within every limit at 1 kHz
+    checked, _ = check_at_1khz(par, y, limits, evaluator)
+    np.testing.assert_allclose(checked, y, rtol=1e-12, atol=0)  # the final check leaves it as it is (round-off)
+    uses = par.trajectory(y).check_limits(limits.lower, limits.upper, limits.max_velocity, limits.max_acceleration)
+    # on the limit (SLSQP's constraint tolerance, FEASIBILITY_TOLERANCE = 1e-6 of vmax), not below it
+    assert uses["velocity"] == pytest.approx(1.0, abs=1e-6)
+    # joint 2's coefficients kept (no constraint of joint 2 is active: the nearest point does not move them;
+    # 1e-8 rad/s allows SLSQP's round-off), and the move is no larger than the uniform shrink's (the shrunk
+    # trajectory is one of the points the projection could have chosen)
+    np.testing.assert_allclose(par.unpack(y)[0][1], par.unpack(x)[0][1], atol=1e-8)
+    np.testing.assert_allclose(par.unpack(y)[1][1], par.unpack(x)[1][1], atol=1e-8)
+    assert np.linalg.norm(y - x) <= np.linalg.norm(par.scaled(x, 1 / 1.05) - x) * (1 + 1e-9)

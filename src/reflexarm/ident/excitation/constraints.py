@@ -13,10 +13,12 @@ shrinks an iterate that misses a limit at 1 kHz (the guard: no trajectory leaves
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+import scipy.optimize
 
 from reflexarm.errors import IdentificationError
 from reflexarm.ident.excitation.cost import Parametrisation
@@ -26,6 +28,8 @@ __all__ = [
     "CHECK_STEP",
     "FEASIBILITY_TOLERANCE",
     "PEAKS_PER_REFINEMENT",
+    "PROJECTION_ITERATIONS",
+    "RESTORATIONS",
     "ConstraintGrid",
     "best_at_1khz",
     "shrink_into_limits",
@@ -39,6 +43,12 @@ CHECK_STEP = 1e-3
 #: Most sample times one refinement adds to each of the two grids (the deepest peaks first): each added
 #: time of the coarse grid costs one more set of RNEA derivatives per constraint evaluation.
 PEAKS_PER_REFINEMENT = 20
+
+#: Refine-and-project steps of :meth:`ConstraintGrid.restored`: a projection moves the peaks by a few
+#: samples at most, so each step's violations are a small fraction of the one before (measured: ...).
+RESTORATIONS = 5
+#: SLSQP iterations of one projection (a distance to a nearby point: converges in a few).
+PROJECTION_ITERATIONS = 50
 
 Margins = tuple[Callable[[np.ndarray], np.ndarray], Callable[[np.ndarray], np.ndarray]]
 
@@ -102,6 +112,33 @@ class ConstraintGrid:
             self.par, self.limits, self.evaluator,
             np.union1d(self.t_linear, new_linear), np.union1d(self.t_dynamics, new_dynamics),
         )  # fmt: skip
+
+    def project(self, x: np.ndarray) -> np.ndarray | None:
+        """The point nearest to x (Euclidean in the coefficients) that meets the grid's constraints (SLSQP,
+        at most :data:`PROJECTION_ITERATIONS` iterations); None if it finds none."""
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            res = scipy.optimize.minimize(
+                lambda y: 0.5 * float((y - x) @ (y - x)), x, jac=lambda y: y - x, method="SLSQP",
+                constraints=self.scipy_constraints, options={"maxiter": PROJECTION_ITERATIONS, "ftol": 1e-12},
+            )  # fmt: skip
+        y = np.asarray(res.x)
+        return y if self.feasible(y) else None
+
+    def restored(self, x: np.ndarray) -> np.ndarray:
+        """x moved onto the limits at 1 kHz: up to :data:`RESTORATIONS` times, refine the grid at its 1 kHz
+        peaks (:meth:`refined`) and project it onto the refined grid (:meth:`project`). Returns x as it is
+        when it has no peak, and the last point reached otherwise (the final check shrinks what is left)."""
+        grid = self
+        for _ in range(RESTORATIONS):
+            refined = grid.refined(x)
+            if refined is None:
+                break
+            y = refined.project(x)
+            if y is None:
+                break
+            grid, x = refined, y
+        return x
 
     def _linear_samples(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
         """The linear margins (N, 6 n) at samples (N, n), scaled as :meth:`_linear_margins` scales them."""
@@ -200,9 +237,10 @@ def best_at_1khz(
     limits: ExcitationLimits,
     evaluator: LimitEvaluator,
     log_cond: Callable[[np.ndarray], float],
-) -> tuple[np.ndarray, dict[str, dict[str, Any]]]:
+) -> tuple[np.ndarray, dict[str, dict[str, Any]], float]:
     """Of the candidate iterates, the one with the lowest condition number after the 1 kHz check (which may
-    shrink it), with that check's report; IdentificationError if none meets the limits at 1 kHz."""
+    shrink it), with that check's report and the factor it scaled the amplitudes by (1: none);
+    IdentificationError if none meets the limits at 1 kHz."""
     checked = []
     errors = []
     for x in candidates:
@@ -211,11 +249,13 @@ def best_at_1khz(
         except IdentificationError as e:
             errors.append(e)
             continue
-        checked.append((float(log_cond(xk)), xk, report))
+        before = float(np.linalg.norm(np.concatenate(par.unpack(x)[:2], axis=None)))
+        scale = float(np.linalg.norm(np.concatenate(par.unpack(xk)[:2], axis=None))) / max(before, 1e-300)
+        checked.append((float(log_cond(xk)), xk, report, min(scale, 1.0)))
     if not checked:
         raise errors[0]
-    _, x, report = min(checked, key=lambda c: c[0])
-    return x, report
+    _, x, report, scale = min(checked, key=lambda c: c[0])
+    return x, report, scale
 
 
 def check_at_1khz(
@@ -228,10 +268,13 @@ def check_at_1khz(
     lo, hi = limits.lower, limits.upper
     uses = best.check_limits(lo, hi, limits.max_velocity, limits.max_acceleration)
     if max(uses.values()) > 1.0:
-        a, b, q0 = par.unpack(x)
-        q, _, _ = best.evaluate(np.arange(0.0, period, CHECK_STEP))
-        s_pos = np.min(np.minimum(hi - q0, q0 - lo) / np.maximum(np.abs(q - q0).max(axis=0), 1e-12))
-        s = min(1.0 / max(uses["velocity"], uses["acceleration"], 1e-12), s_pos) * 0.999
+        q0 = par.unpack(x)[2]
+        d, _, _ = best.evaluate(np.arange(0.0, period, CHECK_STEP))
+        d -= q0  # q0 + s d stays within [lo, hi] for s <= (hi - q0) / max d and (q0 - lo) / max(-d)
+        s_pos = min(
+            np.min((hi - q0) / np.maximum(d.max(axis=0), 1e-12)), np.min((q0 - lo) / np.maximum(-d.min(axis=0), 1e-12))
+        )
+        s = min(1.0 / max(uses["velocity"], uses["acceleration"], 1e-12), s_pos)
         x = par.scaled(x, min(s, 1.0))
         uses = par.trajectory(x).check_limits(lo, hi, limits.max_velocity, limits.max_acceleration)
     if max(uses.values()) > 1.0 + 1e-9:

@@ -15,14 +15,14 @@ candidate is at rest at both ends by construction.
 of one period (``scipy.optimize.minimize``, SLSQP) subject to joint position (with a margin), velocity and
 acceleration limits evaluated on a dense time grid (linear in the coefficients), and to the model's joint
 torques, a workspace bound and self-collision (:mod:`.limits`: nonlinear, with exact derivatives) on a
-coarser grid (:class:`~.constraints.ConstraintGrid`). A peak of a limit between grid points is found by
-checking the best iterate at 1 kHz; its time joins the grid and the optimization goes on
-(:data:`REFINEMENTS`), so the trajectory meets the limits at 1 kHz by construction; the final 1 kHz check
-(:func:`~.constraints.best_at_1khz`) still scales the amplitudes down if a peak is left. Its steps:
-:func:`excitation_limits` (the bounds), a start inside them (:func:`_start`), the SLSQP run with its progress
-recorded and the refinements (:func:`_minimise_and_refine`), the 1 kHz check and the diagnosis of a run
-that stalled (:func:`~.diagnosis.diagnose_stall`: the optimizer's own message, and which base-parameter
-combination the motion fails to excite).
+coarser grid (:class:`~.constraints.ConstraintGrid`). The best iterates are then checked at 1 kHz: a
+peak of a limit between grid points joins the grid and the iterate is moved to the nearest point that
+meets the refined grid (:meth:`~.constraints.ConstraintGrid.restored`), so the trajectory meets the limits
+at 1 kHz by construction; the final 1 kHz check (:func:`~.constraints.best_at_1khz`) still scales the
+amplitudes down if a peak is left. Its steps: :func:`excitation_limits` (the bounds), a start inside them
+(:func:`_start`), the SLSQP run with its progress recorded (:func:`_minimise`), the restoration and 1 kHz
+check of its best iterates, and the diagnosis of a run that stalled (:func:`~.diagnosis.diagnose_stall`:
+the optimizer's own message, and which base-parameter combination the motion fails to excite).
 
 Repeatability: a seeded call gives the same trajectory bit for bit on one machine with the same BLAS
 library and thread count. On another CPU (OpenBLAS picks its kernels per CPU) or with another number
@@ -89,13 +89,6 @@ DEFAULT_POSITION_MARGIN = 0.1
 #: with the lowest condition number after that check is kept (a peak between grid points shrinks an iterate's
 #: amplitudes, and the last iterate is not always the best one after that: measured 17.0 vs 15.6 on a 7-DoF arm).
 CANDIDATES_AT_1KHZ = 5
-#: Refinements of the constraint grid after the run: each adds the times of the peaks the 1 kHz check finds
-#: on the best iterate (:meth:`~.constraints.ConstraintGrid.refined`) and optimizes on from there for at most
-#: :data:`REFINEMENT_ITERATIONS` iterations; the run stops refining once the best iterate meets every
-#: limit at 1 kHz.
-REFINEMENTS = 3
-#: SLSQP iterations after each refinement (it restarts with a fresh quasi-Newton matrix).
-REFINEMENT_ITERATIONS = 10
 
 
 @dataclass(frozen=True)
@@ -115,6 +108,8 @@ class ExcitationDesign:
         limits: every bound the trajectory respects (None for a design read from an old file).
         limit_report: the worst sample of the torque, workspace and self-collision bounds at 1 kHz
             (:meth:`LimitEvaluator.report`).
+        amplitude_scale: the factor the final 1 kHz check scaled the amplitudes by (1: the optimized
+            trajectory met every limit at 1 kHz as it was; below 1: a peak between grid points was left).
     """
 
     trajectory: FourierTrajectory
@@ -130,6 +125,7 @@ class ExcitationDesign:
     diagnosis: str = ""
     limits: ExcitationLimits | None = None
     limit_report: dict[str, dict[str, Any]] = field(default_factory=dict)
+    amplitude_scale: float = 1.0
 
     def to_dict(self) -> dict[str, object]:
         return {
@@ -142,6 +138,7 @@ class ExcitationDesign:
             "limits_initial": self.limits_initial,
             "limits_optimized": self.limits_optimized,
             "limit_report": self.limit_report,
+            "amplitude_scale_at_1khz": self.amplitude_scale,
             "iterations": self.iterations,
             "message": self.message,
             "bounds": self.bounds,
@@ -298,15 +295,15 @@ def optimize_excitation(
     x0 = _start(par, limits, evaluator, mid, seed, initial, grid.t_linear)
     start = par.trajectory(x0)
     gradient = log_condition_gradient(robot, base, par, t_cost)
-    res, history, candidates = _minimise_and_refine(log_cond, gradient, x0, grid, maxiter, progress)
-    x, report = best_at_1khz(par, candidates, limits, evaluator, log_cond)
+    res, history, candidates = _minimise(log_cond, gradient, x0, grid, maxiter, progress)
+    x, report, scale = best_at_1khz(par, [grid.restored(x) for x in candidates], limits, evaluator, log_cond)
     best = par.trajectory(x)
     cond1 = float(np.exp(log_cond(x)))
     return ExcitationDesign(
         best, start, float(np.exp(log_cond(x0))), cond1, _limit_uses(start, limits, evaluator),
         _limit_uses(best, limits, evaluator, report), int(res.get("nit", 0)), str(res.get("message", "")),
         _bounds(limits), tuple(history), diagnose_stall(robot, base, best, cond1, history, res, n_samples), limits,
-        report,
+        report, scale,
     )  # fmt: skip
 
 
@@ -353,37 +350,6 @@ def _start(
     return shrink_into_limits(par, x0, evaluator, t_grid)
 
 
-def _minimise_and_refine(
-    log_cond: Callable[[np.ndarray], float],
-    gradient: Callable[[np.ndarray], np.ndarray],
-    x0: np.ndarray,
-    grid: ConstraintGrid,
-    maxiter: int,
-    progress: bool,
-) -> tuple[scipy.optimize.OptimizeResult, list[float], list[np.ndarray]]:
-    """:func:`_minimise` on ``grid``, then up to :data:`REFINEMENTS` times: refine the grid at the best
-    iterate's 1 kHz peaks and optimize on from it. Returns the last result (``nit``: all iterations), the
-    history and the candidates for the 1 kHz check: the best feasible iterates on the finest grid reached,
-    and the best iterate of each grid before it (checked too, shrunk where it misses a limit)."""
-    res, history, candidates = _minimise(log_cond, gradient, x0, grid, maxiter, progress)
-    candidates = candidates or [x0]  # the start meets the limits on the grid (see _start)
-    nit = int(res.get("nit", 0))
-    earlier: list[np.ndarray] = []
-    for _ in range(REFINEMENTS if maxiter > 0 else 0):
-        refined = grid.refined(candidates[0])
-        if refined is None:
-            break
-        more, steps, found = _minimise(log_cond, gradient, candidates[0], refined, REFINEMENT_ITERATIONS, progress)
-        history += steps
-        nit += int(more.get("nit", 0))
-        if not found:  # no iterate met the refined grid: keep what we have
-            break
-        grid, res, earlier = refined, more, [*earlier, candidates[0]]
-        candidates = found
-    res["nit"] = nit
-    return res, history, candidates + earlier
-
-
 def _minimise(
     log_cond: Callable[[np.ndarray], float],
     gradient: Callable[[np.ndarray], np.ndarray],
@@ -393,12 +359,12 @@ def _minimise(
     progress: bool,
 ) -> tuple[scipy.optimize.OptimizeResult, list[float], list[np.ndarray]]:
     """SLSQP over the grid's constraints from x0, recording the condition number after each iteration.
-    Returns the result, the history and the best iterates that meet the grid's constraints, x0 among them
-    if it does, best first (at most :data:`CANDIDATES_AT_1KHZ`; SLSQP may end outside the nonlinear ones)."""
+    Returns the result, the history and the best iterates that meet the grid's constraints, best first (at
+    most :data:`CANDIDATES_AT_1KHZ`; SLSQP may end outside the nonlinear ones; the start is always one)."""
     from reflexarm._progress import show_progress
 
     history: list[float] = []
-    feasible_iterates = [(float(log_cond(x0)), x0)] if grid.feasible(x0) else []
+    feasible_iterates = [(float(log_cond(x0)), x0)]  # the start meets the grid's limits (see _start)
     bar = None
     if show_progress(progress) and maxiter > 0:
         from tqdm import tqdm
