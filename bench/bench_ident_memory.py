@@ -9,7 +9,7 @@ parameters costs the same at any length; ``--quiet``); its peak resident memory 
 own high-water mark (``VmHWM`` of ``/proc/self/status``, read by the child as it ends), its CPU time
 ``ru_utime + ru_stime`` from ``os.wait4``. Measured:
 
-* **blocks**: the long log (default 1e7 rows) read in blocks (``--block-rows 200000``);
+* **blocks**: the long log (default 1e7 rows) read in blocks (``--block-rows 100000``, the default);
 * **whole, baseline**: a shorter log (default 1e6 rows) read whole (``--block-rows 0``), and the same
   shorter log in blocks: the ratio whole / blocks on it, and the bytes a row each path costs above the
   command's fixed memory (imports, robot), from the two lengths.
@@ -123,8 +123,8 @@ def main(rows: int | None = None, small: int | None = None, fmt: str = "parquet"
         runs = {}
         for name, n, block in (
             ("small_whole", small, 0),
-            ("small_blocks", small, 200_000),
-            ("long_blocks", rows, 200_000),
+            ("small_blocks", small, 100_000),
+            ("long_blocks", rows, 100_000),
         ):
             log = root / f"log_{n}.{fmt}"
             if not log.exists():

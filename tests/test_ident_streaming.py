@@ -41,9 +41,12 @@ SIGNAL_RTOL = 1e-9
 #: beta_b, as |delta beta_b| / |beta_b|: the signals' 1e-10 times the condition number (~40 here) bounds it
 #: by ~4e-9 in the worst direction; measured 3e-11 (combined) and 7e-11 (sequential).
 BETA_RTOL = 1e-9
+#: Validation MSE per joint: the predictions carry the states' 1e-10 of the torque (~50 Nm), the errors are the
+#: torque noise (0.05 Nm): d(MSE) / MSE ~ 2 x 1e-10 x 50 / 0.05 = 2e-7.
+VALIDATION_RTOL = 1e-6
 
 
-def _write_log(robot, path, *, gap=False, rows=N_ROWS, seed=0):
+def _write_log(robot, path, *, gap=False, rows=N_ROWS, seed=0, noise=1.0):
     rng = np.random.default_rng(seed)
     tr = FourierTrajectory(2 * np.pi * 0.1, 0.15 * rng.normal(size=(7, 5)), 0.15 * rng.normal(size=(7, 5)), robot.home)
     t = 1e-3 * np.arange(rows)
@@ -52,8 +55,8 @@ def _write_log(robot, path, *, gap=False, rows=N_ROWS, seed=0):
     q, dq, ddq = tr.evaluate(t)
     fr = FrictionParameters.from_model(robot.friction)
     tau = BatchRegressor(robot).compute_regressor(q, dq, ddq) @ robot.inertial_parameters() + fr.compute_torque(dq)
-    tau += 0.05 * rng.normal(size=tau.shape)
-    dq = dq + 0.01 * rng.normal(size=dq.shape)
+    tau += noise * 0.05 * rng.normal(size=tau.shape)
+    dq = dq + noise * 0.01 * rng.normal(size=dq.shape)
     return save_log(RobotLog(t, q, dq, tau, source="generated"), path)
 
 
@@ -118,6 +121,32 @@ def test_cli_reads_in_blocks_with_the_same_models(atlas, tmp_path, capsys):
     for m, desired in beta[0].items():
         scale = np.linalg.norm(desired)
         np.testing.assert_allclose(beta[BLOCK_ROWS][m], desired, rtol=0, atol=BETA_RTOL * scale, err_msg=m)
+
+
+@pytest.mark.slow  # ~60 s: the model is projected onto consistent parameters (the controller's model)
+def test_cli_validates_in_blocks_with_the_same_numbers(atlas, tmp_path, capsys):
+    """validate: per-joint sums over the blocks (the plot decimated) against the log read whole."""
+    path = _write_log(atlas, tmp_path / "log.parquet")
+    exact = _write_log(atlas, tmp_path / "exact.npz", noise=0.0)
+    args = ["identify", "dynamics", "--robot", "atlas_v5_left_arm", "--log", str(exact), "--method", "combined",
+            "--out", str(tmp_path / "model"), "--quiet"]  # fmt: skip
+    assert main(args) == 0
+    model = tmp_path / "model" / "model_combined.json"
+    tables = {}
+    for rows in (0, BLOCK_ROWS):
+        out = tmp_path / f"val{rows}"
+        args = ["validate", "--model", str(model), "--robot", "atlas_v5_left_arm",
+                "--log", str(path), "--block-rows", str(rows), "--out", str(out), "--quiet"]  # fmt: skip
+        assert main(args) == 0
+        assert ("in blocks of" in capsys.readouterr().out) == (rows > 0)
+        tables[rows] = json.loads((out / "validate.json").read_text())["validation"]
+        assert (out / "fig6_torques.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    for key in ("mse", "rmse", "nrmse", "torque_std"):
+        np.testing.assert_allclose(
+            [r[key] for r in tables[BLOCK_ROWS]["rows"]], [r[key] for r in tables[0]["rows"]], rtol=VALIDATION_RTOL,
+            err_msg=key,
+        )  # fmt: skip
+    assert tables[BLOCK_ROWS]["friction_model"] == tables[0]["friction_model"]
 
 
 def test_bad_value_in_a_late_block_names_the_file_row(atlas, tmp_path):

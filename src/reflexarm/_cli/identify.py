@@ -182,7 +182,7 @@ def _register_dynamics(isub: argparse._SubParsersAction) -> None:
         default=None,
         metavar="N",
         help="read CSV/Parquet logs in blocks of N rows: memory bounded by a block, not by the log, the same "
-        "result to ~1e-10 (default: blocks of 200000 rows for logs over 100 MB; 0: read whole)",
+        "result to ~1e-10 (default: blocks of 100000 rows for logs over 100 MB; 0: read whole)",
     )
     d.add_argument(
         "--min-speed",
@@ -232,6 +232,14 @@ def _register_validate(sub: argparse._SubParsersAction) -> None:
     v.add_argument("--model", required=True, help="model.json written by 'identify dynamics'")
     v.add_argument("--log", default=None, help="validation log (.csv/.parquet/.npz or a ROS 2 bag)")
     v.add_argument("--cutoff", type=float, default=10.0, help="low-pass cutoff for the states [Hz] (default 10)")
+    v.add_argument(
+        "--block-rows",
+        type=int,
+        default=None,
+        metavar="N",
+        help="read a CSV/Parquet --log in blocks of N rows (memory bounded by a block; default: blocks of 100000 "
+        "rows for logs over 100 MB; 0: read whole)",
+    )
     v.add_argument(
         "--friction-model",
         choices=("controller", "identified"),

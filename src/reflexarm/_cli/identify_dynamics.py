@@ -77,7 +77,7 @@ def _identify_from_logs(args: argparse.Namespace) -> int:
     robot = load_robot_arg(args)
     base = compute_base_parameters(robot)
     print(f"{robot.name}: {base.n_base} base parameters of {base.n_standard}")
-    tables = _scan_logs(args, robot)
+    tables = None if args.split is not None else _scan_logs(args, args.log, robot)
     if tables is None:
         ident, val_raw, states = _load_logs(args, robot)
     else:
@@ -107,22 +107,22 @@ def _identify_from_logs(args: argparse.Namespace) -> int:
 STREAM_MIN_BYTES = 100 << 20
 
 
-def _scan_logs(args: argparse.Namespace, robot: Any) -> list[Any] | None:
-    """The ``--log`` files scanned for reading in blocks, or None to read them whole: ``--block-rows 0``,
-    ``--split``, a log that is not a plain CSV/Parquet table, or (by default) logs below
-    :data:`STREAM_MIN_BYTES`. The reader's notes are printed as :func:`load_log_from_args` prints them."""
+def _scan_logs(args: argparse.Namespace, paths: list[str], robot: Any) -> list[Any] | None:
+    """The logs at ``paths`` scanned for reading in blocks, or None to read them whole: ``--block-rows 0``, a log
+    that is not a plain CSV/Parquet table, or (by default) logs below :data:`STREAM_MIN_BYTES`. The reader's
+    notes are printed as :func:`load_log_from_args` prints them."""
     from reflexarm.logs.blocks import DEFAULT_BLOCK_ROWS, NotStreamable
 
     rows = getattr(args, "block_rows", None)
-    if rows == 0 or args.split is not None:
+    if rows == 0:
         return None
     if rows is not None and rows < 0:
         raise ConfigError(f"--block-rows must be a positive number of rows (0: read whole); got {rows}")
-    if rows is None and all(_size(p) < STREAM_MIN_BYTES for p in args.log):
+    if rows is None and all(_size(p) < STREAM_MIN_BYTES for p in paths):
         return None
     block_rows = rows or DEFAULT_BLOCK_ROWS
     tables = []
-    for p in args.log:
+    for p in paths:
         try:
             tables.append(_scan_log(args, p, robot, block_rows))
         except NotStreamable as e:
@@ -490,10 +490,33 @@ def dynamics_study_command(args: argparse.Namespace) -> int:
     return 0
 
 
+def _validate_log(args: argparse.Namespace, result: Any, robot: Any, identified: Any) -> Any:
+    """The validation on ``--log``: read in blocks (:func:`_scan_logs`) when it can, else whole."""
+    from reflexarm.ident import preprocess_log, validate_model
+    from reflexarm.logs.blocks import NotStreamable
+
+    # scored as the controller uses it (its friction: the model file's velocity band, issue 9 F6)
+    scored = identified.friction if args.friction_model == "controller" else None
+    tables = _scan_logs(args, [args.log], robot)
+    if tables is not None:
+        from reflexarm.ident.estimation.streamed_validation import validate_streamed
+
+        try:
+            print(f"reading {tables[0].source} in blocks of {args.block_rows:,} rows ...")
+            return validate_streamed(
+                result, robot, tables[0], cutoff_hz=args.cutoff, block_rows=args.block_rows, label=result.method,
+                friction=scored,
+            )  # fmt: skip
+        except NotStreamable as e:
+            print(f"log: {e}; read whole")
+    raw = load_log_from_args(args, args.log, robot)
+    states = preprocess_log(raw, cutoff_hz=args.cutoff)
+    return validate_model(result, robot, raw, states=states, label=result.method, friction=scored)
+
+
 def validate_command(args: argparse.Namespace) -> int:
     """Score a saved model on ``--log``; ``--closed-loop``: tracking on the plant against the nominal model."""
     from reflexarm._cli.robot_options import DEFAULT_ROBOT
-    from reflexarm.ident import preprocess_log, validate_model
     from reflexarm.ident.export.model_file import load_identified_model, load_model_robot, read_identified_model
     from reflexarm.ident.plots import plot_torque_validation
 
@@ -508,11 +531,7 @@ def validate_command(args: argparse.Namespace) -> int:
         raise ConfigError("give --log FILE to validate on, or --closed-loop to compare tracking in simulation")
     summary: dict[str, Any] = {"model": str(args.model), "robot": robot.name}
     if args.log is not None:
-        raw = load_log_from_args(args, args.log, robot)
-        states = preprocess_log(raw, cutoff_hz=args.cutoff)
-        # scored as the controller uses it (its friction: the model file's velocity band, issue 9 F6)
-        scored = identified.friction if args.friction_model == "controller" else None
-        v = validate_model(result, robot, raw, states=states, label=result.method, friction=scored)
+        v = _validate_log(args, result, robot, identified)
         print(f"friction {v.friction_model}")
         rows = v.table(robot.joint_names)
         write_csv(out / "validation.csv", rows)
@@ -528,11 +547,13 @@ def validate_command(args: argparse.Namespace) -> int:
                 ],
             )
         )
-        print(f"pooled RMSE: {v.pooled_rmse:.4f} Nm over {v.t.size:,} samples; mean MSE over the joints: "
+        samples = getattr(v, "samples", None) or v.t.size
+        print(f"pooled RMSE: {v.pooled_rmse:.4f} Nm over {samples:,} samples; mean MSE over the joints: "
               f"{float(np.mean(v.mse)):.4f} Nm^2")  # fmt: skip
         summary["validation"] = {"rows": rows, "pooled_rmse": v.pooled_rmse, "mean_mse": float(np.mean(v.mse)),
                                  "friction_model": v.friction_model}  # fmt: skip
-        plot_torque_validation({result.method: v}, out / "fig6_torques.png", joint_names=robot.joint_names)
+        plotted = getattr(v, "plotted", v)  # a log read in blocks: every k-th sample
+        plot_torque_validation({result.method: plotted}, out / "fig6_torques.png", joint_names=robot.joint_names)
     if args.closed_loop:
         from reflexarm.experiments.identification import NOMINAL_ERROR_LEVEL, compare_tracking
         from reflexarm.ident.excitation.design import optimize_excitation

@@ -98,10 +98,15 @@ def _grid(plan: PreprocessingPlan) -> np.ndarray:
 
 
 def checked_blocks(
-    table: StreamedTable, plan: PreprocessingPlan, robot: RobotModel, block_rows: int, grid: np.ndarray
+    table: StreamedTable,
+    plan: PreprocessingPlan,
+    robot: RobotModel,
+    block_rows: int,
+    grid: np.ndarray,
+    check_states: bool = True,
 ) -> Iterator[RobotLog]:
-    """The preprocessed blocks of ``table``; the raw and the preprocessed log held against ``robot``'s limits
-    block by block and, once all blocks are read, to the unit checks."""
+    """The preprocessed blocks of ``table``; the raw and (``check_states``) the preprocessed log held against
+    ``robot``'s limits block by block and, once all blocks are read, to the unit checks."""
     from reflexarm.logs.plausibility import check_samples_against_robot
 
     raw_units = StreamedUnitsCheck(table.source, table.t, table.has_ddq)
@@ -117,11 +122,13 @@ def checked_blocks(
 
     start = 0
     for block in preprocessed_blocks(table, plan, block_rows, raw_hook=raw_hook):
-        check(start, block, pre_units)
+        if check_states:
+            check(start, block, pre_units)
         start += len(block)
         yield block
     raw_units.finish(robot)
-    pre_units.finish(robot)
+    if check_states:
+        pre_units.finish(robot)
 
 
 class StreamedUnitsCheck:
