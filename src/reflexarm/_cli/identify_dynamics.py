@@ -26,7 +26,9 @@ from reflexarm._cli.ident_common import (
     write_json,
     write_robot_copy,
 )
+from reflexarm._cli.log_blocks import scan_logs
 from reflexarm._cli.log_options import load_log_from_args
+from reflexarm._cli.validate import validate_command  # noqa: F401  (registered from here)
 from reflexarm.errors import ConfigError
 
 #: Columns of the printed Table I analogue.
@@ -77,7 +79,7 @@ def _identify_from_logs(args: argparse.Namespace) -> int:
     robot = load_robot_arg(args)
     base = compute_base_parameters(robot)
     print(f"{robot.name}: {base.n_base} base parameters of {base.n_standard}")
-    tables = None if args.split is not None else _scan_logs(args, args.log, robot)
+    tables = None if args.split is not None else scan_logs(args, args.log, robot)
     if tables is None:
         ident, val_raw, states = _load_logs(args, robot)
     else:
@@ -100,68 +102,6 @@ def _identify_from_logs(args: argparse.Namespace) -> int:
                 print(f"{m}: {note}")
     _write_results(args, out, robot, base.n_base, results, not_run, val_raw, states)
     return 0
-
-
-#: Table logs larger than this [bytes] are read in blocks unless ``--block-rows`` says otherwise (a 7-joint
-#: CSV log holds about 300 bytes a row: 100 MB is some 3e5 rows, which take about 0.5 GB read whole).
-STREAM_MIN_BYTES = 100 << 20
-
-
-def _scan_logs(args: argparse.Namespace, paths: list[str], robot: Any) -> list[Any] | None:
-    """The logs at ``paths`` scanned for reading in blocks, or None to read them whole: ``--block-rows 0``, a log
-    that is not a plain CSV/Parquet table, or (by default) logs below :data:`STREAM_MIN_BYTES`. The reader's
-    notes are printed as :func:`load_log_from_args` prints them."""
-    from reflexarm.logs.blocks import DEFAULT_BLOCK_ROWS, NotStreamable
-
-    rows = getattr(args, "block_rows", None)
-    if rows == 0:
-        return None
-    if rows is not None and rows < 0:
-        raise ConfigError(f"--block-rows must be a positive number of rows (0: read whole); got {rows}")
-    if rows is None and all(_size(p) < STREAM_MIN_BYTES for p in paths):
-        return None
-    block_rows = rows or DEFAULT_BLOCK_ROWS
-    tables = []
-    for p in paths:
-        try:
-            tables.append(_scan_log(args, p, robot, block_rows))
-        except NotStreamable as e:
-            print(f"log: {e}; all logs are read whole")
-            return None
-    args.block_rows = block_rows
-    return tables
-
-
-def _size(path: str) -> int:
-    p = Path(path)
-    return p.stat().st_size if p.is_file() else 0
-
-
-def _scan_log(args: argparse.Namespace, path: str, robot: Any, block_rows: int) -> Any:
-    """One log scanned (:func:`~reflexarm.logs.block_scan.scan_table`) with the log options of ``args``."""
-    import warnings
-
-    from reflexarm._cli.ident_common import parse_floats
-    from reflexarm.logs import parse_column_mapping
-    from reflexarm.logs.block_scan import scan_table
-
-    torque_from = getattr(args, "torque_from", "torque") or "torque"
-    gains = parse_floats(getattr(args, "gains", None), "--gains")
-    if gains is not None and torque_from != "current":
-        raise ConfigError("--gains [Nm/A] turn motor currents into torques: give them with --torque-from current")
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        table = scan_table(
-            path, joint_names=tuple(robot.joint_names), columns=parse_column_mapping(getattr(args, "columns", None)),
-            time_unit=getattr(args, "time_unit", None), torque_from=torque_from, gains=gains, block_rows=block_rows,
-        )  # fmt: skip
-    cores = [str(w.message).split(": ", 1)[-1] for w in caught]
-    for note in table.notes:
-        print(("warning: " if any(c in note for c in cores) else "log: ") + note)
-    for w, core in zip(caught, cores, strict=True):  # warnings that are not in the notes are passed on
-        if not any(core in note for note in table.notes):
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    return table
 
 
 def _load_logs(args: argparse.Namespace, robot: Any) -> tuple[list[Any], Any, Any]:
@@ -369,15 +309,7 @@ def _load_excitation(robot: Any, path: str) -> Any:
 
 def dynamics_study_command(args: argparse.Namespace) -> int:
     """The simulated Table I study; prints, plots and saves the same (possibly projected) models."""
-    from reflexarm.experiments.identification import (
-        MOVING_SPEED,
-        PAPER_TABLE1_MSE,
-        compare_methods,
-        run_identification_study,
-    )
-    from reflexarm.ident import save_log
-    from reflexarm.ident.export.model_file import save_identified_model
-    from reflexarm.ident.plots import plot_excitation, plot_friction, plot_torque_validation
+    from reflexarm.experiments.identification import MOVING_SPEED, run_identification_study
 
     out = out_dir(args)
     robot = load_robot_arg(args)
@@ -402,6 +334,18 @@ def dynamics_study_command(args: argparse.Namespace) -> int:
     )
     base = st.results["sequential"].base
     print(f"{robot.name}: {base.n_base} base parameters of {base.n_standard}")
+    rows, h = _print_study(args, out, robot, st, min_speed)
+    _save_study(args, out, robot, st, rows, h)
+    return 0
+
+
+def _print_study(
+    args: argparse.Namespace, out: Path, robot: Any, st: Any, min_speed: float
+) -> tuple[list[Any], dict[str, Any]]:
+    """The excitation's condition numbers, Table I, the mean MSEs and the methods compared (the table's rows and
+    the compared MSEs are returned for the files)."""
+    from reflexarm.experiments.identification import MOVING_SPEED, PAPER_TABLE1_MSE, compare_methods
+
     if args.excitation is None:
         print(
             f"excitation: condition number {st.excitation.condition_initial:.4g} -> "
@@ -435,6 +379,16 @@ def dynamics_study_command(args: argparse.Namespace) -> int:
     for m in st.notes["projected"]:  # type: ignore[attr-defined]
         print(f"{m}: the least-squares estimate has no physically consistent set of links near the file's; the saved "
               f"and validated model is the nearest consistent one ({st.results[m].notes[-1]})")  # fmt: skip
+    return rows, h
+
+
+def _save_study(args: argparse.Namespace, out: Path, robot: Any, st: Any, rows: list[Any], h: dict[str, Any]) -> None:
+    """The models, their robot copies, the validation log, excitation.json, study.json and the figures."""
+    from reflexarm.ident import save_log
+    from reflexarm.ident.export.model_file import save_identified_model
+    from reflexarm.ident.plots import plot_excitation, plot_friction, plot_torque_validation
+
+    base = st.results["sequential"].base
     rel = {
         m: float(np.linalg.norm(r.beta_b - st.true_base) / np.linalg.norm(st.true_base)) for m, r in st.results.items()
     }
@@ -487,102 +441,3 @@ def dynamics_study_command(args: argparse.Namespace) -> int:
         + "".join(f", {c}" for c in copies if c)
         + ": the models above in a copy of the robot file)"
     )
-    return 0
-
-
-def _validate_log(args: argparse.Namespace, result: Any, robot: Any, identified: Any) -> Any:
-    """The validation on ``--log``: read in blocks (:func:`_scan_logs`) when it can, else whole."""
-    from reflexarm.ident import preprocess_log, validate_model
-    from reflexarm.logs.blocks import NotStreamable
-
-    # scored as the controller uses it (its friction: the model file's velocity band, issue 9 F6)
-    scored = identified.friction if args.friction_model == "controller" else None
-    tables = _scan_logs(args, [args.log], robot)
-    if tables is not None:
-        from reflexarm.ident.estimation.streamed_validation import validate_streamed
-
-        try:
-            print(f"reading {tables[0].source} in blocks of {args.block_rows:,} rows ...")
-            return validate_streamed(
-                result, robot, tables[0], cutoff_hz=args.cutoff, block_rows=args.block_rows, label=result.method,
-                friction=scored,
-            )  # fmt: skip
-        except NotStreamable as e:
-            print(f"log: {e}; read whole")
-    raw = load_log_from_args(args, args.log, robot)
-    states = preprocess_log(raw, cutoff_hz=args.cutoff)
-    return validate_model(result, robot, raw, states=states, label=result.method, friction=scored)
-
-
-def validate_command(args: argparse.Namespace) -> int:
-    """Score a saved model on ``--log``; ``--closed-loop``: tracking on the plant against the nominal model."""
-    from reflexarm._cli.robot_options import DEFAULT_ROBOT
-    from reflexarm.ident.export.model_file import load_identified_model, load_model_robot, read_identified_model
-    from reflexarm.ident.plots import plot_torque_validation
-
-    out = out_dir(args)
-    result, doc = read_identified_model(args.model)
-    robot = load_robot_arg(args)
-    if args.robot == DEFAULT_ROBOT and doc.get("robot", {}).get("name") != robot.name:
-        robot = load_model_robot(args.model)  # no --robot: the robot the model file names
-        say(args, f"robot {robot.name!r} from {Path(args.model).name} (give --robot to use another file)")
-    identified = load_identified_model(args.model, robot)
-    if args.log is None and not args.closed_loop:
-        raise ConfigError("give --log FILE to validate on, or --closed-loop to compare tracking in simulation")
-    summary: dict[str, Any] = {"model": str(args.model), "robot": robot.name}
-    if args.log is not None:
-        v = _validate_log(args, result, robot, identified)
-        print(f"friction {v.friction_model}")
-        rows = v.table(robot.joint_names)
-        write_csv(out / "validation.csv", rows)
-        print(
-            format_table(
-                rows,
-                [
-                    ("joint", "joint", "{}"),
-                    ("rmse", "RMSE [Nm]", "{:.4f}"),
-                    ("nrmse", "RMSE/std", "{:.3f}"),
-                    ("mse", "MSE [Nm^2]", "{:.4f}"),
-                    ("torque_std", "std(tau) [Nm]", "{:.3f}"),
-                ],
-            )
-        )
-        samples = getattr(v, "samples", None) or v.t.size
-        print(f"pooled RMSE: {v.pooled_rmse:.4f} Nm over {samples:,} samples; mean MSE over the joints: "
-              f"{float(np.mean(v.mse)):.4f} Nm^2")  # fmt: skip
-        summary["validation"] = {"rows": rows, "pooled_rmse": v.pooled_rmse, "mean_mse": float(np.mean(v.mse)),
-                                 "friction_model": v.friction_model}  # fmt: skip
-        plotted = getattr(v, "plotted", v)  # a log read in blocks: every k-th sample
-        plot_torque_validation({result.method: plotted}, out / "fig6_torques.png", joint_names=robot.joint_names)
-    if args.closed_loop:
-        from reflexarm.experiments.identification import NOMINAL_ERROR_LEVEL, compare_tracking
-        from reflexarm.ident.excitation.design import optimize_excitation
-        from reflexarm.robots import perturb_model
-
-        nominal = perturb_model(robot, NOMINAL_ERROR_LEVEL, seed=args.seed)
-        traj = optimize_excitation(robot, maxiter=0, seed=args.seed + 7).initial
-        say(args, f"tracking a {args.duration:g} s trajectory with the perturbed nominal and the identified model ...")
-        cmp = compare_tracking(
-            robot,
-            {"perturbed nominal": nominal, "identified": identified},
-            traj,
-            args.duration,
-            kappa_f=args.kappa_f,
-            seed=args.seed,
-            progress=not args.quiet,
-        )
-        rows = cmp.table(robot.joint_names)
-        write_csv(out / "tracking.csv", rows)
-        cols = [("model", "controller model", "{}")] + [
-            (f"rms_{j + 1}", f"q{j + 1} [mrad]", "{:.2f}") for j in range(robot.n)
-        ]
-        print(
-            format_table(
-                [{k: (float(v) * 1e3 if k.startswith("rms") else v) for k, v in r.items()} for r in rows],  # type: ignore[arg-type]
-                cols + [("rms_all", "all [mrad]", "{:.2f}")],
-            )
-        )
-        summary["tracking_rms_rad"] = rows
-    write_json(out / "validate.json", summary)
-    print(f"\nwrote {out}/")
-    return 0
