@@ -38,6 +38,7 @@ from reflexarm.experiments.ident_runs import (
     simulate_log,
 )
 from reflexarm.ident import (
+    BaseParameters,
     DynamicsIdentification,
     ExcitationDesign,
     FourierTrajectory,
@@ -294,51 +295,13 @@ def run_identification_study(
     extra = scenario_extra(robot, scenario)
     nominal = perturb_model(robot, NOMINAL_ERROR_LEVEL, seed=seed)
     base = compute_base_parameters(robot)
-    fr = run_friction_experiments(
-        robot,
-        joints=tuple(range(robot.n)) if friction_joints is None else friction_joints,
-        speeds=friction_speeds,
-        model=nominal,
-        noise=noise,
-        seed=seed,
-        extra_joint_torque=extra,
-        default=FrictionParameters.from_model(nominal.friction),
-        n_jobs=n_jobs,
-        progress=progress,
+    fr = _friction_runs(robot, friction_joints, friction_speeds, nominal, noise, seed, extra, n_jobs, progress)
+    excitation, vtraj, logs = _simulate_study_logs(
+        robot, excitation, base, maxiter, periods, nominal, noise, seed, extra, progress
     )
-    if excitation is None:
-        excitation = optimize_excitation(robot, base=base, maxiter=maxiter, seed=seed, progress=progress)
-    traj = excitation.trajectory.with_periods(periods)
-    vtraj = validation_trajectory(robot, seed + 1, excitation.trajectory.base_frequency).with_periods(periods)
-    logs = {}
-    for name, tr, noise_seed in (("excitation", traj, seed + 1), ("validation", vtraj, seed + 2)):
-        logs[name], _ = simulate_log(
-            robot,
-            tr,
-            tr.duration,
-            controller_model=nominal,
-            noise=noise,
-            seed=noise_seed,
-            extra_joint_torque=extra,
-            source=name,
-            progress=progress,
-        )
     ident = preprocess_log(logs["excitation"])
     valid = preprocess_log(logs["validation"])
-    estimates = {
-        m: identify_dynamics(
-            robot,
-            ident,
-            method=m,  # type: ignore[arg-type]
-            friction=fr.friction if m == "sequential" else None,
-            base=base,
-            min_speed=min_speed,
-            threads=threads,
-        )
-        for m in METHODS
-    }
-    with blas_threads(threads):
-        results = {m: consistent_result(r, robot, nominal) if project else r for m, r in estimates.items()}
+    estimates, results = _estimate_both(robot, ident, fr.friction, base, nominal, min_speed, project, threads)
     projected = [m for m in METHODS if results[m].beta_b is not estimates[m].beta_b]
     validations = {m: validate_model(r, robot, valid, label=m) for m, r in results.items()}
     return IdentificationStudy(
@@ -364,6 +327,96 @@ def run_identification_study(
         },
         plant_extra=extra,
     )
+
+
+def _friction_runs(
+    robot: RobotModel,
+    joints: Sequence[int] | None,
+    speeds: Sequence[float] | None,
+    nominal: RobotModel,
+    noise: SensorNoise,
+    seed: int,
+    extra: StribeckFriction | None,
+    n_jobs: int,
+    progress: bool,
+) -> FrictionExperiment:
+    """The single-joint constant-velocity runs (every joint by default), the controller on ``nominal``."""
+    return run_friction_experiments(
+        robot,
+        joints=tuple(range(robot.n)) if joints is None else joints,
+        speeds=speeds,
+        model=nominal,
+        noise=noise,
+        seed=seed,
+        extra_joint_torque=extra,
+        default=FrictionParameters.from_model(nominal.friction),
+        n_jobs=n_jobs,
+        progress=progress,
+    )
+
+
+def _simulate_study_logs(
+    robot: RobotModel,
+    excitation: ExcitationDesign | None,
+    base: BaseParameters,
+    maxiter: int,
+    periods: int,
+    nominal: RobotModel,
+    noise: SensorNoise,
+    seed: int,
+    extra: StribeckFriction | None,
+    progress: bool,
+) -> tuple[ExcitationDesign, FourierTrajectory, dict[str, RobotLog]]:
+    """The excitation (optimized here if None), the validation trajectory, and the logs of both run on the plant
+    with the controller on ``nominal``: the excitation's with noise seed ``seed + 1``, the validation's (its own
+    trajectory, seed + 1) with ``seed + 2``."""
+    if excitation is None:
+        excitation = optimize_excitation(robot, base=base, maxiter=maxiter, seed=seed, progress=progress)
+    traj = excitation.trajectory.with_periods(periods)
+    vtraj = validation_trajectory(robot, seed + 1, excitation.trajectory.base_frequency).with_periods(periods)
+    logs = {}
+    for name, tr, noise_seed in (("excitation", traj, seed + 1), ("validation", vtraj, seed + 2)):
+        logs[name], _ = simulate_log(
+            robot,
+            tr,
+            tr.duration,
+            controller_model=nominal,
+            noise=noise,
+            seed=noise_seed,
+            extra_joint_torque=extra,
+            source=name,
+            progress=progress,
+        )
+    return excitation, vtraj, logs
+
+
+def _estimate_both(
+    robot: RobotModel,
+    ident: RobotLog,
+    friction: FrictionParameters,
+    base: BaseParameters,
+    nominal: RobotModel,
+    min_speed: float,
+    project: bool,
+    threads: int | None,
+) -> tuple[dict[str, DynamicsIdentification], dict[str, DynamicsIdentification]]:
+    """Both methods' least-squares estimates (sequential with the single-joint ``friction``) and the results
+    handed out (with consistent links if ``project``)."""
+    estimates = {
+        m: identify_dynamics(
+            robot,
+            ident,
+            method=m,  # type: ignore[arg-type]
+            friction=friction if m == "sequential" else None,
+            base=base,
+            min_speed=min_speed,
+            threads=threads,
+        )
+        for m in METHODS
+    }
+    with blas_threads(threads):
+        results = {m: consistent_result(r, robot, nominal) if project else r for m, r in estimates.items()}
+    return estimates, results
 
 
 #: A recorded run whose joints leave the designed trajectory by more than this [rad] is reported as
