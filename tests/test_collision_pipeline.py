@@ -103,6 +103,25 @@ def test_held_stick_is_a_static_obstacle_the_link_runs_into():
         run_link_collision(setting=LINK_SETTING, stick="thrown")
 
 
+def test_a_held_stick_stands_on_the_path_of_a_link_swung_on_a_tight_circle():
+    # the Panda's link 4 swings about joint 3 on a circle of a few cm: a stick on the tangent at the pushed stick's
+    # start never touched it (the reaction study read "no detection"); the held stick stands where the link's
+    # leading surface will pass, so the link runs into it and the collision is detected
+    from reflexarm import load_robot
+    from reflexarm.experiments.collision import LINK_SETTING, held_stick_tip, run_link_collision
+    from reflexarm.experiments.link_push import link_push_plan
+
+    panda = load_robot("panda")
+    plan = link_push_plan(panda)
+    trace = run_link_collision(setting=LINK_SETTING, stick="held", robot=panda)
+    placement = trace.meta["placement"]
+    assert 1.0 <= placement["held_stick_from_s"] < 1.01  # [s] the reference starts to move at 1 s
+    tip, direction = held_stick_tip(panda, plan.body, plan.trajectory, placement["held_stick_from_s"])
+    assert abs(np.linalg.norm(direction) - 1.0) < 1e-12
+    np.testing.assert_allclose(placement["held_stick_tip_m"], tip, atol=1e-12)
+    assert np.abs(trace.tau_ext).max() > 5.0 and trace.collision.any()  # [Nm] a real contact, detected
+
+
 MENAGERIE_IIWA = Path(__file__).resolve().parents[1].parent / "shared" / "reference" / "menagerie" / "iiwa14.xml"
 
 

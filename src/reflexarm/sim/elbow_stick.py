@@ -52,6 +52,8 @@ class ElbowStick(Scene):
         radius: stick radius [m].
         length: stick length [m].
         name: mocap body name (unique per plant); the tip position is recorded as ``{name}_tip``.
+        tip: world position of the tip's centre [m] (needs ``direction``): the stick appears there at
+            ``t_start`` instead of ahead of the target point (a held stick placed on the link's path).
     """
 
     def __init__(
@@ -67,6 +69,7 @@ class ElbowStick(Scene):
         radius: float = 0.015,
         length: float = 0.6,
         name: str = "elbow_stick",
+        tip: npt.ArrayLike | None = None,
     ) -> None:
         self.body = str(body)
         self.t_start = _nonneg(t_start, "t_start")
@@ -86,6 +89,15 @@ class ElbowStick(Scene):
             if p.shape != (3,) or not np.all(np.isfinite(p)):
                 raise ConfigError(f"point must be a finite 3-vector in the body frame [m]; got {point!r}")
             self.point = p
+        if tip is None:
+            self.tip: np.ndarray | None = None
+        else:
+            t = np.asarray(tip, dtype=float).reshape(-1)
+            if t.shape != (3,) or not np.all(np.isfinite(t)):
+                raise ConfigError(f"tip must be a finite world 3-vector [m]; got {tip!r}")
+            if self.direction is None:
+                raise ConfigError("ElbowStick: tip= needs direction= (the stick's axis)")
+            self.tip = t
         self.standoff = _nonneg(standoff, "standoff")
         self.radius = _positive(radius, "radius")
         self.length = _positive(length, "length")
@@ -153,6 +165,11 @@ class ElbowStick(Scene):
     def _start_run(self, plant: Plant) -> None:
         m, d = plant.model, plant.data
         _, bid = self._ids(plant)
+        if self.tip is not None and self.direction is not None:
+            self._dir = self.direction
+            self._start = self.tip.copy()
+            self._set(plant, self._start, quat_from_x_axis(self.direction))
+            return
         p = self.target_point(plant)
         if self.direction is None:
             jacp = np.zeros((3, m.nv))
