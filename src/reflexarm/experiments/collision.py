@@ -330,7 +330,7 @@ def run_ee_collision(
         placement = {**placement, **plan.describe()}
         swing_joint = plan.joint
     plant = Plant(robot, scene=scene, noise=noise, seed=seed, true_friction=_true_friction(robot, plant_friction))
-    plant.reset(traj.sample(0.0).q_d)
+    plant.reset(traj.waypoints[0])
     ctrl = setting.controller(ctrl_model)
     trace = run_fast(plant, ctrl, traj, traj.duration, progress=progress)  # compiled when it can
     trace.meta.update(
@@ -456,7 +456,7 @@ def run_link_collision(
     else:
         scene = ElbowStick(body=body, t_start=t_start, standoff=standoff)
     plant = Plant(robot, scene=scene, noise=noise, seed=seed, true_friction=_true_friction(robot, plant_friction))
-    plant.reset(traj.sample(0.0).q_d)
+    plant.reset(traj.waypoints[0])
     ctrl = setting.controller(ctrl_model)
     trace = run_fast(plant, ctrl, traj, traj.duration, progress=progress)  # compiled when it can
     trace.meta.update(
@@ -513,7 +513,7 @@ def free_motion_false_alarms(
     ctrl_model, _model_info = controller_model(robot, model_error, model_seed, model)
     traj = free_motion_trajectory(duration, motion, robot)
     plant = Plant(robot, noise=noise, seed=seed)
-    plant.reset(traj.sample(0.0).q_d)
+    plant.reset(traj.waypoints[0])
     ctrl = Controller(ctrl_model, stiffness=300.0, observer_gain=5.0, threshold=threshold, reaction="none")
     # running statistics only (the trace streamed to ``trace_path`` block by block if given): the memory
     # does not grow with the duration, so hours of free motion fit; the compiled loop unless it cannot

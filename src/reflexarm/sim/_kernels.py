@@ -10,6 +10,19 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+# the layout of the packed integer index array of :func:`measurement` (then qadr (n), vadr (n), load (nload)): one
+# definition, in the numba-free module the plant imports
+from reflexarm.sim._kernels_lazy import (
+    IDX_COM_BODY,
+    IDX_FORCE,
+    IDX_HEADER,
+    IDX_N,
+    IDX_NLOAD,
+    IDX_PHYSICAL,
+    IDX_SITE,
+    IDX_TORQUE,
+)
+
 
 @numba.njit(cache=True, inline="always")
 def _mul_inert(i: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover - compiled
@@ -81,10 +94,6 @@ def load_compensated_wrench(
         for k in range(3):
             out[k] -= sensordata[force_adr + k]
             out[3 + k] -= sensordata[torque_adr + k]
-
-
-#: Layout of the packed integer index array of :func:`measurement` (then qadr (n), vadr (n), load (nload)).
-IDX_N, IDX_NLOAD, IDX_FORCE, IDX_TORQUE, IDX_PHYSICAL, IDX_COM_BODY, IDX_SITE, IDX_HEADER = 0, 1, 2, 3, 4, 5, 6, 7
 
 
 @numba.njit(cache=True)

@@ -8,7 +8,7 @@ import numpy as np
 
 from reflexarm.errors import SimulationError
 from reflexarm.signals import Measurement
-from reflexarm.sim import _kernels
+from reflexarm.sim._kernels_lazy import kernels as _kernels
 
 #: Noise samples are drawn in blocks of this many ticks (one ``Generator.uniform`` call per block).
 _NOISE_BLOCK = 1024

@@ -17,8 +17,9 @@ from reflexarm.errors import ConfigError, ModelError, SimulationError
 from reflexarm.robots.friction import CoulombViscousFriction
 from reflexarm.robots.loader import load_robot
 from reflexarm.robots.robot_model import RobotModel
-from reflexarm.sim import _kernels
+from reflexarm.sim import _kernels_lazy as _kernel_layout
 from reflexarm.sim._builder import SENSOR_FORCE, SENSOR_TORQUE, BuildInfo, build_robot_spec
+from reflexarm.sim._kernels_lazy import kernels as _kernels
 from reflexarm.sim._plant_forces import _AppliedForce, _PlantForces
 from reflexarm.sim._plant_sensors import _PlantSensors, step_sensing_last
 from reflexarm.sim.noise import PAPER_NOISE, SensorNoise
@@ -212,15 +213,15 @@ class Plant(_PlantSensors, _PlantForces):
         self._tau = np.zeros(n)
         self._dim = 3 * n + 9
         self._zero_noise = np.zeros(self._dim)
-        self._idx = np.zeros(_kernels.IDX_HEADER + 2 * n + self._load_bodies.size, dtype=np.int64)
-        self._idx[_kernels.IDX_N] = n
-        self._idx[_kernels.IDX_NLOAD] = self._load_bodies.size
-        self._idx[_kernels.IDX_FORCE] = self._force_adr
-        self._idx[_kernels.IDX_TORQUE] = self._torque_adr
-        self._idx[_kernels.IDX_PHYSICAL] = int(self._physical_sensor)
-        self._idx[_kernels.IDX_COM_BODY] = self._com_ref_body
-        self._idx[_kernels.IDX_SITE] = self._sensor_site
-        self._idx[_kernels.IDX_HEADER :] = np.concatenate([self._qadr_arr, self._arm_dofs, self._load_bodies])
+        self._idx = np.zeros(_kernel_layout.IDX_HEADER + 2 * n + self._load_bodies.size, dtype=np.int64)
+        self._idx[_kernel_layout.IDX_N] = n
+        self._idx[_kernel_layout.IDX_NLOAD] = self._load_bodies.size
+        self._idx[_kernel_layout.IDX_FORCE] = self._force_adr
+        self._idx[_kernel_layout.IDX_TORQUE] = self._torque_adr
+        self._idx[_kernel_layout.IDX_PHYSICAL] = int(self._physical_sensor)
+        self._idx[_kernel_layout.IDX_COM_BODY] = self._com_ref_body
+        self._idx[_kernel_layout.IDX_SITE] = self._sensor_site
+        self._idx[_kernel_layout.IDX_HEADER :] = np.concatenate([self._qadr_arr, self._arm_dofs, self._load_bodies])
         self._levels = np.concatenate(
             [
                 np.full(n, noise.q),

@@ -9,7 +9,7 @@ import numpy.typing as npt
 
 from reflexarm.errors import ConfigError
 from reflexarm.signals import Reference
-from reflexarm.sim import _kernels
+from reflexarm.sim._kernels_lazy import kernels as _kernels
 
 __all__ = ["JointTrajectory"]
 
