@@ -8,7 +8,7 @@ import sys
 
 import numpy as np
 
-from reflexarm.sim import _kernels, _kernels_lazy
+from reflexarm.sim import _kernel_layout, _kernels, _kernels_lazy
 
 
 def test_a_plant_is_built_without_numba():
@@ -27,4 +27,4 @@ def test_a_plant_is_built_without_numba():
 def test_the_lazy_kernels_are_the_modules_own():
     assert _kernels_lazy.kernels.sum_squares is _kernels.sum_squares
     assert _kernels_lazy.kernels.sum_squares(np.array([3.0, 4.0])) == 25.0
-    assert (_kernels.IDX_N, _kernels.IDX_HEADER) == (_kernels_lazy.IDX_N, _kernels_lazy.IDX_HEADER) == (0, 7)
+    assert (_kernels.IDX_N, _kernels.IDX_HEADER) == (_kernel_layout.IDX_N, _kernel_layout.IDX_HEADER) == (0, 7)

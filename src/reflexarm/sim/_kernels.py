@@ -12,7 +12,7 @@ import numpy as np
 
 # the layout of the packed integer index array of :func:`measurement` (then qadr (n), vadr (n), load (nload)): one
 # definition, in the numba-free module the plant imports
-from reflexarm.sim._kernels_lazy import (
+from reflexarm.sim._kernel_layout import (
     IDX_COM_BODY,
     IDX_FORCE,
     IDX_HEADER,

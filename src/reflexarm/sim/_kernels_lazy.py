@@ -10,11 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["IDX_COM_BODY", "IDX_FORCE", "IDX_HEADER", "IDX_N", "IDX_NLOAD", "IDX_PHYSICAL", "IDX_SITE", "IDX_TORQUE",
-           "kernels"]  # fmt: skip
-
-#: Layout of the packed integer index array of ``_kernels.measurement`` (then qadr (n), vadr (n), load (nload)).
-IDX_N, IDX_NLOAD, IDX_FORCE, IDX_TORQUE, IDX_PHYSICAL, IDX_COM_BODY, IDX_SITE, IDX_HEADER = 0, 1, 2, 3, 4, 5, 6, 7
+__all__ = ["kernels"]
 
 
 class _Kernels:

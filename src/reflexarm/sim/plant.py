@@ -17,7 +17,7 @@ from reflexarm.errors import ConfigError, ModelError, SimulationError
 from reflexarm.robots.friction import CoulombViscousFriction
 from reflexarm.robots.loader import load_robot
 from reflexarm.robots.robot_model import RobotModel
-from reflexarm.sim import _kernels_lazy as _kernel_layout
+from reflexarm.sim import _kernel_layout
 from reflexarm.sim._builder import SENSOR_FORCE, SENSOR_TORQUE, BuildInfo, build_robot_spec
 from reflexarm.sim._kernels_lazy import kernels as _kernels
 from reflexarm.sim._plant_forces import _AppliedForce, _PlantForces
