@@ -296,7 +296,7 @@ def optimize_excitation(
     start = par.trajectory(x0)
     gradient = log_condition_gradient(robot, base, par, t_cost)
     res, history, candidates = _minimise(log_cond, gradient, x0, grid, maxiter, progress)
-    x, report, scale = best_at_1khz(par, [grid.restored(x) for x in candidates], limits, evaluator, log_cond)
+    x, report, scale = best_at_1khz(grid, candidates, log_cond)
     best = par.trajectory(x)
     cond1 = float(np.exp(log_cond(x)))
     return ExcitationDesign(
