@@ -209,29 +209,34 @@ def within(report: dict[str, dict[str, Any]]) -> bool:
     return bool(ok)
 
 
-def shrink_into_limits(par: Parametrisation, x: np.ndarray, evaluator: LimitEvaluator, t: np.ndarray) -> np.ndarray:
+def shrink_into_limits(
+    par: Parametrisation, x: np.ndarray, evaluator: LimitEvaluator, t: np.ndarray
+) -> tuple[np.ndarray, dict[str, dict[str, Any]]]:
     """x with its amplitudes scaled down (bisection on s in [0, 1], 10 steps: s to 1e-3) until the
-    nonlinear bounds hold at the times ``t``; the rest pose q0 (s = 0) must meet them."""
+    nonlinear bounds hold at the times ``t``, and its :meth:`LimitEvaluator.report` there; the rest pose q0
+    (s = 0) must meet them."""
     if not evaluator.active:
-        return x
+        return x, {}
 
     def report(s: float) -> dict[str, dict[str, Any]]:
         q, dq, ddq = par.trajectory(par.scaled(x, s)).evaluate(t)
         return evaluator.report(t, q, dq, ddq)
 
-    if within(report(1.0)):
-        return x
+    full = report(1.0)
+    if within(full):
+        return x, full
     at_rest = report(0.0)
     if not within(at_rest):
         raise IdentificationError(
             f"no excitation can meet the limits: at rest in the centre pose {np.round(par.unpack(x)[2], 3).tolist()} "
             f"already {at_rest} (choose another --floor, a larger --torque-fraction, or a centre pose)"
         )
-    good, bad = 0.0, 1.0
+    good, bad, kept = 0.0, 1.0, at_rest
     for _ in range(10):
         s = 0.5 * (good + bad)
-        good, bad = (s, bad) if within(report(s)) else (good, s)
-    return par.scaled(x, good)
+        r = report(s)
+        good, bad, kept = (s, bad, r) if within(r) else (good, s, kept)
+    return par.scaled(x, good), kept
 
 
 def best_at_1khz(
@@ -285,7 +290,4 @@ def check_at_1khz(
         uses = par.trajectory(x).check_limits(lo, hi, limits.max_velocity, limits.max_acceleration)
     if max(uses.values()) > 1.0 + 1e-9:
         raise IdentificationError(f"excitation optimization could not meet the limits: {uses}")
-    t = np.arange(0.0, period, CHECK_STEP)
-    x = shrink_into_limits(par, x, evaluator, t)
-    q, dq, ddq = par.trajectory(x).evaluate(t)
-    return x, evaluator.report(t, q, dq, ddq)
+    return shrink_into_limits(par, x, evaluator, np.arange(0.0, period, CHECK_STEP))

@@ -347,7 +347,7 @@ def _start(
         if initial.n != n or initial.n_harmonics != L:
             raise ConfigError(f"initial trajectory has n={initial.n}, L={initial.n_harmonics}; expected n={n}, L={L}")
         x0 = par.pack(initial.a, initial.b, initial.offset)
-    return shrink_into_limits(par, x0, evaluator, t_grid)
+    return shrink_into_limits(par, x0, evaluator, t_grid)[0]
 
 
 def _minimise(

@@ -231,6 +231,7 @@ class LimitEvaluator:
         self.torque_joints = np.flatnonzero(np.isfinite(limits.max_torque))
         self.use_floor = geometry is not None and limits.floor is not None
         self.pairs = geometry.pairs if (geometry is not None and limits.self_collision) else ()
+        self._last_poses: tuple[bytes, np.ndarray, np.ndarray] | None = None
 
     @property
     def active(self) -> bool:
@@ -366,7 +367,14 @@ class LimitEvaluator:
         return out
 
     def _poses(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Rotations (N, n, 3, 3) and origins (N, n, 3) of the joint frames along samples q (N, n)."""
+        """Rotations (N, n, 3, 3) and origins (N, n, 3) of the joint frames along samples q (N, n); the last
+        call's are kept (the 1 kHz check asks :meth:`margin_samples` and :meth:`report` of one motion)."""
+        key = q.tobytes()
+        if self._last_poses is None or self._last_poses[0] != key:
+            self._last_poses = (key, *self._compute_poses(q))
+        return self._last_poses[1], self._last_poses[2]
+
+    def _compute_poses(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         N, n = q.shape
         R, p = np.empty((N, n, 3, 3)), np.empty((N, n, 3))
         for k in range(N):
