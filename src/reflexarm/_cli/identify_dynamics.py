@@ -79,6 +79,8 @@ def _identify_from_logs(args: argparse.Namespace) -> int:
     robot = load_robot_arg(args)
     base = compute_base_parameters(robot)
     print(f"{robot.name}: {base.n_base} base parameters of {base.n_standard}")
+    if args.split is not None and getattr(args, "block_rows", None):
+        print("--split: the log is read whole (its identification and validation parts come from one preprocessing)")
     tables = None if args.split is not None else scan_logs(args, args.log, robot)
     if tables is None:
         ident, val_raw, states = _load_logs(args, robot)
