@@ -308,14 +308,18 @@ NB_MODULE(_core, m)
       [](PyController & c, const reflexarm_bindings::ReplayCol & t, const reflexarm_bindings::ReplayRows & q,
          const reflexarm_bindings::ReplayRows & dq, const reflexarm_bindings::ReplayRows & tau_m, nb::handle wrench,
          const reflexarm_bindings::ReplayCol & gravity, nb::handle residual, nb::handle tau, nb::handle over,
-         nb::handle collision, nb::handle mode, nb::handle status, size_t max_faults) {
+         nb::handle collision, nb::handle mode, nb::handle status, size_t max_faults, bool residual_only,
+         int threads) {
         return reflexarm_bindings::replay(c.ctrl, c.cmd, t, q, dq, tau_m, wrench, gravity, residual, tau, over,
-                                          collision, mode, status, max_faults);
+                                          collision, mode, status, max_faults, residual_only, threads);
       },
       "t"_a, "q"_a, "dq"_a, "tau_m"_a, "wrench"_a.none(), "gravity"_a, "residual"_a, "tau"_a.none(), "over"_a.none(),
-      "collision"_a.none(), "mode"_a.none(), "status"_a.none(), "max_faults"_a = 16,
+      "collision"_a.none(), "mode"_a.none(), "status"_a.none(), "max_faults"_a = 16, "residual_only"_a = false,
+      "threads"_a = 1,
       "A whole log through update() (reflexarm::replayLog; reference: a hold at the measured q) into the given "
-      "output arrays; returns (rejected rows, [(row, fault text)] of the first max_faults).")
+      "output arrays, or with residual_only through its contract, observers and detection only "
+      "(reflexarm::replayResiduals, on `threads` threads: 1 or 2); returns (rejected rows, [(row, fault text)] of "
+      "the first max_faults, whether the residual-only path ran, why not).")
     .def(
       "copy_state_from",
       [](PyController & self, const PyController & other) {

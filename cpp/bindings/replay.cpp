@@ -65,7 +65,7 @@ namespace reflexarm_bindings
   nb::tuple replay(reflexarm::Controller & ctrl, reflexarm::Command & cmd, const ReplayCol & t, const ReplayRows & q,
                    const ReplayRows & dq, const ReplayRows & tau_m, nb::handle wrench, const ReplayCol & gravity,
                    nb::handle residual, nb::handle tau, nb::handle over, nb::handle collision, nb::handle mode,
-                   nb::handle status, std::size_t max_faults)
+                   nb::handle status, std::size_t max_faults, bool residual_only, int threads)
   {
     const long N = static_cast<long>(t.shape(0)), n = ctrl.nv();
     checkInput(q, "q", N, n);
@@ -96,11 +96,16 @@ namespace reflexarm_bindings
     out.mode = output<std::int8_t>(mode, "mode", N, 0, true);
     out.status = output<std::int32_t>(status, "status", N, 0, true);
     std::vector<reflexarm::ReplayFault> faults;
-    // the GIL stays held: a Python thread stepping the same controller meanwhile would race with the replay
-    const long rejected = reflexarm::replayLog(ctrl, cmd, in, out, faults, max_faults);
+    // the GIL stays held: a Python thread stepping the same controller meanwhile would race with the replay (the
+    // residual-only path's second thread computes the dynamics terms from the arrays only, without Python)
+    reflexarm::ResidualReplayRun run;
+    if (residual_only)
+      run = reflexarm::replayResiduals(ctrl, cmd, in, out, faults, max_faults, threads);
+    else
+      run.rejected = reflexarm::replayLog(ctrl, cmd, in, out, faults, max_faults);
     nb::list texts;
     for (const auto & f : faults)
       texts.append(nb::make_tuple(f.row, f.text));
-    return nb::make_tuple(rejected, texts);
+    return nb::make_tuple(run.rejected, texts, run.residual_only, std::string(run.reason));
   }
 } // namespace reflexarm_bindings

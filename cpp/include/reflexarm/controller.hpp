@@ -250,6 +250,9 @@ namespace reflexarm
     int damping_parts_run_ = 0;
     Mode mode_ = Mode::Compliant;
     FaultInfo fault_;
+
+    // the residual-only replay (residual_replay.cpp) runs update()'s contract, observers and detection without the law
+    friend struct ResidualReplay;
   };
 
 } // namespace reflexarm

@@ -57,4 +57,27 @@ namespace reflexarm
   long replayLog(Controller & ctrl, Command & cmd, const ReplayInputs & in, const ReplayOutputs & out,
                  std::vector<ReplayFault> & faults, std::size_t max_faults);
 
+  /// How replayResiduals ran a log.
+  struct ResidualReplayRun
+  {
+    long rejected = 0;          ///< rejected rows, as replayLog's return value
+    bool residual_only = false; ///< true: the residual-only path ran the whole log; false: replayLog did
+    const char * reason = "";   ///< why replayLog ran instead ("" when residual_only)
+  };
+
+  /// The same log as replayLog, for what the detection needs only (residual_replay.cpp): per row the input
+  /// contract, the observer(s) and the detection of update(), without the control law, the torque limits, the
+  /// modal damping and the inverse dynamics. The dynamics terms (M(q) dq, C(q, dq)^T dq, g(q), J(q)^T F: see
+  /// ResidualTerms) depend on the measurements only: they are computed block by block first, on `threads`
+  /// threads (1 or 2; each its own pinocchio::Data), then the observers' recursion runs over the block in order.
+  /// Its residual, detection flags, mode, faults and the controller's observers and clock equal replayLog's to
+  /// rounding (the terms' own, ~1e-14 Nm); out.tau is not written and the status of an accepted row has no
+  /// saturation count (no command). The controller's command state (the last command, the modal damping and its
+  /// schedule) is not advanced: a controller that goes on to drive an arm needs reset() as after any log.
+  /// replayLog runs instead, from the controller's state before the call, when the residual-only path cannot
+  /// give the same result: a detection (the reaction that follows it needs the command), a detection or reaction
+  /// already latched, or a joint of more than one degree of freedom. Throws ConfigError as replayLog.
+  ResidualReplayRun replayResiduals(Controller & ctrl, Command & cmd, const ReplayInputs & in, const ReplayOutputs & out,
+                                    std::vector<ReplayFault> & faults, std::size_t max_faults, int threads);
+
 } // namespace reflexarm

@@ -4,7 +4,19 @@
 core, which runs ``update()`` on every sample in order: the residual, the detection flags and the faults are
 those of N calls of :meth:`Controller.step <reflexarm.control.Controller.step>` with the reference held at
 the measured position (q_d = q, dq_d = ddq_d = 0), bit for bit, and the controller is left in the state those
-calls leave it in. The residual depends on the measurements only, not on the reference or the command.
+calls leave it in (with ``torque=True``; see below otherwise). The residual depends on the measurements only,
+not on the reference or the command.
+
+Without ``torque=True`` the core runs the residual-only path (``reflexarm::replayResiduals``): per sample the
+input contract, the observer(s) and the detection of ``update()``, without the control law, the torque limits,
+the modal damping and the inverse dynamics; the dynamics terms (M(q) dq, C(q, dq)^T dq, g(q), J^T F) come from
+one pass over the tree per sample, computed for a block of samples first (on two threads when the machine has
+them), then the observers' recursion runs over the block. Its residual, flags, mode and faults equal the full
+path's to rounding (~1e-14 Nm: the terms are summed in another order); the controller's observers and clock
+are left as N ``step`` calls leave them, its command state (the last command, the modal damping) is not
+advanced. The full path runs instead, from the controller's state before the call, when the result would
+differ: a detection (the reaction it starts needs the command), a detection already latched in the
+controller, or a joint of more than one degree of freedom (:attr:`ReplayResult.full_path_reason` says which).
 
 The detection pipeline reads a log as ``replay -> events``: :attr:`ReplayResult.events` lists the separate
 threshold crossings (runs of samples with some |residual| above the controller's threshold), and
@@ -14,6 +26,7 @@ reaction), as :attr:`Controller.event <reflexarm.control.Controller.event>` give
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -24,6 +37,10 @@ from reflexarm.control.collision.event import CollisionEvent
 from reflexarm.errors import ConfigError, DataError
 
 __all__ = ["ReplayEvent", "ReplayResult", "replay"]
+
+#: Samples per thread below which the residual-only path's terms stay on one thread by default (a short log
+#: is done in milliseconds either way).
+MIN_ROWS_PER_THREAD = 2048
 
 #: Fault texts kept per replay (the first ones; :attr:`ReplayResult.fault_ticks` counts them all).
 MAX_FAULT_TEXTS = 16
@@ -64,6 +81,8 @@ class ReplayResult:
         fault_ticks: rejected samples; faults: (t, text) of the first :data:`MAX_FAULT_TEXTS` of them.
         events: the separate threshold crossings, in time order (:class:`ReplayEvent`).
         event: the controller's record of the first detection (:class:`CollisionEvent`) or None.
+        residual_only: True if the residual-only path ran (no ``torque``; module docstring).
+        full_path_reason: why the full path ran ("" when the residual-only path did).
     """
 
     t: np.ndarray
@@ -77,6 +96,8 @@ class ReplayResult:
     faults: tuple[tuple[float, str], ...]
     events: tuple[ReplayEvent, ...]
     event: CollisionEvent | None
+    residual_only: bool = False
+    full_path_reason: str = ""
 
     @property
     def modes(self) -> np.ndarray:
@@ -96,6 +117,7 @@ def replay(
     *,
     gravity: npt.ArrayLike | None = None,
     torque: bool = False,
+    threads: int | None = None,
 ) -> ReplayResult:
     """Run a whole log through ``controller`` in one call of its C++ core (module docstring).
 
@@ -107,10 +129,13 @@ def replay(
             non-finite or implausible value is a rejected sample (a fault, as in ``step``), not an error.
         wrench: the wrist wrench (N, 6) [N, Nm] or None (zero, as a log without a sensor).
         gravity: the measured gravity (3,) [m/s^2]; default the controller's model gravity.
-        torque: also keep the commanded torque (another N x n array).
+        torque: also keep the commanded torque (another N x n array): the full path, every sample a whole
+            ``update()``; without it the residual-only path (module docstring).
+        threads: threads of the residual-only path's dynamics terms, 1 or 2; default 2 when the machine has
+            two cores and the log has at least :data:`MIN_ROWS_PER_THREAD` samples per thread, else 1.
 
     Raises:
-        ConfigError: ``controller`` is not a reflexarm Controller.
+        ConfigError: ``controller`` is not a reflexarm Controller; ``threads`` is not 1, 2 or None.
         DataError: an array of another shape or not of real numbers, no samples, or time stamps that are not
             finite and strictly increasing (the message names the array and the first bad sample).
     """
@@ -132,10 +157,15 @@ def replay(
     residual, over = np.empty((N, n)), np.zeros((N, n), dtype=np.uint8)
     collision, mode, status = np.zeros(N, np.uint8), np.zeros(N, np.int8), np.zeros(N, np.int32)
     tau_out = np.empty((N, n)) if torque else None
+    if threads is None:
+        threads = 2 if (os.cpu_count() or 1) >= 2 and N >= 2 * MIN_ROWS_PER_THREAD else 1
+    elif threads not in (1, 2):
+        raise ConfigError(f"threads must be 1, 2 or None; got {threads!r}")
     core = controller._core
-    rejected, texts = core.replay(
-        tt, *arrays, w, np.ascontiguousarray(g), residual, tau_out, over, collision, mode, status, MAX_FAULT_TEXTS
-    )
+    rejected, texts, residual_only, reason = core.replay(
+        tt, *arrays, w, np.ascontiguousarray(g), residual, tau_out, over, collision, mode, status, MAX_FAULT_TEXTS,
+        residual_only=True, threads=threads,  # the core runs the full path when tau is asked for (and says so)
+    )  # fmt: skip
     _sync_detector(controller, tt, over)
     over_b = over.view(bool)
     return ReplayResult(
@@ -150,6 +180,8 @@ def replay(
         faults=tuple((float(tt[k]), str(text)) for k, text in texts),
         events=_events(tt, residual, over_b),
         event=controller.event,
+        residual_only=bool(residual_only),
+        full_path_reason=str(reason),
     )
 
 
