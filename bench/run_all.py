@@ -21,6 +21,7 @@ BENCHES = (
     "bench_realtime_loop",
     "bench_closed_loop",
     "bench_long_runs",
+    "bench_replay",
     "bench_ident",
     "bench_ident_memory",
     "bench_sweeps",
