@@ -108,8 +108,8 @@ def test_a_held_stick_stands_on_the_path_of_a_link_swung_on_a_tight_circle():
     # start never touched it (the reaction study read "no detection"); the held stick stands where the link's
     # leading surface will pass, so the link runs into it and the collision is detected
     from reflexarm import load_robot
-    from reflexarm.experiments.collision import LINK_SETTING, held_stick_tip, run_link_collision
-    from reflexarm.experiments.link_push import link_push_plan
+    from reflexarm.experiments.collision import LINK_SETTING, run_link_collision
+    from reflexarm.experiments.link_push import held_stick_tip, link_push_plan
 
     panda = load_robot("panda")
     plan = link_push_plan(panda)

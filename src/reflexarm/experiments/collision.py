@@ -32,7 +32,7 @@ from reflexarm.experiments.collision_summary import (
     summarize_link_collision,
     write_outputs,
 )
-from reflexarm.experiments.link_push import link_push_plan
+from reflexarm.experiments.link_push import held_stick_tip, link_push_plan, move_start
 from reflexarm.robots import CoulombViscousFriction, RobotModel, load_robot, perturb_model
 from reflexarm.sim import (
     PAPER_NOISE,
@@ -356,61 +356,6 @@ def run_ee_collision(
 STICKS = ("pushed", "held")
 
 
-#: A held stick's tip sits this far ahead of the link's surface when it appears [m] (at least).
-HELD_STICK_GAP_M = 0.02
-
-
-def held_stick_tip(
-    robot: RobotModel, body: str, traj: JointTrajectory, t_start: float, radius: float = 0.015
-) -> tuple[np.ndarray, np.ndarray]:
-    """(tip, direction) of a held stick on the link's path: of the link's surface points (its collision geometry,
-    :func:`~reflexarm.robots.collision_geometry.link_collision_geometry`, 2 cm apart), the one moving fastest
-    along its outward normal along the reference after ``t_start``, at the time it does, among the positions
-    :data:`HELD_STICK_GAP_M` outside the link at ``t_start``; the stick's tip (``radius``) just touches that
-    position, pointing against the point's motion. The link's surface runs into it whatever the curvature of its
-    path (a stick placed on the tangent at ``t_start`` misses a link swung on a tight circle, e.g. the Panda's
-    link 4 about joint 3).
-
-    Raises:
-        ConfigError: a link without collision geometry, or one that never moves clear of where it was.
-    """
-    from reflexarm.control.collision.identify import compute_link_kinematics
-    from reflexarm.experiments.link_push import link_body
-    from reflexarm.robots.collision_geometry import link_collision_geometry
-
-    joint = link_body(robot, body)[0]
-    surface = link_collision_geometry(robot, spacing=0.02)[joint]
-    if not surface.has_geometry:
-        raise ConfigError(f"the link {body!r} has no collision geometry: a held stick cannot touch it")
-    ts = np.arange(t_start, traj.duration, 5e-3)
-    pose = [compute_link_kinematics(robot, traj.sample(float(t)).q_d) for t in ts]
-    pts = np.array([surface.points @ k.rotations[joint].T + k.origins[joint] for k in pose])  # (time, point, 3)
-    normals = np.array([surface.normals @ k.rotations[joint].T for k in pose])
-    vel = np.gradient(pts, ts, axis=0)
-    lead = np.einsum("tmi,tmi->tm", vel, normals)  # speed along the outward normal
-    # outside the link at t_start: away from the nearest surface point, on its outer side
-    flat = pts.reshape(-1, 3)
-    gaps = np.linalg.norm(flat[:, None, :] - pts[0][None], axis=2)
-    near = np.argmin(gaps, axis=1)
-    outer = np.einsum("ki,ki->k", flat - pts[0][near], normals[0][near]) > 0.0
-    clear = ((gaps.min(axis=1) >= HELD_STICK_GAP_M) & outer).reshape(lead.shape)
-    if not clear.any() or np.where(clear, lead, 0.0).max() <= 0.0:
-        raise ConfigError(f"the link {body!r} never moves clear of where it was after t = {t_start:g} s: no path to "
-                          "hold a stick on")  # fmt: skip
-    k, i = np.unravel_index(int(np.argmax(np.where(clear, lead, -np.inf))), lead.shape)
-    direction = -vel[k, i] / np.linalg.norm(vel[k, i])
-    return pts[k, i] - direction * radius, direction
-
-
-def _move_start(traj: JointTrajectory) -> float:
-    """The first time [s] the reference leaves its start (1 ms steps)."""
-    q0 = traj.sample(0.0).q_d
-    for t in np.arange(0.0, traj.duration, 1e-3):
-        if np.abs(traj.sample(float(t)).q_d - q0).max() > 1e-9:
-            return float(t)
-    raise ConfigError("the link collision's reference never moves")
-
-
 def run_link_collision(
     *,
     model_error: float | None = None,
@@ -430,8 +375,8 @@ def run_link_collision(
 
     ``stick``: ``"pushed"`` (the paper's: the stick is pushed into the moving link at 50 mm/s for 1.5 s, and keeps
     coming after a detection), or ``"held"``: the stick stands still on the link's path
-    (:func:`held_stick_tip`) from the start of the move to the end of the run, and the moving link runs into
-    it (a static obstacle: what a reaction can get away from).
+    (:func:`~reflexarm.experiments.link_push.held_stick_tip`) from the start of the move to the end of the run,
+    and the moving link runs into it (a static obstacle: what a reaction can get away from).
 
     On another ``robot`` than Atlas (or with ``link`` on Atlas) the stick pushes ``link`` (1-based joint
     number whose link is pushed, or a link name; default mid-chain) while the arm swings it
@@ -449,7 +394,7 @@ def run_link_collision(
         traj, body, t_start, standoff = plan.trajectory, plan.body, plan.t_start, plan.standoff
         placement = dict(plan.info)
     if stick == "held":  # it stands on the link's path from the start of the move (the link is still far)
-        t_move = _move_start(traj)
+        t_move = move_start(traj)
         tip, direction = held_stick_tip(robot, body, traj, t_move)
         placement.update({"held_stick_tip_m": tip.tolist(), "held_stick_from_s": t_move})
         scene = ElbowStick(body=body, t_start=t_move, speed=0.0, duration=traj.duration, direction=direction, tip=tip)

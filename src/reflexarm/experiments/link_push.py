@@ -16,13 +16,16 @@ from reflexarm.robots import RobotModel
 from reflexarm.sim import JointTrajectory
 
 __all__ = [
+    "HELD_STICK_GAP_M",
     "LINK_PATH_M",
     "LINK_SPEED",
     "STICK_GAP_M",
     "LinkPushPlan",
     "default_link",
+    "held_stick_tip",
     "link_body",
     "link_push_plan",
+    "move_start",
 ]
 
 #: Peak speed of the pushed link in the link collision [m/s] (the paper's elbow moved at ~50 mm/s).
@@ -130,3 +133,58 @@ def _extent_along_motion(robot: RobotModel, q: np.ndarray, body: str, joint: int
         centre = np.array(d.geom_xpos[g]) + R @ m.geom_aabb[g, :3]
         reach.append(float((centre - p) @ v + np.abs(R.T @ v) @ m.geom_aabb[g, 3:]))
     return max(reach)
+
+
+#: A held stick's tip sits this far ahead of the link's surface when it appears [m] (at least).
+HELD_STICK_GAP_M = 0.02
+
+
+def held_stick_tip(
+    robot: RobotModel, body: str, traj: JointTrajectory, t_start: float, radius: float = 0.015
+) -> tuple[np.ndarray, np.ndarray]:
+    """(tip, direction) of a held stick on the link's path: of the link's surface points (its collision geometry,
+    :func:`~reflexarm.robots.collision_geometry.link_collision_geometry`, 2 cm apart), the one moving fastest
+    along its outward normal along the reference after ``t_start``, at the time it does, among the positions
+    :data:`HELD_STICK_GAP_M` outside the link at ``t_start``; the stick's tip (``radius``) just touches that
+    position, pointing against the point's motion. The link's surface runs into it whatever the curvature of its
+    path (a stick placed on the tangent at ``t_start`` misses a link swung on a tight circle, e.g. the Panda's
+    link 4 about joint 3).
+
+    Raises:
+        ConfigError: a link without collision geometry, or one that never moves clear of where it was.
+    """
+    from scipy.spatial import cKDTree
+
+    from reflexarm.control.collision.identify import compute_link_kinematics
+    from reflexarm.robots.collision_geometry import link_collision_geometry
+
+    joint = link_body(robot, body)[0]
+    surface = link_collision_geometry(robot, spacing=0.02)[joint]
+    if not surface.has_geometry:
+        raise ConfigError(f"the link {body!r} has no collision geometry: a held stick cannot touch it")
+    ts = np.arange(t_start, traj.duration, 5e-3)
+    pose = [compute_link_kinematics(robot, traj.sample(float(t)).q_d) for t in ts]
+    pts = np.array([surface.points @ k.rotations[joint].T + k.origins[joint] for k in pose])  # (time, point, 3)
+    normals = np.array([surface.normals @ k.rotations[joint].T for k in pose])
+    vel = np.gradient(pts, ts, axis=0)
+    lead = np.einsum("tmi,tmi->tm", vel, normals)  # speed along the outward normal
+    # outside the link at t_start: away from the nearest surface point, on its outer side
+    flat = pts.reshape(-1, 3)
+    gap, near = cKDTree(pts[0]).query(flat)
+    outer = np.einsum("ki,ki->k", flat - pts[0][near], normals[0][near]) > 0.0
+    clear = ((gap >= HELD_STICK_GAP_M) & outer).reshape(lead.shape)
+    if not clear.any() or np.where(clear, lead, 0.0).max() <= 0.0:
+        raise ConfigError(f"the link {body!r} never moves clear of where it was after t = {t_start:g} s: no path to "
+                          "hold a stick on")  # fmt: skip
+    k, i = np.unravel_index(int(np.argmax(np.where(clear, lead, -np.inf))), lead.shape)
+    direction = -vel[k, i] / np.linalg.norm(vel[k, i])
+    return pts[k, i] - direction * radius, direction
+
+
+def move_start(traj: JointTrajectory) -> float:
+    """The first time [s] the reference leaves its start (1 ms steps)."""
+    q0 = traj.sample(0.0).q_d
+    for t in np.arange(0.0, traj.duration, 1e-3):
+        if np.abs(traj.sample(float(t)).q_d - q0).max() > 1e-9:
+            return float(t)
+    raise ConfigError("the link collision's reference never moves")
