@@ -103,7 +103,8 @@ def test_a_tiny_study_runs_and_writes_its_files(tmp_path):
 def test_a_seeded_free_motion_is_another_log_of_the_same_motion():
     """Tuning and held-out logs of one arm differ in motion: a seed reorders and moves the waypoints (within the
     joint ranges) and rescales the segments; no seed gives the fixed cycle, one seed always the same motion."""
-    from reflexarm.experiments.collision import FREE_MOTION_JITTER_RAD, free_motion_trajectory
+    from reflexarm.experiments.collision import free_motion_trajectory
+    from reflexarm.experiments.free_motion_variation import FREE_MOTION_JITTER_RAD
 
     robot = study_arm("panda").robot
     t = np.arange(0.0, 60.0, 0.05)

@@ -32,6 +32,7 @@ from reflexarm.experiments.collision_summary import (
     summarize_link_collision,
     write_outputs,
 )
+from reflexarm.experiments.free_motion_variation import varied_cycles
 from reflexarm.experiments.link_push import held_stick_tip, link_push_plan, move_start
 from reflexarm.robots import CoulombViscousFriction, RobotModel, load_robot, perturb_model
 from reflexarm.sim import (
@@ -199,7 +200,8 @@ def free_motion_trajectory(
     the arm's start posture; segments of EE_MOVE_TIME + 0.5 s or the swing's move time.
 
     ``seed`` (None: the fixed cycle) makes another log of the same motion: every cycle visits its
-    waypoints in a seeded order, each moved by up to :data:`FREE_MOTION_JITTER_RAD` (or 5 % of the joint's
+    waypoints in a seeded order, each moved by up to
+    :data:`~reflexarm.experiments.free_motion_variation.FREE_MOTION_JITTER_RAD` (or 5 % of the joint's
     range, whichever is smaller; clipped to the range), with segment times scaled by 0.85-1.2. Tuning and
     held-out logs of one arm then differ in motion as well as in noise.
     """
@@ -219,36 +221,11 @@ def free_motion_trajectory(
         cycle = list(loaded_waypoints(robot, start))
     k = max(1, int(np.ceil(duration / (seg * (len(cycle) + 1)))))
     if seed is not None:
-        return _varied_cycles(np.asarray(start, float), np.asarray(cycle, float), seg, duration, seed, robot)
+        return varied_cycles(np.asarray(start, float), np.asarray(cycle, float), seg, duration, seed, robot)
     way = [start]
     for _ in range(k):
         way += [*cycle, start]
     return JointTrajectory(np.array(way), np.full(len(way) - 1, seg))
-
-
-#: Largest waypoint offset of a seeded free motion [rad] (:func:`free_motion_trajectory`).
-FREE_MOTION_JITTER_RAD = 0.15
-
-
-def _varied_cycles(
-    start: np.ndarray, cycle: np.ndarray, seg: float, duration: float, seed: int, robot: RobotModel | None
-) -> JointTrajectory:
-    """The cycle ``start -> cycle -> start`` repeated for ``duration``, varied by ``seed`` (see
-    :func:`free_motion_trajectory`)."""
-    rng = np.random.default_rng(seed)
-    if robot is None:
-        lo, hi = np.full(start.size, -np.inf), np.full(start.size, np.inf)
-    else:
-        lo, hi = robot.lower_limit, robot.upper_limit
-    amp = np.minimum(FREE_MOTION_JITTER_RAD, 0.05 * np.where(np.isfinite(hi - lo), hi - lo, np.inf))
-    way, times, total = [start], [], 0.0
-    while total < duration:
-        for q in (*cycle[rng.permutation(len(cycle))], start):
-            moved = start if q is start else np.clip(q + rng.uniform(-amp, amp), lo, hi)
-            way.append(moved)
-            times.append(seg * rng.uniform(0.85, 1.2))
-            total += times[-1]
-    return JointTrajectory(np.array(way), np.array(times))
 
 
 def link_collision_trajectory() -> JointTrajectory:
