@@ -84,12 +84,12 @@ class ConstraintGrid:
             par, limits, evaluator, np.arange(n_linear) * period / n_linear, np.arange(n_dynamics) * period / n_dynamics
         )
 
-    @property
-    def scipy_constraints(self) -> list[dict[str, Any]]:
-        """The constraints in ``scipy.optimize.minimize``'s form."""
-        out = [{"type": "ineq", "fun": self.linear[0], "jac": self.linear[1]}]
+    def scipy_constraints(self, inside: float = 0.0) -> list[dict[str, Any]]:
+        """The constraints margins >= ``inside`` in ``scipy.optimize.minimize``'s form."""
+        out = [{"type": "ineq", "fun": lambda x: self.linear[0](x) - inside, "jac": self.linear[1]}]
         if self.nonlinear is not None:
-            out.append({"type": "ineq", "fun": self.nonlinear[0], "jac": self.nonlinear[1]})
+            nonlinear = self.nonlinear
+            out.append({"type": "ineq", "fun": lambda x: nonlinear[0](x) - inside, "jac": nonlinear[1]})
         return out
 
     def feasible(self, x: np.ndarray) -> bool:
@@ -99,9 +99,8 @@ class ConstraintGrid:
         return self.nonlinear is None or bool(np.min(self.nonlinear[0](x)) >= -FEASIBILITY_TOLERANCE)
 
     def refined(self, x: np.ndarray) -> ConstraintGrid | None:
-        """This grid plus the 1 kHz sample times at which a margin of x has a local minimum below
-        -:data:`FEASIBILITY_TOLERANCE` (at most :data:`PEAKS_PER_REFINEMENT` per grid, the deepest first);
-        None when x meets every limit at 1 kHz."""
+        """This grid plus the 1 kHz sample times at which a margin of x has a local minimum below zero (at
+        most :data:`PEAKS_PER_REFINEMENT` per grid, the deepest first); None when x meets every limit at 1 kHz."""
         trajectory = self.par.trajectory(x)
         t = np.arange(0.0, trajectory.period, CHECK_STEP)
         q, dq, ddq = trajectory.evaluate(t)
@@ -118,12 +117,14 @@ class ConstraintGrid:
 
     def project(self, x: np.ndarray) -> np.ndarray | None:
         """The point nearest to x (Euclidean in the coefficients) that meets the grid's constraints (SLSQP,
-        at most :data:`PROJECTION_ITERATIONS` iterations); None if it finds none."""
+        at most :data:`PROJECTION_ITERATIONS` iterations; aiming :data:`FEASIBILITY_TOLERANCE` inside them, so
+        that SLSQP's own tolerance leaves no margin below zero); None if it finds none."""
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             res = scipy.optimize.minimize(
                 lambda y: 0.5 * float((y - x) @ (y - x)), x, jac=lambda y: y - x, method="SLSQP",
-                constraints=self.scipy_constraints, options={"maxiter": PROJECTION_ITERATIONS, "ftol": 1e-12},
+                constraints=self.scipy_constraints(FEASIBILITY_TOLERANCE),
+                options={"maxiter": PROJECTION_ITERATIONS, "ftol": 1e-12},
             )  # fmt: skip
         y = np.asarray(res.x)
         return y if self.feasible(y) else None
@@ -188,11 +189,11 @@ class ConstraintGrid:
 
 def _peak_times(t: np.ndarray, margins: np.ndarray) -> np.ndarray:
     """The times of the local minima in time (periodic) of each column of ``margins`` (N, m) that lie below
-    -FEASIBILITY_TOLERANCE, at most PEAKS_PER_REFINEMENT, the deepest first."""
+    zero, at most PEAKS_PER_REFINEMENT, the deepest first."""
     if margins.shape[1] == 0:
         return np.zeros(0)
     peak = (margins <= np.roll(margins, 1, axis=0)) & (margins <= np.roll(margins, -1, axis=0))
-    peak &= margins < -FEASIBILITY_TOLERANCE
+    peak &= margins < 0.0
     rows = np.flatnonzero(peak.any(axis=1))
     depth = np.where(peak[rows], margins[rows], np.inf).min(axis=1)
     return np.sort(t[rows[np.argsort(depth)[:PEAKS_PER_REFINEMENT]]])

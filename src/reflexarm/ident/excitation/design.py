@@ -85,9 +85,9 @@ DEFAULT_MAX_VELOCITY = 1.5
 DEFAULT_MAX_ACCELERATION = 5.0
 #: Default margin kept from the joint position limits [rad].
 DEFAULT_POSITION_MARGIN = 0.1
-#: The best feasible iterates (by the cost on the optimization's grid) checked at 1 kHz after the run; the one
-#: with the lowest condition number after that check is kept (a peak between grid points shrinks an iterate's
-#: amplitudes, and the last iterate is not always the best one after that: measured 17.0 vs 15.6 on a 7-DoF arm).
+#: The best feasible iterates (by the cost on the optimization's grid) restored onto the limits and checked at
+#: 1 kHz after the run (:func:`~.constraints.best_at_1khz`); the one with the lowest condition number after
+#: that is kept (restoring moves each iterate a little, so the best on the grid need not stay the best).
 CANDIDATES_AT_1KHZ = 5
 
 
@@ -384,7 +384,7 @@ def _minimise(
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             res = scipy.optimize.minimize(
-                log_cond, x0, jac=gradient, method="SLSQP", constraints=grid.scipy_constraints,
+                log_cond, x0, jac=gradient, method="SLSQP", constraints=grid.scipy_constraints(),
                 options={"maxiter": int(maxiter), "ftol": 1e-6}, callback=step,
             )  # fmt: skip
     finally:
