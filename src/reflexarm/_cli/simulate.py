@@ -120,7 +120,7 @@ def _add_free_motion(ssub: argparse._SubParsersAction) -> None:
         default="auto",
         metavar="FILE.parquet|none",
         help="stream the trace to this Parquet file, block by block (default: free_motion_trace.parquet in --out: "
-        "every tick up to 600 s, ~0.5 MB per simulated second of the Atlas arm, every 100th tick beyond, ~18 MB "
+        "every tick up to 600 s, ~0.41 MB per simulated second of the Atlas arm, every 100th tick beyond, ~20 MB "
         "per simulated hour; 'none': statistics only; memory does not grow with --duration either way)",
     )
     fm.add_argument(
