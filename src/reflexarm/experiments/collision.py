@@ -461,16 +461,16 @@ def free_motion_false_alarms(
     }
 
 
-#: A free-motion trace keeps every tick up to this duration [s] (~0.5 MB per simulated second of the Atlas arm).
+#: A free-motion trace keeps every tick up to this duration [s] (~0.41 MB per simulated second of the Atlas arm).
 FULL_TRACE_UP_TO_S = 600.0
-#: ... and every this many ticks beyond (10 Hz at 1 kHz: ~18 MB per simulated hour of the Atlas arm; the
+#: ... and every this many ticks beyond (10 Hz at 1 kHz: ~20 MB per simulated hour of the Atlas arm; the
 #: statistics, the largest residuals and the histogram, are over every tick all the same).
 LONG_RUN_TRACE_EVERY = 100
 
 
 def default_trace_every(duration: float) -> int:
     """Ticks per written row of a free-motion trace of ``duration`` s: 1 up to :data:`FULL_TRACE_UP_TO_S`,
-    :data:`LONG_RUN_TRACE_EVERY` beyond (a long run's trace stays small: ~18 MB per simulated hour)."""
+    :data:`LONG_RUN_TRACE_EVERY` beyond (a long run's trace stays small: ~20 MB per simulated hour)."""
     return 1 if duration <= FULL_TRACE_UP_TO_S else LONG_RUN_TRACE_EVERY
 
 
