@@ -37,7 +37,7 @@ __all__ = [
     "shrink_into_limits",
 ]
 
-#: Scaled constraint margin (O(1) units, see :meth:`ConstraintGrid.linear`) an iterate may miss and still
+#: Scaled constraint margin (O(1) units, see :class:`ConstraintGrid`) an iterate may miss and still
 #: count as feasible: the 1 kHz check that follows removes what is left.
 FEASIBILITY_TOLERANCE = 1e-6
 #: Sampling step of the final check [s] (1 kHz, a torque controller's rate).
