@@ -260,3 +260,18 @@ def test_tuning_and_detect_replay_take_the_residual_only_path(atlas, monkeypatch
     t, q, dq, tau, _ = _log(atlas, N=500, bump=False)
     replay_residual(RobotLog(t=t, q=q, dq=dq, tau=tau, source="synthetic"), atlas, ObserverSettings())
     assert seen == [True]
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_residual_only_path_over_several_blocks(atlas, threads):
+    """A log longer than the core's block (8192 samples): the blocks' terms (pipelined on two threads) line up with
+    their samples, faults in later blocks included."""
+    N = 20_000  # two whole blocks and a part
+    t, q, dq, tau, wrench = _log(atlas, N=N, bump=False)
+    tau[9000, 4] = 1e6  # a rejected sample in the second block
+    q[16500, 0] = np.nan  # ... and in the third
+    kw = dict(threshold=None, reaction="none", kappa_ext=1, observer_discretization="exact")
+    fast = replay(Controller(atlas, **kw), t, q, dq, tau, wrench, threads=threads)
+    full = replay(Controller(atlas, **kw), t, q, dq, tau, wrench, torque=True)
+    assert fast.residual_only and fast.fault_ticks == 2
+    _assert_same_detection(fast, full)
