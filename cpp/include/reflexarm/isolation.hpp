@@ -105,9 +105,10 @@ namespace reflexarm
     ///   begin(q, residual)  the candidate links and their kinematics (one computeJointJacobians), no fit;
     ///   step(point_budget)  at most point_budget units of the fit, true when none is left;
     ///   finish(out)         the choice of the link and its estimate (runs any work still left first).
-    /// The work is, per candidate link from the most proximal on, pass 1 (the 3x3 gram J_p W W J_p^T and
-    /// J_p W W r of each point: one unit per point) then pass 2 (the constrained fit of each point and its
-    /// error: one unit per point); a link without geometry is one unit (the wrench fit). A step may go on
+    /// The work is, per candidate link from the most proximal on, pass 1 (the link's terms, then the trace of
+    /// A = J_p W W J_p^T of each point: one unit per point) then pass 2 (A and b = J_p W W r of each point, the
+    /// lower bound of its error, then unless the bound rules it out the constrained fit and its error: one unit per
+    /// point); a link without geometry is one unit (the wrench fit). A step may go on
     /// from one link to the next; pass 1's largest trace (the floor of the edges) is kept per link until its
     /// pass 2, the best point per link across the steps. So work_total() = sum over candidate links of 2 m
     /// (m >= 1 points) or 1 (no geometry), and the work is done after ceil(work_total() / point_budget) steps.
@@ -134,6 +135,13 @@ namespace reflexarm
     {
       return work_total_ - work_done_;
     }
+    /// Candidate points of the isolation begun whose constrained fit was skipped so far: their unconstrained
+    /// least-squares error (a lower bound of the constrained one) already exceeded the link's best + tolerance, so
+    /// they can be neither the best point nor in its consistent set (the result is the same as without skipping).
+    long prunedPoints() const noexcept
+    {
+      return pruned_;
+    }
 
     int nv() const noexcept
     {
@@ -150,13 +158,12 @@ namespace reflexarm
 
     struct LinkBuffers
     {
-      Rows3 points_local; ///< (m, 3)
-      Rows3 generators;   ///< (m K, 3) unit edges of the pyramid, joint frame
+      Rows3 points_local;  ///< (m, 3) candidate points, joint frame
+      Rows3 generators;    ///< (m K, 3) unit edges of the pyramid, joint frame
       Rows3 facet_normals; ///< (m K, 3) inward facet normals, joint frame
-      Rows3 points;       ///< (m, 3) world, at the last fit
-      Rows3 forces;       ///< (m, 3) best force per point
-      Eigen::VectorXd errors; ///< (m) weighted fit errors
-      Eigen::Matrix<double, Eigen::Dynamic, 12, Eigen::RowMajor> gram; ///< (m, 12): A (9) and b (3) per point
+      Rows3 points;        ///< (m, 3) world, at the last fit
+      Rows3 forces;        ///< (m, 3) best force per point, world (pruned points: not written)
+      Eigen::VectorXd errors; ///< (m) weighted fit errors; +inf for a point pruned by its lower bound
       Jac jacobian;       ///< LOCAL_WORLD_ALIGNED joint Jacobian at the last call
       Eigen::Matrix3d rotation;
       Eigen::Vector3d origin;
@@ -166,9 +173,11 @@ namespace reflexarm
       double floor = 0.0;     ///< the edges' floor, from pass 1, for pass 2
     };
 
+    /// the terms of the trace of A in the link's joint frame (at the start of its pass 1)
+    void linkTerms(int link) noexcept;
     void pointJacobianT(const Jac & J, const Eigen::Vector3d & d) noexcept;
-    /// pass 1 over points [begin, end) of a link: world points, gram rows, the largest trace
-    void gramRange(int link, Eigen::Index begin, Eigen::Index end) noexcept;
+    /// pass 1 over points [begin, end) of a link: the largest trace of A
+    void traceRange(int link, Eigen::Index begin, Eigen::Index end) noexcept;
     /// pass 2 over points [begin, end): the constrained fit, the errors, the best point so far
     void fitRange(int link, Eigen::Index begin, Eigen::Index end) noexcept;
     void estimateLink(int link, double tolerance, ContactEstimateData & out) noexcept;
@@ -184,6 +193,13 @@ namespace reflexarm
     Eigen::VectorXd residual_, weighted_residual_, wrench_r_;
     Eigen::VectorXd h_, gg_, g12_, x1_, x2_, t_;
     Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> d_world_, c_world_, jpt_;
+    // the link under fit (linkTerms), joint frame: with u_c, v_c the rows of W J^T rotated into it (row c of W J_p^T
+    // at the point p is u_c + v_c x p), trace A(p) = tr P + 2 tr(Q [p]x) + |p|^2 tr S - p^T S p, P = sum u u^T,
+    // Q = sum u v^T, S = sum v v^T
+    Eigen::Matrix3d P_, Q_, S_;
+    double wr2_ = 0.0;       ///< |W r|^2
+    double tolerance_ = 0.0; ///< fit_tolerance + relative_tolerance |W r| (the consistent set's, and the pruning's)
+    long pruned_ = 0;        ///< points of the isolation begun whose constrained fit the lower bound skipped
     Eigen::MatrixXd wrench_b_;
     Eigen::JacobiSVD<Eigen::MatrixXd> wrench_svd_;
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> link_eig_;
