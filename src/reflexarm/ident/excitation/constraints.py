@@ -50,8 +50,12 @@ PEAKS_PER_REFINEMENT = 20
 #: times; they move by a sample or two, so the next step's violations are far smaller (measured on the Panda:
 #: margins -0.02 -> -8e-4 -> within, the second move 2 % of the first or less; 1-2 steps per iterate).
 RESTORATIONS = 5
-#: SLSQP iterations of one projection (a distance to a nearby point: converges in a few).
+#: SLSQP iterations of one projection (a distance to a nearby point: converges in 1-3).
 PROJECTION_ITERATIONS = 50
+#: SLSQP's ftol of a projection, on 0.5 |y - x|^2 (~1e-6 for a move of 1e-3): the nearest point to ~1e-3 of
+#: the move is near enough (the point must meet the constraints, SLSQP's other test at this ftol); 1e-12
+#: left SLSQP circling the point reached for 40 iterations (0.2 s each) on the Gen3-like arm.
+PROJECTION_FTOL = 1e-9
 
 Margins = tuple[Callable[[np.ndarray], np.ndarray], Callable[[np.ndarray], np.ndarray]]
 
@@ -124,7 +128,7 @@ class ConstraintGrid:
             res = scipy.optimize.minimize(
                 lambda y: 0.5 * float((y - x) @ (y - x)), x, jac=lambda y: y - x, method="SLSQP",
                 constraints=self.scipy_constraints(FEASIBILITY_TOLERANCE),
-                options={"maxiter": PROJECTION_ITERATIONS, "ftol": 1e-12},
+                options={"maxiter": PROJECTION_ITERATIONS, "ftol": PROJECTION_FTOL},
             )  # fmt: skip
         y = np.asarray(res.x)
         return y if self.feasible(y) else None
