@@ -49,14 +49,11 @@ def _scan_log(args: argparse.Namespace, path: str, robot: Any, block_rows: int) 
     """One log scanned (:func:`~reflexarm.logs.block_scan.scan_table`) with the log options of ``args``."""
     import warnings
 
-    from reflexarm._cli.ident_common import parse_floats
+    from reflexarm._cli.log_options import torque_source
     from reflexarm.logs import parse_column_mapping
     from reflexarm.logs.block_scan import scan_table
 
-    torque_from = getattr(args, "torque_from", "torque") or "torque"
-    gains = parse_floats(getattr(args, "gains", None), "--gains")
-    if gains is not None and torque_from != "current":
-        raise ConfigError("--gains [Nm/A] turn motor currents into torques: give them with --torque-from current")
+    torque_from, gains = torque_source(args)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         table = scan_table(

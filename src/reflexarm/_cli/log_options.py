@@ -69,6 +69,17 @@ def add_log_options(p: argparse.ArgumentParser) -> None:
     )
 
 
+def torque_source(args: argparse.Namespace) -> tuple[str, Any]:
+    """(``--torque-from``, the ``--gains`` [Nm/A] or None) of ``args``; gains without currents are refused."""
+    from reflexarm._cli.ident_common import parse_floats
+
+    torque_from = getattr(args, "torque_from", "torque") or "torque"
+    gains = parse_floats(getattr(args, "gains", None), "--gains")
+    if gains is not None and torque_from != "current":
+        raise ConfigError("--gains [Nm/A] turn motor currents into torques: give them with --torque-from current")
+    return torque_from, gains
+
+
 def load_log_from_args(args: argparse.Namespace, path: str, robot: Any, *, check: bool = True) -> Any:
     """The :class:`~reflexarm.logs.RobotLog` at ``path`` for ``robot`` (joints mapped by its joint names),
     read with the log options of ``args``; the reader's notes are printed (repairs as warnings).
@@ -78,14 +89,10 @@ def load_log_from_args(args: argparse.Namespace, path: str, robot: Any, *, check
     velocities, continuous joints in degrees, a torque on another scale than the model's), so that every
     command refuses the same implausible log with the same message.
     """
-    from reflexarm._cli.ident_common import parse_floats
     from reflexarm.logs import load_log, parse_column_mapping
     from reflexarm.logs.plausibility import check_log_against_robot
 
-    torque_from = getattr(args, "torque_from", "torque") or "torque"
-    gains = parse_floats(getattr(args, "gains", None), "--gains")
-    if gains is not None and torque_from != "current":
-        raise ConfigError("--gains [Nm/A] turn motor currents into torques: give them with --torque-from current")
+    torque_from, gains = torque_source(args)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         log = load_log(

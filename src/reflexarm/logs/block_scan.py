@@ -13,7 +13,7 @@ import numpy as np
 
 from reflexarm.errors import DataError
 from reflexarm.logs.blocks import DEFAULT_BLOCK_ROWS, NotStreamable, StreamedTable, _Columns
-from reflexarm.logs.robot_log import LogRepairWarning
+from reflexarm.logs.robot_log import LogRepairWarning, refuse_time_going_back
 
 __all__ = ["scan_table"]
 
@@ -125,7 +125,7 @@ def scan_time(table: StreamedTable, time_unit: str | None, block_rows: int = DEF
     N = t.size
     if N < 2:
         raise DataError(f"{where}: a log needs at least 2 samples; got {N}")
-    _refuse_backwards(t, where)
+    refuse_time_going_back(t, where)
     if repeat.any():
         keep = ~repeat
         t = t[keep]
@@ -162,21 +162,6 @@ def _scan(table: StreamedTable, block_rows: int) -> tuple[np.ndarray, np.ndarray
     if not stamps:
         raise DataError(f"{table.source}: the file has no rows")
     return np.concatenate(stamps), np.concatenate(repeats), (cmax, tmax)
-
-
-def _refuse_backwards(t: np.ndarray, where: str) -> None:
-    back = np.flatnonzero(np.diff(t) < 0)
-    if back.size:
-        r = int(back[0]) + 1
-        raise DataError(
-            f"{where}: time goes backwards at row {r}: t = {t[r]:.9g} s after {t[r - 1]:.9g} s "
-            f"({back.size} such row(s))",
-            source=where,
-            column="t",
-            row=r,
-            value=float(t[r]),
-            expected=f">= {t[r - 1]:.9g} s",
-        )
 
 
 def _refuse_irregular(t: np.ndarray, where: str) -> None:

@@ -34,7 +34,7 @@ from reflexarm.errors import DataError
 from reflexarm.logs._retime import irregular_steps, retime
 from reflexarm.logs.bounds import check_absolute_bounds
 
-__all__ = ["WRENCH_COLUMNS", "LogRepairWarning", "RobotLog"]
+__all__ = ["WRENCH_COLUMNS", "LogRepairWarning", "RobotLog", "refuse_time_going_back"]
 
 #: Columns of the wrist wrench in the log schema (see :mod:`reflexarm.logs.files`).
 WRENCH_COLUMNS = ("fx", "fy", "fz", "mx", "my", "mz")
@@ -329,8 +329,12 @@ def _check_time_order(t: np.ndarray, where: str) -> None:
     N = t.size
     if N < 2:
         raise DataError(f"{where}: a log needs at least 2 samples; got {N}")
-    steps = np.diff(t)
-    back = np.flatnonzero(steps < 0)
+    refuse_time_going_back(t, where)
+
+
+def refuse_time_going_back(t: np.ndarray, where: str) -> None:
+    """A DataError naming the first row of ``t`` whose stamp lies before the previous one (and how many do)."""
+    back = np.flatnonzero(np.diff(t) < 0)
     if back.size:
         r = int(back[0]) + 1
         raise DataError(
