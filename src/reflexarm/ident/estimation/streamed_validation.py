@@ -18,7 +18,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from reflexarm.ident.estimation.result import DynamicsIdentification
-from reflexarm.ident.estimation.validation import EXACT_SIGN, TorqueValidation, describe_friction_model
+from reflexarm.ident.estimation.validation import (
+    EXACT_SIGN,
+    TorqueValidation,
+    describe_friction_model,
+    validation_table,
+)
 from reflexarm.logs.blocks import DEFAULT_BLOCK_ROWS, NotStreamable, StreamedTable
 from reflexarm.logs.preprocessing import DEFAULT_CUTOFF_HZ, plan_preprocessing
 from reflexarm.robots.friction import CoulombViscousFriction
@@ -60,17 +65,7 @@ class ValidationSummary:
 
     def table(self, joint_names: Sequence[str] | None = None) -> list[dict[str, object]]:
         """Rows ``{joint, mse, rmse, nrmse, torque_std}`` per joint, as :meth:`TorqueValidation.table`."""
-        names = list(joint_names) if joint_names is not None else [str(j + 1) for j in range(self.mse.size)]
-        return [
-            {
-                "joint": names[j],
-                "mse": float(self.mse[j]),
-                "rmse": float(self.rmse[j]),
-                "nrmse": float(self.nrmse[j]),
-                "torque_std": float(self.torque_std[j]),
-            }  # fmt: skip
-            for j in range(len(names))
-        ]
+        return validation_table(self.mse, self.torque_std, joint_names)
 
 
 def validate_streamed(

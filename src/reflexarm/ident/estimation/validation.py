@@ -14,7 +14,7 @@ from reflexarm.logs.robot_log import RobotLog
 from reflexarm.robots.friction import CoulombViscousFriction
 from reflexarm.robots.robot_model import RobotModel
 
-__all__ = ["EXACT_SIGN", "TorqueValidation", "describe_friction_model", "validate_model"]
+__all__ = ["EXACT_SIGN", "TorqueValidation", "describe_friction_model", "validate_model", "validation_table"]
 
 #: :attr:`TorqueValidation.friction_model` of a prediction with the identification's own friction model.
 EXACT_SIGN = "as identified: d_v dq + mu_C sgn(dq) (exact sign) [+ offsets]"
@@ -80,18 +80,27 @@ class TorqueValidation:
 
     def table(self, joint_names: Sequence[str] | None = None) -> list[dict[str, object]]:
         """Rows ``{joint, mse, rmse, nrmse, std}`` per joint."""
-        names = list(joint_names) if joint_names is not None else [str(j + 1) for j in range(self.measured.shape[1])]
-        std = self.measured.std(axis=0)
-        return [
-            {
-                "joint": names[j],
-                "mse": float(self.mse[j]),
-                "rmse": float(self.rmse[j]),
-                "nrmse": float(self.nrmse[j]),
-                "torque_std": float(std[j]),
-            }
-            for j in range(len(names))
-        ]
+        return validation_table(self.mse, self.measured.std(axis=0), joint_names)
+
+
+def validation_table(
+    mse: np.ndarray, torque_std: np.ndarray, joint_names: Sequence[str] | None = None
+) -> list[dict[str, object]]:
+    """Rows ``{joint, mse, rmse, nrmse, torque_std}`` per joint from the per-joint MSE [Nm^2] and the measured
+    torque's std [Nm] (nrmse = rmse / std); joints named 1..n without ``joint_names``."""
+    names = list(joint_names) if joint_names is not None else [str(j + 1) for j in range(mse.size)]
+    rmse = np.sqrt(mse)
+    nrmse = rmse / np.maximum(torque_std, 1e-300)
+    return [
+        {
+            "joint": names[j],
+            "mse": float(mse[j]),
+            "rmse": float(rmse[j]),
+            "nrmse": float(nrmse[j]),
+            "torque_std": float(torque_std[j]),
+        }
+        for j in range(len(names))
+    ]
 
 
 def validate_model(
