@@ -44,6 +44,10 @@ N_TICKS = 300
 #: ControllerParams.damping_update_period / Controller.kDampingParts (cpp/include/reflexarm/params.hpp).
 DAMPING_TICKS = 4
 
+#: Ticks of a collision's isolation after its fit (the class docstring's rule): one chooses the link and its rank,
+#: one estimates its point and force, and on the next the estimate is in (the retract planned from it).
+FINISHING_TICKS = 3
+
 BOUNDS = {
     "margin": 0.2,
     "velocity_factor": 10.0,
@@ -94,8 +98,10 @@ class Oracle:
       geometry: the candidate links are the most distal joint with |r_j| > significance_j and every later one;
       each candidate point is fitted twice (pass 1, the gram J_p W W J_p^T and J_p W W r; pass 2, the constrained
       fit), one unit each, a candidate link without geometry is one unit (the wrench fit); the tick that begins
-      does no unit, each following tick at most points_per_tick units, so the estimate is in
-      ceil(units / points_per_tick) ticks after the beginning (on that tick if there are no units);
+      does no unit, each following tick at most points_per_tick units, then one tick chooses the link (and its
+      rank), one estimates its point and force, and the estimate is in (and a waiting retract planned from it) on
+      the tick after: ceil(units / points_per_tick) + 3 ticks after the beginning (on that tick if there are no
+      units: nothing significant);
     * the tick whose isolation comes in does not advance the reaction (brake / retract timing) that tick.
     """
 
@@ -462,7 +468,7 @@ class Oracle:
             return 0
         counts = self.geometry.point_counts()[significant[-1] :]  # type: ignore[attr-defined]
         units = int(np.sum(np.where(counts > 0, 2 * counts, 1)))
-        return -(-units // self.settings.isolation_points_per_tick)
+        return -(-units // self.settings.isolation_points_per_tick) + FINISHING_TICKS
 
     def begin_isolation(self, t, q, r) -> bool:
         """Isolate (q, r) of this tick; the estimate is in after isolation_ticks. True if it is in now."""

@@ -18,10 +18,13 @@ namespace reflexarm
     return has_isolator_ && !event_.estimated && event_.contact_class == ContactClass::Collision;
   }
 
-  // The isolation of a collision, spread over the ticks (ContactIsolator::begin / step / finish, the same result
-  // bit for bit as one isolate()): begun on this tick from its residual and posture (kinematics and candidate
-  // links only), then isolation_points_per_tick candidate points per following accepted tick (stepIsolation), the
-  // estimate in on the tick the work runs out. True if it is in already (no work: nothing significant).
+  // The isolation of a collision, spread over the ticks (ContactIsolator::begin / step / finishStep / finish, the
+  // same result bit for bit as one isolate()): begun on this tick from its residual and posture (kinematics and
+  // candidate links only), then one part per following accepted tick (stepIsolation): the fit's units,
+  // isolation_points_per_tick a tick; the choice of the link and its rank; its estimate (point, force, what is
+  // determined); the estimate in (and a waiting retract planned from it) on the tick after. So no tick costs much
+  // more than a step of the fit: ceil(units / points_per_tick) + 3 ticks after the beginning. True if it is in
+  // already (no work: nothing significant, on the tick it began).
   bool Controller::beginIsolation(double t, const State & s, const Eigen::VectorXd & residual) noexcept
   {
     CollisionEvent & e = event_;
@@ -36,9 +39,17 @@ namespace reflexarm
 
   bool Controller::stepIsolation(double t) noexcept
   {
-    if (!isolator_.step(std::max(1, params_.reaction_params.isolation_points_per_tick)))
+    if (isolator_.workLeft() > 0)
+    {
+      isolator_.step(std::max(1, params_.reaction_params.isolation_points_per_tick));
       return false;
-    finishIsolation(t);
+    }
+    if (isolator_.finishStepsLeft() > 0)
+    {
+      isolator_.finishStep();
+      return false;
+    }
+    finishIsolation(t); // a copy of the estimate the stages wrote
     return true;
   }
 

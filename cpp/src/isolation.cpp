@@ -205,8 +205,7 @@ namespace reflexarm
   {
     LinkBuffers & L = links_[static_cast<size_t>(link)];
     out.link = link;
-    out.has_point = out.has_force = false;
-    out.link_rank = linkRank(link);
+    out.has_point = out.has_force = false; // out.link_rank: chooseLink()'s
     if (L.best < 0)
     {
       out.point.setZero();
@@ -308,6 +307,7 @@ namespace reflexarm
     cur_link_ = 0;
     cur_pass_ = 1;
     cur_point_ = 0;
+    stage_ = 0;
   }
 
   bool ContactIsolator::begin(
@@ -399,26 +399,16 @@ namespace reflexarm
     return work_done_ >= work_total_;
   }
 
-  bool ContactIsolator::finish(ContactEstimateData & out) noexcept
+  // finish()'s stage 1: the most proximal candidate link within the tolerance of the best fit, and the rank of its
+  // Jacobian (the estimate's fields other than those of estimateLink)
+  void ContactIsolator::chooseLink() noexcept
   {
+    ContactEstimateData & out = estimate_;
     out = ContactEstimateData();
     out.fit_error = kNaN;
     out.point_spread = kNaN;
-    if (!valid_)
-    {
-      cancel();
-      return false;
-    }
-    step(std::numeric_limits<int>::max()); // the work left, if any
-    active_ = false;
     out.max_significance_ratio = ratio_;
     const int last = first_;
-    if (last < 0)
-    {
-      out.determined = Determined::None;
-      out.cause = IsolationCause::NoSignificantJoint;
-      return true;
-    }
     out.first_candidate = last;
     out.candidate_count = n_ - last;
     const double tol = tolerance_;
@@ -434,13 +424,56 @@ namespace reflexarm
       }
     out.best_fit = best;
     out.tolerance = tol;
-    estimateLink(chosen, tol, out);
-    if (!(best <= tol))
+    out.link = chosen;
+    out.link_rank = linkRank(chosen);
+  }
+
+  bool ContactIsolator::finishStep() noexcept
+  {
+    if (finishStepsLeft() == 0)
+      return true;
+    if (work_done_ < work_total_)
+      return false; // the fit first
+    if (stage_ == 0)
+      chooseLink();
+    else // stage 2: the chosen link's estimate
     {
-      out.determined = Determined::LinkOnly;
-      out.cause = IsolationCause::NoSingleContact;
-      out.has_point = out.has_force = false;
+      ContactEstimateData & out = estimate_;
+      estimateLink(out.link, tolerance_, out);
+      if (!(out.best_fit <= tolerance_))
+      {
+        out.determined = Determined::LinkOnly;
+        out.cause = IsolationCause::NoSingleContact;
+        out.has_point = out.has_force = false;
+      }
     }
+    ++stage_;
+    return stage_ == kFinishSteps;
+  }
+
+  bool ContactIsolator::finish(ContactEstimateData & out) noexcept
+  {
+    out = ContactEstimateData();
+    out.fit_error = kNaN;
+    out.point_spread = kNaN;
+    if (!valid_)
+    {
+      cancel();
+      return false;
+    }
+    step(std::numeric_limits<int>::max()); // the work left, if any
+    while (!finishStep()) // ... and the stages left
+    {
+    }
+    active_ = false;
+    if (first_ < 0)
+    {
+      out.max_significance_ratio = ratio_;
+      out.determined = Determined::None;
+      out.cause = IsolationCause::NoSignificantJoint;
+      return true;
+    }
+    out = estimate_;
     return true;
   }
 

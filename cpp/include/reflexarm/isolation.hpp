@@ -104,7 +104,11 @@ namespace reflexarm
     /// The same isolation spread over calls, bounded work per call (the real-time tick's form):
     ///   begin(q, residual)  the candidate links and their kinematics (one computeJointJacobians), no fit;
     ///   step(point_budget)  at most point_budget units of the fit, true when none is left;
-    ///   finish(out)         the choice of the link and its estimate (runs any work still left first).
+    ///   finishStep()        one stage of the choice after the fit: 1. the most proximal link within the tolerance
+    ///                       of the best fit and the rank of its Jacobian, 2. its estimate (the consistent set, the
+    ///                       force's rank, what is determined); true when none is left (each about the cost of a
+    ///                       few points of pass 2, so that no call costs much more than a step of a few points);
+    ///   finish(out)         the estimate (runs any work and stage still left first; after them, a copy).
     /// The work is, per candidate link from the most proximal on, pass 1 (the link's terms, then the trace of
     /// A = J_p W W J_p^T of each point: one unit per point) then pass 2 (A and b = J_p W W r of each point, the
     /// lower bound of its error, then unless the bound rules it out the constrained fit and its error: one unit per
@@ -112,12 +116,15 @@ namespace reflexarm
     /// from one link to the next; pass 1's largest trace (the floor of the edges) is kept per link until its
     /// pass 2, the best point per link across the steps. So work_total() = sum over candidate links of 2 m
     /// (m >= 1 points) or 1 (no geometry), and the work is done after ceil(work_total() / point_budget) steps.
-    /// begin + step... + finish gives bitwise the result of isolate(), which is begin + step(all) + finish.
+    /// begin + step... + finishStep... + finish gives bitwise the result of isolate(), which is begin + step(all) +
+    /// finish. finishStep() before the fit is done does nothing and returns false; with nothing to fit (no
+    /// significant joint, invalid input) it has no stage and returns true.
     /// begin() returns false (and finish() writes what isolate() writes for it) on a q or residual of the
     /// wrong size or a non-finite value. Allocation-free, never throw.
     bool begin(
       const Eigen::Ref<const Eigen::VectorXd> & q, const Eigen::Ref<const Eigen::VectorXd> & residual) noexcept;
     bool step(int point_budget) noexcept;
+    bool finishStep() noexcept;
     bool finish(ContactEstimateData & out) noexcept;
     /// Drops an isolation under way (finish() then writes what it writes before any begin()).
     void cancel() noexcept;
@@ -135,6 +142,12 @@ namespace reflexarm
     {
       return work_total_ - work_done_;
     }
+    /// Stages of finishStep() left (2 after a begin() with work, 0 without; 0 once they ran).
+    int finishStepsLeft() const noexcept
+    {
+      return valid_ && first_ >= 0 ? kFinishSteps - stage_ : 0;
+    }
+    static constexpr int kFinishSteps = 2;
     /// Candidate points of the isolation begun whose constrained fit was skipped so far: their unconstrained
     /// least-squares error (a lower bound of the constrained one) already exceeded the link's best + tolerance, so
     /// they can be neither the best point nor in its consistent set (the result is the same as without skipping).
@@ -180,6 +193,8 @@ namespace reflexarm
     void traceRange(int link, Eigen::Index begin, Eigen::Index end) noexcept;
     /// pass 2 over points [begin, end): the constrained fit, the errors, the best point so far
     void fitRange(int link, Eigen::Index begin, Eigen::Index end) noexcept;
+    /// finish()'s stages: the choice of the link and its rank (1), its estimate (2), into estimate_
+    void chooseLink() noexcept;
     void estimateLink(int link, double tolerance, ContactEstimateData & out) noexcept;
     int linkRank(int link) noexcept;
     double wrenchError(int link) noexcept;
@@ -211,6 +226,8 @@ namespace reflexarm
     int work_total_ = 0, work_done_ = 0;
     int cur_link_ = 0, cur_pass_ = 1; ///< where the next step goes on: link, pass (1 or 2), point
     Eigen::Index cur_point_ = 0;
+    int stage_ = 0;                 ///< finishStep()'s stages done (0 .. kFinishSteps)
+    ContactEstimateData estimate_;  ///< the estimate the stages write, finish() copies
   };
 
 } // namespace reflexarm
