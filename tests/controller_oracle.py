@@ -86,8 +86,9 @@ class Oracle:
     * hold: law (2) with q_d = q_target, dq_d = ddq_d = 0, no disturbance compensation; compliant holds q_detect
       from the detection on (kappa_eps -> 0) at c K with the modal damping of c K, c = compliant_stiffness_factor:
       L^-1 (c K) L^-T = c U diag(lambda) U^T has the same U and c lambda, so that damping is sqrt(c) D;
-    * the reaction's law replaces (2) from the tick after detection; the torque limits bound it like any command;
-      every reaction's law (13 included) adds K (clip(q, safe range) - q) and, above a joint's velocity limit,
+    * the reaction's law replaces (2) from the detecting tick on (the event starts before that tick's law); the
+      torque limits bound it like any command; every reaction's law (13 included) adds K (clip(q, safe range) - q)
+      and, above a joint's velocity limit,
       -(M dq)_i / brake_time x (1 - v_lim_i / |dq_i|);
     * classification: with kappa_ext = 0, |wrist force| > contact_level at detection is a "contact"
       (contact_reaction), else a "collision" (reaction);
@@ -270,10 +271,6 @@ class Oracle:
         J = np.zeros((6, n))
         if self.kappa_ext:
             J = pin.computeFrameJacobian(model, self.data, q, self.robot.sensor_frame_id, pin.LOCAL).copy()
-        eps_w = self.eps_w
-        if eps_w != self.kappa_eps:
-            inc = DT / self.switch_time
-            eps_w = min(eps_w + inc, 1.0) if self.kappa_eps > eps_w else max(eps_w - inc, 0.0)
         # D from M(q) every damping_update_period accepted ticks, put in use min(DAMPING_TICKS, period) - 1 ticks
         # later (the core spreads the computation over that many ticks); whole on the first tick after a reset
         D: np.ndarray | None = self.D
@@ -310,6 +307,12 @@ class Oracle:
             self.invalid = True
             return self.reject((OBSERVER_INVALID, 0, -1, 0.0, 0.0, 0.0))
         over = np.abs(self.r_det()) > (np.inf if self.threshold is None else self.threshold)
+        started = self.threshold is not None and self.begin(t, q, dq, p, wrench, over)
+        # the kappa_eps ramp after the event's start (a compliant reaction switches kappa_eps off on the detecting tick)
+        eps_w = self.eps_w
+        if eps_w != self.kappa_eps:
+            inc = DT / self.switch_time
+            eps_w = min(eps_w + inc, 1.0) if self.kappa_eps > eps_w else max(eps_w - inc, 0.0)
         tau = self.reaction_torque(t, q, dq, g, C, p, tau_f)
         if tau is None:
             r = np.clip(self.obs[0][2], -self.residual_limit, self.residual_limit)
@@ -320,8 +323,8 @@ class Oracle:
         self.eps_w = eps_w
         if not self.gravity_mode:
             self.countdown = (self.countdown or self.damping_update_period) - 1
-        if self.threshold is not None:
-            self.follow(t, q, dq, p, wrench, over, saturated)
+        if self.threshold is not None and self.detected and not started:
+            self.advance(t, q, dq, over, saturated)
         return {"code": 0, "tau": bounded, "residual": self.r_det().copy(), "collision": self.detected,
                 "collided": over, "saturated": saturated, "mode": self.mode, "fault": None}  # fmt: skip
 
@@ -367,7 +370,8 @@ class Oracle:
 
     # ------------------------------------------------------------------ reactions
     def reaction_torque(self, t, q, dq, g, C, p, tau_f) -> np.ndarray | None:
-        """The reaction's law on this tick (None: law (2)); the event's phase is the one the last tick left."""
+        """The reaction's law on this tick (None: law (2)); the event's phase is the one the last tick left, or the
+        one the event started in on the detecting tick."""
         if self.gravity_mode:
             return g + self.limits(q, dq, p)  # (13)
         ev = self.event
@@ -404,8 +408,9 @@ class Oracle:
         assert self.dq_f is not None
         return 0.5 * float(self.dq_f @ self.p_f)
 
-    def follow(self, t, q, dq, p, wrench, over, saturated) -> None:
-        """After the law: low-pass dq and M dq; start the event on the first detection, else follow it."""
+    def begin(self, t, q, dq, p, wrench, over) -> bool:
+        """Before the law: low-pass dq and M dq; start the event on the first detection (True), so that the
+        reaction's law makes the detecting tick's torque already."""
         if self.dq_f is None:
             self.dq_f, self.p_f = dq.copy(), p.copy()
         else:
@@ -415,8 +420,8 @@ class Oracle:
         if over.any() and not self.detected:
             self.detected = True
             self.start(t, q, wrench, over)
-        elif self.detected:
-            self.advance(t, q, dq, over, saturated)
+            return True
+        return False
 
     def start(self, t, q, wrench, over) -> None:
         rs, zeta = self.settings, self.threshold

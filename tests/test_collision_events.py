@@ -166,6 +166,8 @@ def test_motion_after_detection(ee_run):
     assert o.joint_travel_after_detection_rad == pytest.approx(travel, abs=TOL)
     assert o.joint_travel_joint == 1
     assert o.moved_after_detection_m == pytest.approx(4 * math.sin(travel / 2), abs=TOL)
+    # an end-effector contact: the end effector's distance at the run's end (the travel only grows: the largest)
+    assert o.away_at_end_m == pytest.approx(4 * math.sin(travel / 2), abs=TOL)
     assert o.peak_speed_ratio == pytest.approx(W / V_LIMIT[0], abs=TOL)
     assert o.peak_speed_joint == 1 and o.peak_speed_rad_s == pytest.approx(W, abs=TOL)
 
@@ -196,6 +198,23 @@ def link_run(arm, gap_ticks: int, meta=None, gap_level: float = 0.0):
     tau2[1000 : 1000 + gap_ticks] = gap_level
     tau = np.column_stack([np.zeros_like(t), tau2])
     return collision_outcome(make_trace(q, dq, np.zeros_like(t), tau, 700, crossed=(1,), meta=meta), arm)
+
+
+def test_away_at_end_follows_the_recorded_contact_point_on_its_link(arm):
+    """The stick tip recorded at detection, 0.5 m out along link 2: fixed on b2, it turns with joint 2 (0.5 rad/s
+    from detection at 0.7 s to the last sample at 1.499 s) on a circle of 0.5 m about joint 2's axis, while b2's
+    origin, on that axis, stays put."""
+    t = np.arange(1500) * DT
+    q2_det = 0.5 * 0.7
+    tip = np.tile([L1 + 0.5 * math.cos(q2_det), 0.5 * math.sin(q2_det), 0.0], (t.size, 1))
+    q = np.column_stack([np.zeros_like(t), 0.5 * t])
+    dq = np.column_stack([np.zeros_like(t), np.full_like(t, 0.5)])
+    tau = np.column_stack([np.zeros_like(t), np.where(t >= 0.5, 4.0, 0.0)])
+    o = collision_outcome(make_trace(q, dq, np.zeros_like(t), tau, 700, crossed=(1,), extras={"stick_tip": tip}), arm)
+    assert o.contact_class == "link" and o.contact_link == "b2"
+    assert o.moved_after_detection_m == pytest.approx(0.0, abs=TOL)
+    turned = 0.5 * (1499 - 700) * DT
+    assert o.away_at_end_m == pytest.approx(2 * 0.5 * math.sin(turned / 2), abs=TOL)
 
 
 def test_link_collision_class_link_and_its_origin(arm):

@@ -52,6 +52,17 @@ def test_one_arm_scenario_reaction_runs_and_writes_its_files(one_run, capsys):
     m = reaction_measures(r)
     assert m["level_unit"] == "Nm" and m["level_at_detection"] == r["external_torque_at_detection_Nm"]
     assert m["level_text"] in row
+    assert "away at end [m]" in header and f"{r['away_at_end_m']:.3f}" in row
+    assert doc["conditions"]["noise"] == "paper"
+
+
+def test_noise_none_runs_without_sensor_noise(tmp_path, capsys):
+    out = tmp_path / "quiet"
+    argv = ["reaction-study", "--arms", "iiwa14_frictionless", "--scenarios", "link", "--reactions", "brake"]
+    assert main([*argv, "--noise", "none", "--out", str(out)]) == 0
+    assert "no sensor noise" in capsys.readouterr().err
+    doc = json.loads((out / "reaction_study.json").read_text())
+    assert doc["conditions"]["noise"] != "paper" and "dq=0.0" in doc["conditions"]["noise"]
 
 
 @pytest.mark.parametrize(

@@ -60,7 +60,8 @@ namespace reflexarm
       return reject(FaultCode::ObserverInvalid, cmd);
     }
     const int n_over = detect();
-    const double eps_w = rampedEpsWeight();
+    const bool started = beginEvent(t, s, n_over); // the reaction acts from the detecting tick on
+    const double eps_w = rampedEpsWeight();         // after it: a compliant reaction switches kappa_eps off
     code = controlLaw(s, r, eps_w);
     if (code != FaultCode::None)
     {
@@ -69,7 +70,7 @@ namespace reflexarm
     }
     const int n_sat = boundTorque();
     commitTick(eps_w);
-    react(t, s, n_over, n_sat, cmd);
+    react(t, s, n_over, n_sat, started, cmd);
     writeCommand(n_sat, cmd);
     return FaultCode::None;
   }
@@ -202,27 +203,32 @@ namespace reflexarm
       damping_countdown_ = (damping_countdown_ ? damping_countdown_ : params_.damping_update_period) - 1;
   }
 
-  void Controller::react(double t, const State & s, int n_over, int n_sat, Command & cmd) noexcept
+  bool Controller::beginEvent(double t, const State & s, int n_over) noexcept
+  {
+    if (!has_detector_)
+      return false;
+    filterVelocity(s);
+    if (n_over == 0 || detected_)
+      return false;
+    detected_ = true;
+    first_time_ = t;
+    first_joints_ = over_;
+    startReaction(t, s); // classify, record, choose and start the reaction (latched until reset())
+    return true;
+  }
+
+  void Controller::react(double t, const State & s, int n_over, int n_sat, bool started, Command & cmd) noexcept
   {
     cmd.n_collided = 0;
     cmd.collided.setZero();
     if (!has_detector_)
       return;
-    filterVelocity(s);
     if (n_over > 0)
     {
       cmd.collided = over_;
       cmd.n_collided = n_over;
-      if (!detected_)
-      {
-        detected_ = true;
-        first_time_ = t;
-        first_joints_ = over_;
-        startReaction(t, s); // classify, record, choose and start the reaction (latched until reset())
-        return;
-      }
     }
-    if (detected_)
+    if (detected_ && !started)
       followEvent(t, s, n_over, n_sat);
   }
 

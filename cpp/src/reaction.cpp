@@ -1,6 +1,7 @@
 // reflexarm::Controller: the collision pipeline after the detection threshold (12): classify the contact, choose
 // and run the reaction (gravity (13), brake, retract, compliant), follow the event and guard that the reaction
-// brings the arm to rest. Called from update() on accepted ticks; never allocates, never throws.
+// brings the arm to rest. Called from update() on accepted ticks; never allocates, never throws. The event starts
+// between detect() and the control law (beginEvent), so the reaction's law makes the detecting tick's torque.
 //
 // Reactions (the arm's own torque limits bound every one of them in boundTorque(), after this law):
 //   gravity   tau = g(q)                                                         (13), for good

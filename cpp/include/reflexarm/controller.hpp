@@ -172,7 +172,11 @@ namespace reflexarm
     FaultCode controlLaw(const State & s, const Reference & r, double eps_w) noexcept;
     int boundTorque() noexcept;
     void commitTick(double eps_w) noexcept;
-    void react(double t, const State & s, int n_over, int n_sat, Command & cmd) noexcept;
+    /// Before the law: low-pass dq for the guard; on the first detection start the event and its reaction, so
+    /// that the reaction's law already makes this tick's torque. True when the event started on this tick.
+    bool beginEvent(double t, const State & s, int n_over) noexcept;
+    /// After the law: the command's detection fields; follow a running event (not on the tick it started).
+    void react(double t, const State & s, int n_over, int n_sat, bool started, Command & cmd) noexcept;
     void writeCommand(int n_sat, Command & cmd) const noexcept;
     // the collision pipeline after detection (reaction.cpp)
     void startReaction(double t, const State & s) noexcept;

@@ -98,6 +98,10 @@ class CollisionOutcome:
         stopped_after_s: time after detection at which T first falls below :data:`KE_RESIDUAL_SHARE` of its
             value at detection (None: never in the run).
         moved_after_detection_m: largest distance of the tracked point from its position at detection.
+        away_at_end_m: how far from where it was at detection the contact point ends (the run's last sample): for
+            a link collision whose scene records the point, that point fixed on the contact link; else the
+            tracked frame's origin (the end effector for an end-effector contact). How far a retract took the
+            arm from the contact.
         joint_travel_after_detection_rad: largest |q_j - q_j(t_det)| after detection, over joints.
         joint_travel_joint: the joint of that largest travel.
         peak_speed_ratio: largest |dq_j| / velocity limit_j after detection.
@@ -130,6 +134,7 @@ class CollisionOutcome:
     peak_kinetic_energy_after_detection_J: float | None
     stopped_after_s: float | None
     moved_after_detection_m: float | None
+    away_at_end_m: float | None
     joint_travel_after_detection_rad: float | None
     joint_travel_joint: int | None
     peak_speed_ratio: float | None
@@ -220,8 +225,14 @@ def _after_detection(
     values["stopped_after_s"] = None if k_s is None else float(t_after[k_s])
     # motion after detection
     frame = robot.ee_frame if link is None else link
-    p = np.array([robot.compute_frame_pose(q, frame)[1] for q in trace.q[i_d:]])
+    poses = [robot.compute_frame_pose(q, frame) for q in trace.q[i_d:]]
+    p = np.array([x[1] for x in poses])
     values["moved_after_detection_m"] = float(np.linalg.norm(p - p[0], axis=1).max())
+    point, _ = _contact_point(trace, i_d)
+    if point is not None and cls == "link":  # the contact point, fixed on its link from detection on
+        local = poses[0][0].T @ (np.asarray(point) - p[0])
+        p = np.array([R @ local + x for R, x in poses])
+    values["away_at_end_m"] = float(np.linalg.norm(p[-1] - p[0]))
     travel = np.abs(trace.q[i_d:] - trace.q[i_d]).max(axis=0)
     values["joint_travel_after_detection_rad"] = float(travel.max())
     values["joint_travel_joint"] = int(np.argmax(travel)) + 1

@@ -249,14 +249,19 @@ def reaction_measures(row: dict[str, Any]) -> dict[str, Any]:
         at, peak = row.get("external_torque_at_detection_Nm"), row.get("peak_external_torque_after_detection_Nm")
         unit = "Nm"
     detected = row.get("detected_s") is not None
+
+    def ratio(x: float | None) -> float | None:
+        return None if at is None or x is None or at <= 0.0 else x / at
+
     return {
         "level_unit": unit,
         "level_at_detection": at,
         "peak_after_detection": peak,
-        "peak_ratio": None if at is None or peak is None or at <= 0.0 else peak / at,
+        "peak_ratio": ratio(peak),
         "level_text": "-" if at is None else f"{at:.1f} -> {'-' if peak is None else f'{peak:.1f}'} {unit}",
         "ke_ratio": row.get("kinetic_energy_ratio"),
         "moved_m": row.get("moved_after_detection_m"),
+        "away_m": row.get("away_at_end_m"),
         "peak_speed_ratio": row.get("peak_speed_ratio"),
         "recontact": None if not detected else ("yes" if row.get("recontact") else "no"),
         "guard": row.get("guard") if row.get("error") is None else f"error: {row['error']}",

@@ -1,7 +1,11 @@
 """React: what the controller does once a collision is detected, and the guard that checks it stops the arm.
 
 The reactions run inside the real-time tick (C++ core, ``cpp/src/reaction.cpp``); this module names them and
-holds their settings. Every reaction's torque is bounded by the controller's torque limit; reference motions
+holds their settings. A reaction makes the torque of the detecting tick already: the event starts between the
+detection and that tick's law, so the arm is not pushed on for one more period (at 1 kHz the tick after detection
+carried 0.2-2.8 N / Nm more contact than detection on every arm of ``reflexarm reaction-study``; with the reaction
+on the detecting tick, the peak after detection is below the level at detection in the demo and held-stick
+scenes). Every reaction's torque is bounded by the controller's torque limit; reference motions
 stay below ``velocity_fraction`` x the joints' velocity limits and ``position_margin`` inside their ranges.
 
 * ``"gravity"``: eq. (13), tau = g(q) for good (the paper's reaction). An arm with little joint friction keeps
@@ -90,12 +94,13 @@ class ReactionSettings:
         isolation_points_per_tick: the isolation is spread over the ticks: it begins on the tick
             ``isolation_delay`` after detection (that tick's residual and posture) and fits at most this many
             candidate points per following tick (each point twice: the gram of pass 1, the constrained fit of
-            pass 2; a link without geometry counts one), so a link collision is isolated
-            ceil(2 x candidate points / this) ticks after it began (``CollisionEvent.t_estimated``); an integer
-            >= 1. The default, 32, makes a step tick ~2 x a plain one (~150 ns a unit, ~7-9 us a plain tick:
-            bench/bench_collision_tick.py) and the 2 cm controller geometry's 1300-2300 units take 12-74 ms (Atlas,
-            Panda, iiwa14), so that a retract waiting for the estimate ends within the guard's 0.5 s; 8 keeps a
-            step tick at ~1.3 x but takes 48-295 ms.
+            pass 2; a link without geometry counts one), then spends three more ticks finishing (the choice of
+            the link, its estimate, the estimate in and a waiting retract planned), so a link collision is
+            isolated ceil(2 x candidate points / this) + 3 ticks after it began (``CollisionEvent.t_estimated``);
+            an integer >= 1. The default, 32, takes 15, 77 and 47 ticks on the 2 cm controller geometry of Atlas,
+            Panda and iiwa14 (bench/bench_collision_tick.py), so that a retract waiting for the estimate ends
+            within the guard's 0.5 s; its largest tick, a fit step, costs 1.9-2.4 x a plain tick. At 4 a fit step
+            costs ~1.2 us (~1.17 x a ~7 us plain tick, warm caches) but the isolation takes 99-592 ms.
     """
 
     brake_time: float = 0.05
