@@ -75,3 +75,22 @@ def test_without_friction_the_arm_moves_on_at_least_as_far(link_study):
     assert b.moved_after_detection_m >= a.moved_after_detection_m
     assert b.kinetic_energy_after_J >= a.kinetic_energy_after_J
     assert np.isfinite(b.peak_speed_ratio)
+
+
+@pytest.mark.parametrize("scenario", ["demo", "link_held"])
+def test_the_reaction_acts_from_the_detecting_tick(scenario):
+    """iiwa14, brake and retract: the contact never exceeds its level at detection afterwards, and the retract ends
+    >= 2 cm from the contact (issue 15). With the reaction one tick late (the core before 7a2d90e) the tick after
+    detection still carried the old law's push: 21.9 -> 24.7 N (demo) and 16.9 -> 17.8 Nm (held stick)."""
+    study = run_reaction_study([study_arm("iiwa14")], ["brake", "retract"], [scenario])
+    for reaction in ("brake", "retract"):
+        o = study.outcome("iiwa14", scenario, reaction)
+        assert o is not None and o.detected_s is not None
+        if scenario == "demo":
+            at, peak = o.force_at_detection_N, o.peak_force_after_detection_N
+        else:
+            at, peak = o.external_torque_at_detection_Nm, o.peak_external_torque_after_detection_Nm
+        assert at is not None and peak is not None and peak <= at, (reaction, at, peak)
+        assert not o.recontact
+    away = study.outcome("iiwa14", scenario, "retract").away_at_end_m
+    assert away is not None and away >= 0.02
