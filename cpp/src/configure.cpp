@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <new>
 #include <sstream>
 
 #include "reflexarm/controller.hpp"
@@ -78,132 +79,234 @@ namespace reflexarm
         throw ConfigError(std::string(name) + " must be 0 or 1; got " + std::to_string(value));
       return value;
     }
+
+    // ------------------------------------------------------------------ configure()'s checks, in their order
+    void checkModel(const pinocchio::Model & model)
+    {
+      if (model.nq != model.nv)
+        throw ConfigError(
+          "model has nq=" + std::to_string(model.nq) + " != nv=" + std::to_string(model.nv)
+          + ": only fixed-base arms with 1-DoF joints are supported");
+      if (model.nv == 0)
+        throw ConfigError("model has no joints");
+    }
+
+    /// dt, the gains and thresholds per joint, the switches, the scalars and the friction and spring terms; q gets
+    /// the per-joint values broadcast to n.
+    void checkJointParams(const ControllerParams & p, int n, ControllerParams & q)
+    {
+      checkPositive(p.dt, "dt");
+      q.stiffness = asVector(p.stiffness, n, "stiffness", Sign::Positive);
+      q.damping_ratio = asVector(p.damping_ratio, n, "damping_ratio", Sign::NonNegative);
+      q.observer_gain = asVector(p.observer_gain, n, "observer_gain", Sign::Positive);
+      const bool use_det = p.detection_observer_gain.size() > 0;
+      if (use_det)
+        q.detection_observer_gain =
+          asVector(p.detection_observer_gain, n, "detection_observer_gain", Sign::Positive);
+      const bool has_detector = p.threshold.size() > 0;
+      if (has_detector)
+        q.threshold = asVector(p.threshold, n, "threshold", Sign::Positive);
+      q.kappa_f = checkSwitch(p.kappa_f, "kappa_f");
+      q.kappa_eps = checkSwitch(p.kappa_eps, "kappa_eps");
+      q.kappa_ext = checkSwitch(p.kappa_ext, "kappa_ext");
+      checkPositive(p.residual_limit, "residual_limit");
+      if (!std::isfinite(p.switch_time) || p.switch_time < 0.0)
+        throw ConfigError("switch_time must be a non-negative number of seconds; got " + std::to_string(p.switch_time));
+      if (p.damping_update_period < 1)
+        throw ConfigError(
+          "damping_update_period must be a positive integer; got " + std::to_string(p.damping_update_period));
+      q.friction_coulomb = asVector(p.friction_coulomb, n, "friction_coulomb", Sign::NonNegative);
+      q.friction_viscous = asVector(p.friction_viscous, n, "friction_viscous", Sign::NonNegative);
+      checkPositive(p.friction_velocity_band, "friction_velocity_band");
+      const bool has_springs = p.spring_stiffness.size() > 0;
+      if (has_springs)
+      {
+        q.spring_stiffness = asVector(p.spring_stiffness, n, "spring_stiffness", Sign::NonNegative);
+        q.spring_reference = asVector(p.spring_reference, n, "spring_reference", Sign::Any);
+      }
+    }
+
+    /// The sensor frame, the input bounds, the reactions and the observer's discretization.
+    void checkBoundsAndModes(const pinocchio::Model & model, const ControllerParams & p)
+    {
+      if (p.sensor_frame_id >= model.frames.size())
+        throw ConfigError(
+          "sensor_frame_id " + std::to_string(p.sensor_frame_id) + " is not a frame of the model (it has "
+          + std::to_string(model.frames.size()) + " frames)");
+      const InputBounds & b = p.input_bounds;
+      const double bounds[] = {b.position_margin, b.velocity_factor, b.torque_factor,
+                               b.max_force,       b.max_moment,      b.gravity_tolerance,
+                               b.max_acceleration, b.max_velocity,    b.max_torque};
+      const char * bound_names[] = {"position_margin", "velocity_factor",  "torque_factor",
+                                    "max_force",       "max_moment",       "gravity_tolerance",
+                                    "max_acceleration", "max_velocity",    "max_torque"};
+      for (int k = 0; k < 9; ++k)
+        checkPositive(bounds[k], (std::string("InputBounds.") + bound_names[k]).c_str());
+      for (const Reaction r : {p.reaction, p.contact_reaction})
+        if (static_cast<int>(r) < 0 || static_cast<int>(r) >= kReactionCount)
+          throw ConfigError(
+            "reaction " + std::to_string(static_cast<int>(r))
+            + " is not a Reaction (gravity 0, compliant 1, none 2, brake 3, retract 4)");
+      const int disc = static_cast<int>(p.observer_discretization);
+      if (disc != 0 && disc != 1)
+        throw ConfigError(
+          "observer_discretization " + std::to_string(disc) + " is not an ObserverDiscretization (euler 0, exact 1)");
+    }
+
+    void checkReactionParams(const ReactionParams & rp)
+    {
+      const double rvals[] = {rp.brake_time,        rp.brake_duration,     rp.retract_distance,
+                              rp.max_retract_angle, rp.retract_speed,      rp.max_retract_time, rp.velocity_fraction,
+                              rp.compliant_stiffness_factor, rp.rest_time, rp.rest_energy_fraction,
+                              rp.rest_energy_floor, rp.energy_filter_time, rp.contact_level};
+      const char * rnames[] = {"brake_time",        "brake_duration",       "retract_distance",
+                               "max_retract_angle", "retract_speed",        "max_retract_time", "velocity_fraction",
+                               "compliant_stiffness_factor", "rest_time",   "rest_energy_fraction",
+                               "rest_energy_floor", "energy_filter_time",   "contact_level"};
+      for (int k = 0; k < 13; ++k)
+        checkPositive(rvals[k], (std::string("ReactionParams.") + rnames[k]).c_str());
+      if (!std::isfinite(rp.position_margin) || rp.position_margin < 0.0)
+        throw ConfigError("ReactionParams.position_margin must be a non-negative number of radians");
+      if (!std::isfinite(rp.isolation_delay) || rp.isolation_delay < 0.0)
+        throw ConfigError("ReactionParams.isolation_delay must be a non-negative number of seconds");
+      if (rp.isolation_points_per_tick < 1)
+        throw ConfigError(
+          "ReactionParams.isolation_points_per_tick must be a positive integer; got "
+          + std::to_string(rp.isolation_points_per_tick));
+    }
+
+    /// The period band, and the observer's stability at the longest integrated period (the exact form is stable at
+    /// any gain). q: the gains as checkJointParams broadcast them.
+    void checkObserverStability(const ControllerParams & p, const ControllerParams & q)
+    {
+      const bool exact = p.observer_discretization == ObserverDiscretization::Exact;
+      const bool use_det = p.detection_observer_gain.size() > 0;
+      const double lo = p.period_band_low, hi = p.period_band_high;
+      if (!(0.0 < lo && lo <= 1.0 && 1.0 <= hi && hi < kInf))
+        throw ConfigError(
+          "period_band must satisfy 0 < low <= 1 <= high < inf; got (" + std::to_string(lo) + ", "
+          + std::to_string(hi) + ")");
+      double k_o = q.observer_gain.maxCoeff();
+      if (use_det)
+        k_o = std::max(k_o, q.detection_observer_gain.maxCoeff());
+      if (!exact
+          && (q.observer_gain.maxCoeff() * p.dt >= 1.0
+              || (use_det && q.detection_observer_gain.maxCoeff() * p.dt >= 1.0)))
+        throw ConfigError("observer_gain * dt must be < 1 for the discrete observer to be stable");
+      if (!exact && k_o * p.dt * hi >= 1.0)
+        throw ConfigError(
+          "observer_gain * dt * period_band[1] must be < 1 for the observer to stay stable at the longest "
+          "integrated period");
+    }
+
+    /// The torque limit, given (+inf = none) or the model's effort limits, and the torque rate limit, into q.
+    void checkTorqueLimits(const pinocchio::Model & model, const ControllerParams & p, int n, ControllerParams & q)
+    {
+      const Eigen::VectorXd effort = model.upperEffortLimit;
+      if (p.torque_limit.size() == 0)
+      {
+        q.torque_limit = effort;
+        for (int i = 0; i < n; ++i)
+          if (!(std::isfinite(effort[i]) && effort[i] > 0.0))
+            q.torque_limit[i] = kInf;
+      }
+      else
+        q.torque_limit = asVector(p.torque_limit, n, "torque_limit", Sign::Positive, true);
+      if (p.torque_rate_limit.size() > 0)
+        q.torque_rate_limit = asVector(p.torque_rate_limit, n, "torque_rate_limit", Sign::Positive);
+    }
+
+    /// Every check of configure() in order (throws the first ConfigError); returns p with its per-joint values
+    /// broadcast to the model's joints and the torque limit resolved.
+    ControllerParams checkedParams(const pinocchio::Model & model, const ControllerParams & p)
+    {
+      checkModel(model);
+      const int n = model.nv;
+      ControllerParams q = p;
+      checkJointParams(p, n, q);
+      checkBoundsAndModes(model, p);
+      checkReactionParams(p.reaction_params);
+      checkObserverStability(p, q);
+      checkTorqueLimits(model, p, n, q);
+      return q;
+    }
+
+    // ------------------------------------------------------------------ pinocchio::Data without indeterminate enums
+    // Pinocchio's Data constructors never compute its two Eigen::LLT members (llt_JMinvJt, osim_llt), and Eigen's
+    // LLT leaves m_info indeterminate until compute(): copying such a Data (its copy constructor or assignment, so a
+    // Controller's) reads that enum (UBSan -fsanitize=enum: "not a valid value for type 'ComputationInfo'"). A
+    // compute() on an empty matrix defines it (Success) without allocating; the LLTs stay 0x0, and every Pinocchio
+    // algorithm that uses them (contact dynamics, PV; none of ours) computes them first.
+    void defineLlts(pinocchio::Data & data) noexcept
+    {
+      data.llt_JMinvJt.compute(pinocchio::Data::MatrixXs());
+      data.osim_llt.compute(pinocchio::Data::MatrixXs());
+    }
+
+    /// data = Data(model) without a copy: destroyed and constructed in place, its LLTs defined. If the constructor
+    /// throws, data is left a default Data (so its owner's destructor finds an object) and the exception goes on.
+    void constructData(pinocchio::Data & data, const pinocchio::Model & model)
+    {
+      using Data = pinocchio::Data;
+      data.~Data();
+      try
+      {
+        new (&data) Data(model);
+      }
+      catch (...)
+      {
+        new (&data) Data();
+        defineLlts(data);
+        throw;
+      }
+      defineLlts(data);
+    }
   } // namespace
+
+  Controller::Data Controller::definedData()
+  {
+    Data data;
+    defineLlts(data);
+    return data;
+  }
 
   void Controller::configure(const Model & model, const ControllerParams & p)
   {
     configured_ = false;
-    if (model.nq != model.nv)
-      throw ConfigError(
-        "model has nq=" + std::to_string(model.nq) + " != nv=" + std::to_string(model.nv)
-        + ": only fixed-base arms with 1-DoF joints are supported");
-    if (model.nv == 0)
-      throw ConfigError("model has no joints");
-    const int n = model.nv;
-    checkPositive(p.dt, "dt");
-    ControllerParams q = p;
-    q.stiffness = asVector(p.stiffness, n, "stiffness", Sign::Positive);
-    q.damping_ratio = asVector(p.damping_ratio, n, "damping_ratio", Sign::NonNegative);
-    q.observer_gain = asVector(p.observer_gain, n, "observer_gain", Sign::Positive);
-    const bool use_det = p.detection_observer_gain.size() > 0;
-    if (use_det)
-      q.detection_observer_gain =
-        asVector(p.detection_observer_gain, n, "detection_observer_gain", Sign::Positive);
-    const bool has_detector = p.threshold.size() > 0;
-    if (has_detector)
-      q.threshold = asVector(p.threshold, n, "threshold", Sign::Positive);
-    q.kappa_f = checkSwitch(p.kappa_f, "kappa_f");
-    q.kappa_eps = checkSwitch(p.kappa_eps, "kappa_eps");
-    q.kappa_ext = checkSwitch(p.kappa_ext, "kappa_ext");
-    checkPositive(p.residual_limit, "residual_limit");
-    if (!std::isfinite(p.switch_time) || p.switch_time < 0.0)
-      throw ConfigError("switch_time must be a non-negative number of seconds; got " + std::to_string(p.switch_time));
-    if (p.damping_update_period < 1)
-      throw ConfigError(
-        "damping_update_period must be a positive integer; got " + std::to_string(p.damping_update_period));
-    q.friction_coulomb = asVector(p.friction_coulomb, n, "friction_coulomb", Sign::NonNegative);
-    q.friction_viscous = asVector(p.friction_viscous, n, "friction_viscous", Sign::NonNegative);
-    checkPositive(p.friction_velocity_band, "friction_velocity_band");
-    const bool has_springs = p.spring_stiffness.size() > 0;
-    if (has_springs)
-    {
-      q.spring_stiffness = asVector(p.spring_stiffness, n, "spring_stiffness", Sign::NonNegative);
-      q.spring_reference = asVector(p.spring_reference, n, "spring_reference", Sign::Any);
-    }
-    if (p.sensor_frame_id >= model.frames.size())
-      throw ConfigError(
-        "sensor_frame_id " + std::to_string(p.sensor_frame_id) + " is not a frame of the model (it has "
-        + std::to_string(model.frames.size()) + " frames)");
-    const InputBounds & b = p.input_bounds;
-    const double bounds[] = {b.position_margin, b.velocity_factor, b.torque_factor,
-                             b.max_force,       b.max_moment,      b.gravity_tolerance,
-                             b.max_acceleration, b.max_velocity,    b.max_torque};
-    const char * bound_names[] = {"position_margin", "velocity_factor",  "torque_factor",
-                                  "max_force",       "max_moment",       "gravity_tolerance",
-                                  "max_acceleration", "max_velocity",    "max_torque"};
-    for (int k = 0; k < 9; ++k)
-      checkPositive(bounds[k], (std::string("InputBounds.") + bound_names[k]).c_str());
-    for (const Reaction r : {p.reaction, p.contact_reaction})
-      if (static_cast<int>(r) < 0 || static_cast<int>(r) >= kReactionCount)
-        throw ConfigError(
-          "reaction " + std::to_string(static_cast<int>(r))
-          + " is not a Reaction (gravity 0, compliant 1, none 2, brake 3, retract 4)");
-    const int disc = static_cast<int>(p.observer_discretization);
-    if (disc != 0 && disc != 1)
-      throw ConfigError(
-        "observer_discretization " + std::to_string(disc) + " is not an ObserverDiscretization (euler 0, exact 1)");
-    const bool exact = p.observer_discretization == ObserverDiscretization::Exact;
-    const ReactionParams & rp = p.reaction_params;
-    const double rvals[] = {rp.brake_time,        rp.brake_duration,     rp.retract_distance,
-                            rp.max_retract_angle, rp.retract_speed,      rp.max_retract_time, rp.velocity_fraction,
-                            rp.compliant_stiffness_factor, rp.rest_time, rp.rest_energy_fraction,
-                            rp.rest_energy_floor, rp.energy_filter_time, rp.contact_level};
-    const char * rnames[] = {"brake_time",        "brake_duration",       "retract_distance",
-                             "max_retract_angle", "retract_speed",        "max_retract_time", "velocity_fraction",
-                             "compliant_stiffness_factor", "rest_time",   "rest_energy_fraction",
-                             "rest_energy_floor", "energy_filter_time",   "contact_level"};
-    for (int k = 0; k < 13; ++k)
-      checkPositive(rvals[k], (std::string("ReactionParams.") + rnames[k]).c_str());
-    if (!std::isfinite(rp.position_margin) || rp.position_margin < 0.0)
-      throw ConfigError("ReactionParams.position_margin must be a non-negative number of radians");
-    if (!std::isfinite(rp.isolation_delay) || rp.isolation_delay < 0.0)
-      throw ConfigError("ReactionParams.isolation_delay must be a non-negative number of seconds");
-    if (rp.isolation_points_per_tick < 1)
-      throw ConfigError(
-        "ReactionParams.isolation_points_per_tick must be a positive integer; got "
-        + std::to_string(rp.isolation_points_per_tick));
-    // observer stability at the longest integrated period (the exact form is stable at any gain)
-    const double lo = p.period_band_low, hi = p.period_band_high;
-    if (!(0.0 < lo && lo <= 1.0 && 1.0 <= hi && hi < kInf))
-      throw ConfigError(
-        "period_band must satisfy 0 < low <= 1 <= high < inf; got (" + std::to_string(lo) + ", "
-        + std::to_string(hi) + ")");
-    double k_o = q.observer_gain.maxCoeff();
-    if (use_det)
-      k_o = std::max(k_o, q.detection_observer_gain.maxCoeff());
-    if (!exact && (q.observer_gain.maxCoeff() * p.dt >= 1.0 || (use_det && q.detection_observer_gain.maxCoeff() * p.dt >= 1.0)))
-      throw ConfigError("observer_gain * dt must be < 1 for the discrete observer to be stable");
-    if (!exact && k_o * p.dt * hi >= 1.0)
-      throw ConfigError(
-        "observer_gain * dt * period_band[1] must be < 1 for the observer to stay stable at the longest "
-        "integrated period");
-    // torque limit: given (+inf = none) or the model's effort limits
-    Eigen::VectorXd effort = model.upperEffortLimit;
-    if (p.torque_limit.size() == 0)
-    {
-      q.torque_limit = effort;
-      for (int i = 0; i < n; ++i)
-        if (!(std::isfinite(effort[i]) && effort[i] > 0.0))
-          q.torque_limit[i] = kInf;
-    }
-    else
-      q.torque_limit = asVector(p.torque_limit, n, "torque_limit", Sign::Positive, true);
-    if (p.torque_rate_limit.size() > 0)
-      q.torque_rate_limit = asVector(p.torque_rate_limit, n, "torque_rate_limit", Sign::Positive);
-
+    const ControllerParams q = checkedParams(model, p);
     // ---------------------------------------------------------------- everything checked: allocate
     params_ = q;
-    n_ = n;
+    n_ = model.nv;
+    setModel(model);
+    setJointParams(model, q);
+    setInputBounds(model, q);
+    setObserverAndReactionBounds(model, q);
+    sizeReaction(q);
+    sizeBuffers(q);
+    configured_ = true;
+    reset();
+  }
+
+  void Controller::setModel(const Model & model)
+  {
     model_ = model;
     model0_ = model;
     model0_.gravity.linear().setZero();
-    data_g_ = Data(model_);
-    data_c_ = Data(model_);
-    data_j_ = Data(model_);
-    data_m_ = Data(model_);
-    data_p_ = Data(model0_);
-    data_ff_ = Data(model0_);
-    data_r_ = Data(model_);
+    constructData(data_g_, model_);
+    constructData(data_c_, model_);
+    constructData(data_j_, model_);
+    constructData(data_m_, model_);
+    constructData(data_p_, model0_);
+    constructData(data_ff_, model0_);
+    constructData(data_r_, model_);
+  }
+
+  void Controller::setJointParams(const Model & model, const ControllerParams & q)
+  {
+    const int n = n_;
+    const bool use_det = q.detection_observer_gain.size() > 0;
+    const bool has_detector = q.threshold.size() > 0;
+    const bool has_springs = q.spring_stiffness.size() > 0;
     K_ = q.stiffness;
     xi_ = q.damping_ratio;
     ko_ = q.observer_gain;
@@ -216,17 +319,24 @@ namespace reflexarm
     viscous_ = q.friction_viscous;
     use_det_ = use_det;
     has_detector_ = has_detector;
-    inv_band_ = 1.0 / p.friction_velocity_band;
-    limit_ = p.residual_limit;
-    period_lo_ = lo * p.dt;
-    period_hi_ = hi * p.dt;
+    inv_band_ = 1.0 / q.friction_velocity_band;
+    limit_ = q.residual_limit;
+    period_lo_ = q.period_band_low * q.dt;
+    period_hi_ = q.period_band_high * q.dt;
     timing_.band_low = period_lo_;
     timing_.band_high = period_hi_;
     gravity_ = model.gravity.linear();
     g_norm_ = gravity_.norm();
-    g_tol_ = b.gravity_tolerance;
-    force_max_ = b.max_force;
-    moment_max_ = b.max_moment;
+    g_tol_ = q.input_bounds.gravity_tolerance;
+    force_max_ = q.input_bounds.max_force;
+    moment_max_ = q.input_bounds.max_moment;
+  }
+
+  void Controller::setInputBounds(const Model & model, const ControllerParams & q)
+  {
+    const int n = n_;
+    const InputBounds & b = q.input_bounds;
+    const Eigen::VectorXd & effort = model.upperEffortLimit;
     q_lo_.resize(n);
     q_hi_.resize(n);
     dq_max_.resize(n);
@@ -243,6 +353,12 @@ namespace reflexarm
       tau_m_max_[i] = (std::isfinite(ref) && ref > 0.0) ? b.torque_factor * ref : b.max_torque;
     }
     ddq_max_ = Eigen::VectorXd::Constant(n, b.max_acceleration);
+  }
+
+  void Controller::setObserverAndReactionBounds(const Model & model, const ControllerParams & q)
+  {
+    const int n = n_;
+    const ReactionParams & rp = q.reaction_params;
     decay_.resize(n);
     decay_det_.resize(n);
     v_lim_.resize(n);
@@ -250,8 +366,8 @@ namespace reflexarm
     q_safe_hi_.resize(n);
     for (int i = 0; i < n; ++i)
     {
-      decay_[i] = std::exp(-ko_[i] * p.dt);
-      decay_det_[i] = std::exp(-ko_det_[i] * p.dt);
+      decay_[i] = std::exp(-ko_[i] * q.dt);
+      decay_det_[i] = std::exp(-ko_det_[i] * q.dt);
       const double vel = model.upperVelocityLimit[i];
       v_lim_[i] = (std::isfinite(vel) && vel > 0.0) ? vel : kInf;
       const double lower = model.lowerPositionLimit[i], upper = model.upperPositionLimit[i];
@@ -261,6 +377,11 @@ namespace reflexarm
       q_safe_lo_[i] = std::isfinite(lower) ? lower + margin : -kInf;
       q_safe_hi_[i] = std::isfinite(upper) ? upper - margin : kInf;
     }
+  }
+
+  void Controller::sizeReaction(const ControllerParams & q)
+  {
+    const int n = n_;
     event_.resize(n);
     K_hold_ = K_;
     q_from_.setZero(n);
@@ -275,8 +396,13 @@ namespace reflexarm
     t_phase_ = 0.0;
     retract_time_ = 0.1;
     tau_max_ = q.torque_limit;
-    tau_step_ = q.torque_rate_limit.size() > 0 ? Eigen::VectorXd(q.torque_rate_limit * p.dt)
+    tau_step_ = q.torque_rate_limit.size() > 0 ? Eigen::VectorXd(q.torque_rate_limit * q.dt)
                                                 : Eigen::VectorXd::Constant(n, kInf);
+  }
+
+  void Controller::sizeBuffers(const ControllerParams & q)
+  {
+    const int n = n_;
     zeros_.setZero(n);
     g_.setZero(n);
     p_.setZero(n);
@@ -304,8 +430,6 @@ namespace reflexarm
     kappa_ext_ = q.kappa_ext;
     kappa_eps_before_reaction_ = kappa_eps_;
     reacted_ = false;
-    configured_ = true;
-    reset();
   }
 
   // ------------------------------------------------------------------------------------------ reset & mode

@@ -45,7 +45,12 @@ namespace reflexarm
       throw ConfigError("cone_edges must be an integer >= 3; got " + std::to_string(params.cone_edges));
 
     model_ = model;
-    data_ = pinocchio::Data(model_);
+    // not data_ = pinocchio::Data(model_): a fresh Data's Eigen::LLT members have an indeterminate m_info (never
+    // computed), which a copy reads (UBSan enum); a compute() on an empty matrix defines it (as Controller's Data)
+    pinocchio::Data data(model_);
+    data.llt_JMinvJt.compute(pinocchio::Data::MatrixXs());
+    data.osim_llt.compute(pinocchio::Data::MatrixXs());
+    data_ = data;
     n_ = n;
     K_ = params.cone_edges;
     params_ = params;

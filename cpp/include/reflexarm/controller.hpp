@@ -144,6 +144,16 @@ namespace reflexarm
     FaultCode reject(FaultCode code, Command & cmd) noexcept;
     void updateMode() noexcept;
     void restoreGravity() noexcept;
+    // the steps of configure() after its checks, in order (configure.cpp)
+    void setModel(const Model & model);
+    void setJointParams(const Model & model, const ControllerParams & q);
+    void setInputBounds(const Model & model, const ControllerParams & q);
+    void setObserverAndReactionBounds(const Model & model, const ControllerParams & q);
+    void sizeReaction(const ControllerParams & q);
+    void sizeBuffers(const ControllerParams & q);
+    /// A default Data whose Eigen::LLT members have a defined m_info, so that copying a Controller never reads an
+    /// indeterminate enum (configure.cpp; configure() constructs the Data in place the same way).
+    static Data definedData();
     // the steps of update(), in order (controller.cpp unless noted)
     bool commandFits(const Command & cmd) const noexcept;
     FaultCode notReady(Command & cmd) const noexcept;
@@ -209,7 +219,8 @@ namespace reflexarm
     int n_ = 0;
     ControllerParams params_;
     Model model_, model0_; // model0_: zero gravity, for M(q) x as RNEA(q, 0, x)
-    Data data_g_, data_c_, data_j_, data_m_, data_p_, data_ff_, data_r_;
+    Data data_g_ = definedData(), data_c_ = definedData(), data_j_ = definedData(), data_m_ = definedData(),
+         data_p_ = definedData(), data_ff_ = definedData(), data_r_ = definedData();
     // parameters per joint
     Eigen::VectorXd K_, xi_, ko_, ko_det_, threshold_, coulomb_, viscous_, spring_k_, spring_q_;
     bool has_springs_ = false;
