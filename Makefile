@@ -56,7 +56,7 @@ bench: $(STAMP)
 
 # The C++ library and its tests (cpp/tests) under AddressSanitizer + UBSan (-DREFLEXARM_SANITIZE=ON) in
 # cpp/build-sanitize: configure, build (SAN_JOBS=1 on a small machine), run both tests; any report fails the run
-# (UBSan does not recover; ASan aborts on the first error). cpp/sanitize/ubsan.supp: the library-side finding.
+# (UBSan does not recover; ASan aborts on the first error). cpp/sanitize/ubsan.supp: empty (its history).
 SAN_JOBS ?= 2
 sanitize:
 	@$(CHECK_TOOLCHAIN)

@@ -16,6 +16,22 @@ namespace reflexarm
 {
   using namespace isolation_detail;
 
+  namespace
+  {
+    void defineLlts(pinocchio::Data & data) noexcept
+    {
+      data.llt_JMinvJt.compute(pinocchio::Data::MatrixXs());
+      data.osim_llt.compute(pinocchio::Data::MatrixXs());
+    }
+  } // namespace
+
+  pinocchio::Data ContactIsolator::definedData()
+  {
+    pinocchio::Data data;
+    defineLlts(data);
+    return data;
+  }
+
   void ContactIsolator::configure(
     const pinocchio::Model & model, const std::vector<LinkSurfaceData> & surfaces, const IsolationParams & params)
   {
@@ -48,8 +64,7 @@ namespace reflexarm
     // not data_ = pinocchio::Data(model_): a fresh Data's Eigen::LLT members have an indeterminate m_info (never
     // computed), which a copy reads (UBSan enum); a compute() on an empty matrix defines it (as Controller's Data)
     pinocchio::Data data(model_);
-    data.llt_JMinvJt.compute(pinocchio::Data::MatrixXs());
-    data.osim_llt.compute(pinocchio::Data::MatrixXs());
+    defineLlts(data);
     data_ = data;
     n_ = n;
     K_ = params.cone_edges;

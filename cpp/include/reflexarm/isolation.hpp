@@ -200,7 +200,10 @@ namespace reflexarm
     double wrenchError(int link) noexcept;
 
     pinocchio::Model model_;
-    pinocchio::Data data_;
+    /// A default Data whose Eigen::LLT members have a defined m_info (computed on an empty matrix), so that copying
+    /// a never-configured isolator (inside a Controller without geometry) reads no indeterminate enum (UBSan).
+    static pinocchio::Data definedData();
+    pinocchio::Data data_ = definedData();
     int n_ = 0;
     int K_ = 8;
     IsolationParams params_;
