@@ -142,7 +142,7 @@ namespace reflexarm
       if (c.detected_ || c.reacted_)
         return "a detection is latched in the controller";
       if (!ResidualTerms::supports(c.model_))
-        return "a joint has more than one degree of freedom";
+        return "a joint is not a 1-DoF revolute or prismatic joint";
       return nullptr;
     }
 

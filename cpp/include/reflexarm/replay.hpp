@@ -76,7 +76,7 @@ namespace reflexarm
   /// schedule) is not advanced: a controller that goes on to drive an arm needs reset() as after any log.
   /// replayLog runs instead, from the controller's state before the call, when the residual-only path cannot
   /// give the same result: a detection (the reaction that follows it needs the command), a detection or reaction
-  /// already latched, or a joint of more than one degree of freedom. Throws ConfigError as replayLog.
+  /// already latched, or a joint that is not a 1-DoF revolute or prismatic one. Throws ConfigError as replayLog.
   ResidualReplayRun replayResiduals(Controller & ctrl, Command & cmd, const ReplayInputs & in, const ReplayOutputs & out,
                                     std::vector<ReplayFault> & faults, std::size_t max_faults, int threads);
 

@@ -16,7 +16,8 @@ path's to rounding (~1e-14 Nm: the terms are summed in another order); the contr
 are left as N ``step`` calls leave them, its command state (the last command, the modal damping) is not
 advanced. The full path runs instead, from the controller's state before the call, when the result would
 differ: a detection (the reaction it starts needs the command), a detection already latched in the
-controller, or a joint of more than one degree of freedom (:attr:`ReplayResult.full_path_reason` says which).
+controller, or a joint that is not a 1-DoF revolute or prismatic one (:attr:`ReplayResult.full_path_reason` says
+which).
 
 The detection pipeline reads a log as ``replay -> events``: :attr:`ReplayResult.events` lists the separate
 threshold crossings (runs of samples with some |residual| above the controller's threshold), and
