@@ -17,6 +17,7 @@ from reflexarm import load_robot
 from reflexarm.control import MODES, Controller, replay
 from reflexarm.errors import ConfigError, DataError
 from reflexarm.signals import Measurement, Reference
+from rpr_arm import rpr_urdf
 
 #: The replay and the step loop run the same update() on the same numbers in the same order: they agree to
 #: the bit; 1e-12 Nm is the bar the issue sets (far below any threshold).
@@ -277,25 +278,10 @@ def test_residual_only_path_over_several_blocks(atlas, threads):
     _assert_same_detection(fast, full)
 
 
-#: A revolute joint about a tilted axis, a prismatic joint along an unaligned axis, a revolute joint after it: the
-#: residual-only path's world-frame pass covers more than the built-in arms' axis-aligned revolute joints.
-URDF_RPR = """<?xml version="1.0"?>
-<robot name="rpr">
-  <link name="base"/>
-  <link name="l1"><inertial><origin xyz="0.0 0.0 0.1"/><mass value="2.0"/>
-    <inertia ixx="0.03" ixy="0.001" ixz="0.0" iyy="0.02" iyz="0.002" izz="0.01"/></inertial></link>
-  <link name="l2"><inertial><origin xyz="0.05 0.1 0.0" rpy="0.2 0 0"/><mass value="1.5"/>
-    <inertia ixx="0.02" ixy="0.0" ixz="0.001" iyy="0.03" iyz="0.0" izz="0.01"/></inertial></link>
-  <link name="l3"><inertial><origin xyz="0.2 0.0 0.0"/><mass value="0.8"/>
-    <inertia ixx="0.01" ixy="0.0" ixz="0.0" iyy="0.02" iyz="0.0" izz="0.02"/></inertial></link>
-  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><origin xyz="0 0 0.2" rpy="0.3 0 0"/>
-    <axis xyz="0.36 0 0.48"/><limit lower="-3" upper="3" effort="100" velocity="5"/></joint>
-  <joint name="j2" type="prismatic"><parent link="l1"/><child link="l2"/><origin xyz="0.1 0 0.4" rpy="0 0.4 0.2"/>
-    <axis xyz="0.6 0 0.8"/><limit lower="-0.3" upper="0.3" effort="100" velocity="1"/></joint>
-  <joint name="j3" type="revolute"><parent link="l2"/><child link="l3"/><origin xyz="0 0.1 0" rpy="0 0 0.5"/>
-    <axis xyz="0 -1 0"/><limit lower="-2" upper="2" effort="50" velocity="5"/></joint>
-</robot>
-"""
+#: A revolute joint about a tilted axis, a prismatic joint along an unaligned axis, a revolute joint about a negative
+#: axis after it: the residual-only path's world-frame pass covers more than the built-in arms' axis-aligned
+#: revolute joints.
+URDF_RPR = rpr_urdf(j1_axis="0.36 0 0.48", j3_axis="0 -1 0")
 
 
 def _other_arm(name, tmp_path):

@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <new>
 #include <sstream>
 
 #include "params_check.hpp"
@@ -15,45 +14,7 @@ namespace reflexarm
   namespace
   {
     constexpr double kInf = std::numeric_limits<double>::infinity();
-
-    // ------------------------------------------------------------------ pinocchio::Data without indeterminate enums
-    // Pinocchio's Data constructors never compute its two Eigen::LLT members (llt_JMinvJt, osim_llt), and Eigen's
-    // LLT leaves m_info indeterminate until compute(): copying such a Data (its copy constructor or assignment, so a
-    // Controller's) reads that enum (UBSan -fsanitize=enum: "not a valid value for type 'ComputationInfo'"). A
-    // compute() on an empty matrix defines it (Success) without allocating; the LLTs stay 0x0, and every Pinocchio
-    // algorithm that uses them (contact dynamics, PV; none of ours) computes them first.
-    void defineLlts(pinocchio::Data & data) noexcept
-    {
-      data.llt_JMinvJt.compute(pinocchio::Data::MatrixXs());
-      data.osim_llt.compute(pinocchio::Data::MatrixXs());
-    }
-
-    /// data = Data(model) without a copy: destroyed and constructed in place, its LLTs defined. If the constructor
-    /// throws, data is left a default Data (so its owner's destructor finds an object) and the exception goes on.
-    void constructData(pinocchio::Data & data, const pinocchio::Model & model)
-    {
-      using Data = pinocchio::Data;
-      data.~Data();
-      try
-      {
-        new (&data) Data(model);
-      }
-      catch (...)
-      {
-        new (&data) Data();
-        defineLlts(data);
-        throw;
-      }
-      defineLlts(data);
-    }
   } // namespace
-
-  Controller::Data Controller::definedData()
-  {
-    Data data;
-    defineLlts(data);
-    return data;
-  }
 
   void Controller::configure(const Model & model, const ControllerParams & p)
   {

@@ -16,22 +16,6 @@ namespace reflexarm
 {
   using namespace isolation_detail;
 
-  namespace
-  {
-    void defineLlts(pinocchio::Data & data) noexcept
-    {
-      data.llt_JMinvJt.compute(pinocchio::Data::MatrixXs());
-      data.osim_llt.compute(pinocchio::Data::MatrixXs());
-    }
-  } // namespace
-
-  pinocchio::Data ContactIsolator::definedData()
-  {
-    pinocchio::Data data;
-    defineLlts(data);
-    return data;
-  }
-
   void ContactIsolator::configure(
     const pinocchio::Model & model, const std::vector<LinkSurfaceData> & surfaces, const IsolationParams & params)
   {
@@ -61,11 +45,7 @@ namespace reflexarm
       throw ConfigError("cone_edges must be an integer >= 3; got " + std::to_string(params.cone_edges));
 
     model_ = model;
-    // not data_ = pinocchio::Data(model_): a fresh Data's Eigen::LLT members have an indeterminate m_info (never
-    // computed), which a copy reads (UBSan enum); a compute() on an empty matrix defines it (as Controller's Data)
-    pinocchio::Data data(model_);
-    defineLlts(data);
-    data_ = data;
+    constructData(data_, model_); // in place, its LLTs defined (defined_data.hpp)
     n_ = n;
     K_ = params.cone_edges;
     params_ = params;

@@ -104,7 +104,8 @@ namespace reflexarm
       const Eigen::Matrix3d R0 = parent.R * b.R_joint; // the joint's frame at q = 0
       b.o = parent.o + parent.R * b.p_joint;
       b.z = R0 * b.axis;
-      Vector3d s_lin, s_ang;
+      Vector3d & s_lin = b.s_lin;
+      Vector3d & s_ang = b.s_ang;
       if (b.revolute)
       {
         const double c = std::cos(qi), s = std::sin(qi);
@@ -165,21 +166,10 @@ namespace reflexarm
       const int k = b.idx_v;
       const Vector3d g_lin = b.m_sub * a_g_, g_ang = b.mc.cross(a_g_);
       const Vector3d x_lin = b.w.cross(b.h), x_ang = b.w.cross(b.L) + b.v.cross(b.h); // v_k x* F_k
-      if (b.revolute)
-      {
-        const Vector3d s_lin = b.o.cross(b.z);
-        p[k] = s_lin.dot(b.h) + b.z.dot(b.L) + b.armature * dq[k];
-        ct[k] = -(s_lin.dot(x_lin) + b.z.dot(x_ang));
-        g[k] = s_lin.dot(g_lin) + b.z.dot(g_ang);
-        jt[k] = b.carries_sensor && with_wrench_ ? s_lin.dot(f_w) + b.z.dot(n_w) : 0.0;
-      }
-      else
-      {
-        p[k] = b.z.dot(b.h) + b.armature * dq[k];
-        ct[k] = -b.z.dot(x_lin);
-        g[k] = b.z.dot(g_lin);
-        jt[k] = b.carries_sensor && with_wrench_ ? b.z.dot(f_w) : 0.0;
-      }
+      p[k] = b.s_lin.dot(b.h) + b.s_ang.dot(b.L) + b.armature * dq[k];
+      ct[k] = -(b.s_lin.dot(x_lin) + b.s_ang.dot(x_ang));
+      g[k] = b.s_lin.dot(g_lin) + b.s_ang.dot(g_ang);
+      jt[k] = b.carries_sensor && with_wrench_ ? b.s_lin.dot(f_w) + b.s_ang.dot(n_w) : 0.0;
       Body & parent = bodies_[static_cast<std::size_t>(b.parent)];
       if (b.parent > 0)
       {

@@ -13,6 +13,7 @@
 #include "pinocchio/multibody.hpp"
 
 #include "reflexarm/collision_event.hpp"
+#include "reflexarm/defined_data.hpp"
 #include "reflexarm/fault.hpp"
 #include "reflexarm/modal_damping.hpp"
 #include "reflexarm/params.hpp"
@@ -151,9 +152,6 @@ namespace reflexarm
     void setObserverAndReactionBounds(const Model & model, const ControllerParams & q);
     void sizeReaction(const ControllerParams & q);
     void sizeBuffers(const ControllerParams & q);
-    /// A default Data whose Eigen::LLT members have a defined m_info, so that copying a Controller never reads an
-    /// indeterminate enum (configure.cpp; configure() constructs the Data in place the same way).
-    static Data definedData();
     // the steps of update(), in order (controller.cpp unless noted)
     bool commandFits(const Command & cmd) const noexcept;
     FaultCode notReady(Command & cmd) const noexcept;

@@ -17,6 +17,7 @@
 
 #include "pinocchio/multibody.hpp"
 
+#include "reflexarm/defined_data.hpp"
 #include "reflexarm/params.hpp"
 
 namespace reflexarm
@@ -200,10 +201,7 @@ namespace reflexarm
     double wrenchError(int link) noexcept;
 
     pinocchio::Model model_;
-    /// A default Data whose Eigen::LLT members have a defined m_info (computed on an empty matrix), so that copying
-    /// a never-configured isolator (inside a Controller without geometry) reads no indeterminate enum (UBSan).
-    static pinocchio::Data definedData();
-    pinocchio::Data data_ = definedData();
+    pinocchio::Data data_ = definedData(); // defined LLTs: a never-configured isolator copies cleanly (UBSan)
     int n_ = 0;
     int K_ = 8;
     IsolationParams params_;

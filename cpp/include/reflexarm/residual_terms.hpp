@@ -58,6 +58,7 @@ namespace reflexarm
       // this sample, world frame
       Eigen::Matrix3d R;
       Eigen::Vector3d o, z;        ///< joint origin and axis
+      Eigen::Vector3d s_lin, s_ang; ///< S_k: (o x z, z) revolute, (z, 0) prismatic
       Eigen::Vector3d v, w;        ///< spatial velocity (linear at the world origin, angular)
       Eigen::Vector3d h, L;        ///< subtree momentum (linear, angular about the world origin)
       Eigen::Vector3d mc;          ///< subtree sum of m_i c_i
