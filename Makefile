@@ -25,7 +25,7 @@ CORE_SOURCES := cpp/CMakeLists.txt $(wildcard cpp/cmake/* cpp/include/reflexarm/
 $(DEPS_STAMP): pyproject.toml
 	@$(CHECK_TOOLCHAIN)
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet pip==26.3 # pinned, so that a new pip cannot change how the sdists below are built
 	$(BIN)/python -c 'import tomllib; print("\n".join(tomllib.load(open("pyproject.toml", "rb"))["build-system"]["requires"]))' > $(VENV)/build-requirements.txt
 	$(BIN)/python -m pip install --quiet -r $(VENV)/build-requirements.txt
 	touch $(DEPS_STAMP)
