@@ -9,11 +9,13 @@ import numpy as np
 import pytest
 
 from reflexarm.control import Controller
-from reflexarm.experiments.collision import EE_START
+from reflexarm.experiments.collision import EE_START, CollisionSetting
 from reflexarm.experiments.detection_study import (
     PULSE_GRACE_S,
     contact_lag,
     free_motion_residuals,
+    input_lag,
+    observer_input,
     run_detection_study,
 )
 from reflexarm.experiments.reaction_study import study_arm
@@ -75,6 +77,62 @@ def test_contact_lag_counts_from_the_first_true_crossing():
     assert row["detecting_joints"] == [2]
     none = contact_lag(_Trace(tau, np.zeros(N, dtype=bool), collided), np.full(n, 10.0))  # type: ignore[arg-type]
     assert none["lag_s"] is None and none["detected_s"] is None
+
+
+class _Log:
+    """The fields observer_input reads (a run's true states and measured torque)."""
+
+    def __init__(self, t, q, dq, tau_m) -> None:
+        self.t, self.q, self.dq, self.tau_m = t, q, dq, tau_m
+        self.wrench = np.zeros((t.size, 6))
+
+
+#: |LP_k(observer_input) - the residual at k| / max |residual|: the input replay is the observer at k_o dt = 10,
+#: whose own lag leaves e^-10 = 4.5e-5 of the previous tick in each sample; 1e-3 leaves 20x room for it.
+INPUT_FILTER_TOL = 1e-3
+
+
+def test_the_observer_input_filtered_at_the_gain_is_the_residual(atlas):
+    """observer_input is the detecting observer's input with its filter taken out: a first-order filter at k_o
+    (zero-order hold, written here) of it gives the residual of a replay at k_o, on a moving arm whose torque
+    is gravity plus a growing external torque (the model's error torques, here its C^T dq and friction)."""
+    N, k = 1500, 50.0
+    t = (np.arange(N) + 1) * DT
+    w = 2.0 * np.pi * 0.5
+    q = EE_START + 0.3 * np.sin(w * t)[:, None]
+    dq = 0.3 * w * np.cos(w * t)[:, None] * np.ones(atlas.n)
+    tau_m = np.array([atlas.compute_gravity(x) for x in q])
+    tau_m[:, 1] += np.clip(40.0 * (t - 0.8), 0.0, None)  # a contact torque ramping from 0.8 s
+    log = _Log(t, q, dq, tau_m)
+    setting = CollisionSetting("probe", stiffness=300.0, threshold=None, reaction="none",
+                               detection_observer_gain=k, observer_discretization="exact")  # fmt: skip
+    d = observer_input(log, setting, atlas)  # type: ignore[arg-type]
+    from reflexarm.control import replay
+
+    ref = replay(setting.controller(atlas), t, q, dq, tau_m).residual
+    a, lp, y = np.exp(-k * DT), np.empty_like(d), np.zeros(atlas.n)
+    for i in range(N):
+        y = a * y + (1.0 - a) * d[i]
+        lp[i] = y
+    assert np.abs(lp - ref).max() <= INPUT_FILTER_TOL * np.abs(ref).max()
+    assert np.abs(d[1200:, 1]).max() > 1.5 * np.abs(ref[1200:, 1] - d[1200:, 1]).max()  # the input leads
+
+
+def test_input_lag_counts_from_the_input_crossing_after_contact():
+    n, N = 3, 100
+    tau = np.zeros((N, n))
+    disturbance = np.zeros((N, n))
+    disturbance[5, 0] = 50.0  # a crossing before contact: not the contact's
+    disturbance[:, 1] = np.linspace(0.0, 20.0, N)  # crosses 10 Nm at tick 50
+    collision = np.arange(N) >= 57
+    collided = np.zeros((N, n), dtype=bool)
+    collided[57:, 1] = True
+    row = input_lag(_Trace(tau, collision, collided), np.full(n, 10.0), disturbance, contact_s=20 * DT)  # type: ignore[arg-type]
+    first = int(np.argmax(disturbance[:, 1] > 10.0))
+    assert row["input_lag_s"] == pytest.approx((57 - first) * DT)
+    assert row["input_lag_detecting_joint_s"] == pytest.approx((57 - first) * DT)
+    none = input_lag(_Trace(tau, collision, collided), np.full(n, 10.0), disturbance, contact_s=None)  # type: ignore[arg-type]
+    assert none["input_lag_s"] is None
 
 
 def test_chunked_free_motion_residuals_refilter_per_chunk():

@@ -22,7 +22,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "logs (seeds A: other motions and noise of the same arm), count false alarms in --heldout-minutes of free "
         "motion (seeds C), run the demo contact and the link collision with each pair and short force pulses on the "
         "links (seeds B); lag = detection - the "
-        "first time the true |tau_ext_j| exceeds zeta_j. Writes JSON, CSV and the lag / false-alarm figure.",
+        "first time the true |tau_ext_j| exceeds zeta_j; own = detection - the first time after contact that the "
+        "observer's input (tau_ext + the model's error torque, its filter taken out) exceeds zeta_j. Writes JSON, CSV "
+        "and the lag / false-alarm figure.",
     )
     p.add_argument("--arm", action="append", choices=_ARMS, default=None, help="an arm (repeat; default all five)")
     p.add_argument("--gains", default="5,20,50,100,200,500", metavar="K1,K2,...", help="detection gains [1/s]")
@@ -45,8 +47,8 @@ def _print(name: str, arm: dict[str, Any]) -> None:
         return "    -" if v is None else f"{1e3 * v:5.1f}"
 
     print(f"\n{name} (plant friction {arm['plant_friction']})")
-    print(f"{'k_o':>5} {'zeta max':>8} {'ramp':>5} {'meas':>5} {'FA/h':>6} {'demo lag':>8} {'delay':>6} "
-          f"{'link lag':>8} {'delay':>6} {'pulses':>7}")  # fmt: skip
+    print(f"{'k_o':>5} {'zeta max':>8} {'ramp':>5} {'meas':>5} {'FA/h':>6} {'demo lag':>8} {'own':>5} {'delay':>6} "
+          f"{'link lag':>8} {'own':>5} {'delay':>6} {'pulses':>7}")  # fmt: skip
     for p in arm["pairs"]["pairs"]:
         k = p["detection_observer_gain"]
         c = arm["contacts"].get(str(k), {})
@@ -55,8 +57,9 @@ def _print(name: str, arm: dict[str, Any]) -> None:
         pul = arm.get("pulses", {}).get("caught", {}).get(str(k))
         pulses = "-" if pul is None else f"{pul['caught_eligible']}/{pul['eligible']}"
         print(f"{k:5g} {max(p['collision_Nm']):8.2f} {ms(p['ramp_lag_max_s'])} {ms(p['measured_ramp_lag_max_s'])} "
-              f"{h.get('alarms_per_hour', float('nan')):6.2f} {ms(d.get('lag_s')):>8} {ms(d.get('delay_s')):>6} "
-              f"{ms(lk.get('lag_s')):>8} {ms(lk.get('delay_s')):>6} {pulses:>7}")  # fmt: skip
+              f"{h.get('alarms_per_hour', float('nan')):6.2f} {ms(d.get('lag_s')):>8} {ms(d.get('input_lag_s'))} "
+              f"{ms(d.get('delay_s')):>6} {ms(lk.get('lag_s')):>8} {ms(lk.get('input_lag_s'))} "
+              f"{ms(lk.get('delay_s')):>6} {pulses:>7}")  # fmt: skip
 
 
 def _detection_study(args: argparse.Namespace) -> int:
