@@ -272,8 +272,8 @@ def plot_tradeoff(study: DetectionStudy, path: str | Path) -> Path:
                 yscale="log", title="lag / false-alarm trade-off over k_o (labels: k_o [1/s])")  # fmt: skip
     axes[1].axhline(1e3 * TARGET_LAG_S, color="k", ls="--", lw=0.8)
     axes[1].set_yscale("symlog", linthresh=10.0)  # lags of a few ms beside detections seconds early or late
-    axes[1].set(xscale="log", xlabel="detection k_o [1/s]", ylabel="lag [ms]",
-                title="lag after the true |tau_ext| (filled) / the observer's input (open) crosses zeta")  # fmt: skip
+    title = "demo / link collision: lag after the true |tau_ext| (filled)\nor the observer's input (open) exceeds zeta"
+    axes[1].set(xscale="log", xlabel="detection k_o [1/s]", ylabel="lag [ms]", title=title)
     axes[0].legend(fontsize=7)
     axes[1].legend(fontsize=6, ncol=2)
     fig.tight_layout()
