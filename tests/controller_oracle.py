@@ -47,6 +47,8 @@ DAMPING_TICKS = 4
 #: Ticks of a collision's isolation after its fit (the class docstring's rule): one chooses the link and its rank,
 #: one estimates its point and force, and on the next the estimate is in (the retract planned from it).
 FINISHING_TICKS = 3
+#: Pass-1 points per unit of the isolation's work (ContactIsolator::kTracePoints, cpp/include/reflexarm/isolation.hpp).
+TRACE_POINTS = 16
 
 BOUNDS = {
     "margin": 0.2,
@@ -97,8 +99,9 @@ class Oracle:
       accepted ticks later (the estimate's t_estimated), and the retract then planned from it: the real-time tick
       spreads the fit over the ticks (``ReactionSettings.isolation_points_per_tick``). The rule, from the
       geometry: the candidate links are the most distal joint with |r_j| > significance_j and every later one;
-      each candidate point is fitted twice (pass 1, the gram J_p W W J_p^T and J_p W W r; pass 2, the constrained
-      fit), one unit each, a candidate link without geometry is one unit (the wrench fit); the tick that begins
+      each candidate point is scored twice (pass 1, the trace of J_p W W J_p^T, TRACE_POINTS points a unit, the
+      link's last unit the rest; pass 2, the constrained fit, one unit a point), a candidate link without geometry
+      is one unit (the wrench fit); the tick that begins
       does no unit, each following tick at most points_per_tick units, then one tick chooses the link (and its
       rank), one estimates its point and force, and the estimate is in (and a waiting retract planned from it) on
       the tick after: ceil(units / points_per_tick) + 3 ticks after the beginning (on that tick if there are no
@@ -472,7 +475,7 @@ class Oracle:
         if significant.size == 0:
             return 0
         counts = self.geometry.point_counts()[significant[-1] :]  # type: ignore[attr-defined]
-        units = int(np.sum(np.where(counts > 0, 2 * counts, 1)))
+        units = int(np.sum(np.where(counts > 0, -(-counts // TRACE_POINTS) + counts, 1)))
         return -(-units // self.settings.isolation_points_per_tick) + FINISHING_TICKS
 
     def begin_isolation(self, t, q, r) -> bool:

@@ -37,8 +37,17 @@ FORCE_ATOL = 1e-8
 FIT_ATOL = 1e-9
 #: Noisy variant: residual noise [Nm] per joint (Gaussian), its significance level and fit tolerance.
 NOISE = 0.05
+#: An exact tie: two candidate points that both explain the residual (true fit error 0, a link of rank < 5) score
+#: round-off, not 0. The fit's f solves a 3x3 (or 2x2) system whose backward error is a few eps; the error
+#: |W (J_p^T f - r)| then carries ~eps |A| |f| / sqrt(lambda_min(A)) = eps sigma_max |f| sqrt(kappa(A)) (sigma the
+#: singular values of W J_p^T, kappa(A) capped at 1e10: a worse interior or facet solve is skipped). Measured on
+#: Atlas' rank-3 link 2 (|f| ~ 1-3.5 kN, kappa ~ 3e5-2e6): 3e-11 to 1.4e-9 Nm, <= 15 x that estimate; two points
+#: tie when their errors differ by at most TIE_ROUNDOFF x the larger estimate (+ FIT_ATOL).
+TIE_ROUNDOFF = 100.0
 NOISY_SIGNIFICANCE = 0.25
 NOISY_FIT_TOLERANCE = 0.3
+#: Pass-1 points per unit of the stepped isolation's work (ContactIsolator::kTracePoints).
+TRACE_POINTS = 16
 
 
 @pytest.fixture(scope="module")
@@ -83,6 +92,15 @@ def _assert_same(a, b, where, tie=None):
     assert b.reason == a.reason, where
 
 
+def _fit_roundoff(py, fit, index):
+    """eps sigma_max |f| sqrt(kappa(A)) at one candidate point (TIE_ROUNDOFF's estimate of an exact fit's error)."""
+    d = fit.points[index] - fit.origin
+    jp = (fit.jacobian[:3] + np.cross(fit.jacobian[3:].T, d).T) * py.weights[None, :]  # W J_p^T, transposed
+    lam = np.linalg.eigvalsh(jp @ jp.T)
+    kappa = min(lam[-1] / lam[0], 1e10) if lam[0] > 0.0 else 1e10
+    return float(np.finfo(float).eps * np.sqrt(lam[-1] * kappa) * np.linalg.norm(fit.forces[index]))
+
+
 def _tie_check(py, cc, q, r, where):
     """The core's best point on the chosen link scores as well as Python's best (an exact tie), in Python's fit."""
 
@@ -93,7 +111,8 @@ def _tie_check(py, cc, q, r, where):
             return
         k = int(np.argmin(np.linalg.norm(fit.points - out["best_point"], axis=1)))
         assert np.linalg.norm(fit.points[k] - out["best_point"]) < POINT_ATOL, where
-        assert fit.errors[k] <= fit.errors[fit.best] + FIT_ATOL, f"{where}: core best point is no tie"
+        tie = FIT_ATOL + TIE_ROUNDOFF * max(_fit_roundoff(py, fit, i) for i in (k, fit.best))
+        assert fit.errors[k] <= fit.errors[fit.best] + tie, f"{where}: core best point is no tie"
 
     return check
 
@@ -237,9 +256,10 @@ def _bits(value: object) -> object:
 @pytest.mark.parametrize("name", ARMS)
 def test_isolation_in_steps_equals_one_shot_bitwise(arms, name):
     """The real-time tick's form of the isolation (begin, step(budget) until done, finish) returns isolate()'s
-    estimate bit for bit, in ceil(work / budget) steps, work = 2 per candidate point (pass 1 and pass 2) + 1 per
-    candidate link without geometry (the candidates: the most distal joint above its significance and every later
-    one), on a few hundred seeded contacts per arm, exact and noisy residuals (Atlas: a link without geometry)."""
+    estimate bit for bit, in ceil(work / budget) steps, work = per candidate link with m points ceil(m / 16) (pass
+    1, ContactIsolator::kTracePoints points a unit) + m (pass 2), 1 per candidate link without geometry (the
+    candidates: the most distal joint above its significance and every later one), on a few hundred seeded contacts
+    per arm, exact and noisy residuals (Atlas: a link without geometry)."""
     robot = _arm(arms, name)
     geometry = link_collision_geometry(robot, spacing=SPACING)
     truth = link_collision_geometry(robot, spacing=0.004, seed=3)
@@ -255,7 +275,7 @@ def test_isolation_in_steps_equals_one_shot_bitwise(arms, name):
         one = {k: _bits(v) for k, v in iso.isolate(q, r).items()}
         significant = np.flatnonzero(np.abs(r) > significance)
         tail = counts[significant[-1] :] if significant.size else counts[:0]
-        work = int(np.sum(np.where(tail > 0, 2 * tail, 1)))
+        work = int(np.sum(np.where(tail > 0, -(-tail // TRACE_POINTS) + tail, 1)))
         for budget in BUDGETS:
             spread = iso.isolate_in_steps(q, r, budget)
             assert (spread.pop("work"), spread.pop("steps")) == (work, -(-work // budget)), f"{name} contact {i}"

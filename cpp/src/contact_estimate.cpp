@@ -28,7 +28,9 @@ namespace reflexarm
   bool Controller::beginIsolation(double t, const State & s, const Eigen::VectorXd & residual) noexcept
   {
     CollisionEvent & e = event_;
-    isolator_.begin(s.q, residual);
+    // the joint placements and world Jacobians at s.q: computeDynamics' computeCoriolisMatrix on this tick (data_c_.oMi
+    // and data_c_.J, still in cache), bit for bit what the isolator's own computeJointJacobians would give
+    isolator_.begin(s.q, residual, data_c_);
     e.isolating = true;
     e.t_estimate = t; // the residual it uses
     if (isolator_.workLeft() > 0)

@@ -1,6 +1,6 @@
 // reflexarm::ContactIsolator: the C++ port of reflexarm.control.collision.isolate / identify (see isolation.hpp).
-// Each step follows the Python (vectorised) code line by line, in the same order of operations where it decides
-// something (argmin, argmax, the tolerance tests), so that the two agree to round-off.
+// Each step follows the Python (vectorised) code, with its decisions (argmin, argmax, the tolerance tests) in the same
+// order, so that the two agree to round-off (the fit itself in each link's joint frame: isolation_fit.cpp).
 #include "reflexarm/isolation.hpp"
 
 #include "isolation_detail.hpp"
@@ -60,9 +60,8 @@ namespace reflexarm
     x1_.resize(K_);
     x2_.resize(K_);
     t_.resize(K_);
-    d_world_.resize(K_, 3);
-    c_world_.resize(K_, 3);
-    jpt_.resize(n, 3);
+    ad_.resize(K_, 3);
+    uv_.setZero(n, 6);
     wrench_b_.resize(n, 6);
     wrench_svd_ = Eigen::JacobiSVD<Eigen::MatrixXd>(n, 6, Eigen::ComputeThinU);
 
@@ -84,10 +83,13 @@ namespace reflexarm
       L.points_local = s.points;
       L.generators.resize(m * K_, 3);
       L.facet_normals.resize(m * K_, 3);
-      L.points.resize(m, 3);
       L.forces.resize(m, 3);
       L.errors.resize(m);
       L.jacobian = Jac::Zero(6, n);
+      const auto & support = model.supports[static_cast<size_t>(link + 1)]; // the universe, then joints 1 .. link+1
+      L.support.resize(static_cast<Eigen::Index>(support.size()) - 1);
+      for (size_t k = 1; k < support.size(); ++k)
+        L.support[static_cast<Eigen::Index>(k - 1)] = model.joints[support[k]].idx_v();
       for (Eigen::Index i = 0; i < m; ++i)
       {
         const Eigen::Vector3d nout = s.normals.row(i).transpose();
@@ -119,88 +121,6 @@ namespace reflexarm
     }
   }
 
-  namespace
-  {
-    /// Eigenvalues of the symmetric tridiagonal (diag, sub) below x: the negative pivots of its LDL^T - x I
-    /// (Sturm count, backward stable).
-    template <typename Diag, typename Sub>
-    int eigenvaluesBelow(const Diag & diag, const Sub & sub, double x)
-    {
-      int count = 0;
-      double q = diag[0] - x;
-      for (Eigen::Index i = 0;; ++i)
-      {
-        if (q == 0.0)
-          q = -std::numeric_limits<double>::epsilon() * (std::abs(x) + std::numeric_limits<double>::min());
-        count += q < 0.0;
-        if (i + 1 >= diag.size())
-          return count;
-        q = diag[i + 1] - x - sub[i] * sub[i] / q;
-      }
-    }
-  } // namespace
-
-  int ContactIsolator::linkRank(int link) noexcept
-  {
-    const Jac & J = links_[static_cast<size_t>(link)].jacobian;
-    Eigen::Matrix<double, 6, 6> G;
-    for (int i = 0; i < 6; ++i)
-      for (int j = 0; j < 6; ++j)
-      {
-        double s = 0.0;
-        for (int c = 0; c <= link; ++c)
-          s += J(i, c) * J(j, c);
-        G(i, j) = s;
-      }
-    // the rank: eigenvalues of G (squared singular values of J[:, :link+1]) above kRankTolerance^2 x the largest.
-    // SelfAdjointEigenSolver::compute's first half (its scaling and its tridiagonal T), then Sturm counts on T: the
-    // largest eigenvalue of the PSD G lies in [trace / 6, trace], so if no eigenvalue lies between the thresholds
-    // of those two, the count at either is the rank; otherwise (an eigenvalue within a factor 6 of the threshold)
-    // compute's second half, the eigenvalues themselves, as before. Same rank, a third of the cost.
-    Eigen::Matrix<double, 6, 6> mat = G.triangularView<Eigen::Lower>();
-    const double scale = mat.cwiseAbs().maxCoeff();
-    if (!(scale > 0.0))
-      return 0;
-    mat.triangularView<Eigen::Lower>() /= scale;
-    Eigen::Matrix<double, 6, 1> diag;
-    Eigen::Matrix<double, 5, 1> sub, hcoeffs;
-    Eigen::internal::tridiagonalization_inplace(mat, diag, sub, hcoeffs, false);
-    const double trace = diag.sum(), tol2 = kRankTolerance * kRankTolerance;
-    if (!(trace > 0.0))
-      return 0;
-    const int below_lo = eigenvaluesBelow(diag, sub, tol2 * trace / 6.0 * (1.0 - 1e-9));
-    const int below_hi = eigenvaluesBelow(diag, sub, tol2 * trace * (1.0 + 1e-9));
-    if (below_lo == below_hi)
-      return 6 - below_lo;
-    link_eig_.compute(G, Eigen::EigenvaluesOnly);
-    const auto & w = link_eig_.eigenvalues(); // ascending
-    const double top = w[5];
-    if (!(top > 0.0))
-      return 0;
-    int rank = 0;
-    for (int i = 0; i < 6; ++i)
-      rank += w[i] > tol2 * top;
-    return rank;
-  }
-
-  double ContactIsolator::wrenchError(int link) noexcept
-  {
-    // |r - J^T w*| for the best wrench at the link origin: r minus its projection on the range of (J W)^T
-    const Jac & J = links_[static_cast<size_t>(link)].jacobian;
-    for (int c = 0; c < n_; ++c)
-      for (int i = 0; i < 6; ++i)
-        wrench_b_(c, i) = J(i, c) * weights_[c];
-    wrench_svd_.compute(wrench_b_);
-    const auto & s = wrench_svd_.singularValues();
-    const auto & U = wrench_svd_.matrixU();
-    const double cutoff = std::numeric_limits<double>::epsilon() * std::max(n_, 6) * (s.size() ? s[0] : 0.0);
-    wrench_r_ = weighted_residual_;
-    for (Eigen::Index k = 0; k < s.size(); ++k)
-      if (s[k] > cutoff)
-        wrench_r_ -= U.col(k) * U.col(k).dot(weighted_residual_);
-    return wrench_r_.norm();
-  }
-
   void ContactIsolator::estimateLink(int link, double tolerance, ContactEstimateData & out) noexcept
   {
     LinkBuffers & L = links_[static_cast<size_t>(link)];
@@ -219,9 +139,11 @@ namespace reflexarm
       return;
     }
     const int best = L.best;
-    const Eigen::Vector3d pb = L.points.row(best).transpose();
-    const Eigen::Vector3d fb = L.forces.row(best).transpose();
-    const Eigen::Vector3d d = pb - L.origin;
+    // the fit is in the link's joint frame (isolation_fit.cpp): the best point and force rotated into the world
+    const Eigen::Vector3d pl = L.points_local.row(best).transpose(), fl = L.forces.row(best).transpose();
+    const Eigen::Vector3d d = L.rotation * pl; // p - o
+    const Eigen::Vector3d pb = d + L.origin;
+    const Eigen::Vector3d fb = L.rotation * fl;
     const Jac & J = L.jacobian;
     double e2 = 0.0;
     Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
@@ -236,23 +158,27 @@ namespace reflexarm
     out.point = pb;
     out.force = fb;
     out.fit_error = std::sqrt(e2);
+    // the consistent set: the forces in the joint frame (magnitudes and angles do not depend on it), the points'
+    // distances from the world points as identify.py forms them (R p + o), so that a distance on the candidate grid
+    // (e.g. exactly 5.25 cm) rounds as in Python where the reason prints it
     const double limit = L.errors[best] + tolerance;
     int count = 0;
-    double spread = 0.0, max_rel = 0.0, min_cos = kInf;
-    const double ref = fb.norm();
+    double spread2 = 0.0, max_rel = 0.0, min_cos = kInf;
+    const double ref = fl.norm();
     for (Eigen::Index i = 0; i < L.errors.size(); ++i)
     {
       if (!(L.errors[i] <= limit))
         continue;
       ++count;
-      spread = std::max(spread, (L.points.row(i).transpose() - pb).norm());
+      const Eigen::Vector3d pi = L.rotation * L.points_local.row(i).transpose() + L.origin;
+      spread2 = std::max(spread2, (pi - pb).squaredNorm());
       const Eigen::Vector3d fi = L.forces.row(i).transpose();
       const double mag = fi.norm();
-      min_cos = std::min(min_cos, fi.dot(fb) / std::max(mag * ref, kTiny));
+      min_cos = std::min(min_cos, fi.dot(fl) / std::max(mag * ref, kTiny));
       max_rel = std::max(max_rel, std::abs(mag - ref));
     }
     out.consistent_points = count;
-    out.point_spread = spread;
+    out.point_spread = std::sqrt(spread2); // the largest distance (sqrt is monotonic)
     out.force_variation = max_rel / std::max(ref, kTiny);
     out.direction_variation_deg = std::acos(std::clamp(min_cos, -1.0, 1.0)) * (180.0 / M_PI);
     // rank of J_p J_p^T at the best point (eigenvalues: squared singular values)
@@ -313,9 +239,27 @@ namespace reflexarm
   bool ContactIsolator::begin(
     const Eigen::Ref<const Eigen::VectorXd> & q, const Eigen::Ref<const Eigen::VectorXd> & residual) noexcept
   {
+    return beginWith(q, residual, nullptr);
+  }
+
+  bool ContactIsolator::begin(
+    const Eigen::Ref<const Eigen::VectorXd> & q,
+    const Eigen::Ref<const Eigen::VectorXd> & residual,
+    const pinocchio::Data & kin) noexcept
+  {
+    return beginWith(q, residual, &kin);
+  }
+
+  bool ContactIsolator::beginWith(
+    const Eigen::Ref<const Eigen::VectorXd> & q,
+    const Eigen::Ref<const Eigen::VectorXd> & residual,
+    const pinocchio::Data * kin) noexcept
+  {
     cancel();
     active_ = true;
     if (n_ == 0 || q.size() != n_ || residual.size() != n_ || !q.allFinite() || !residual.allFinite())
+      return false;
+    if (kin && (kin->J.cols() != n_ || static_cast<int>(kin->oMi.size()) != n_ + 1))
       return false;
     valid_ = true;
     residual_ = residual;
@@ -336,21 +280,31 @@ namespace reflexarm
     wr2_ = weighted_residual_.squaredNorm();
     tolerance_ = params_.fit_tolerance + params_.relative_tolerance * weighted_residual_.norm();
 
-    pinocchio::computeJointJacobians(model_, data_, q);
+    if (!kin)
+      pinocchio::computeJointJacobians(model_, data_, q);
+    const pinocchio::Data & data = kin ? *kin : data_;
     for (int link = last; link < n_; ++link)
     {
       LinkBuffers & L = links_[static_cast<size_t>(link)];
       const auto jid = static_cast<pinocchio::JointIndex>(link + 1);
-      L.rotation = data_.oMi[jid].rotation();
-      L.origin = data_.oMi[jid].translation();
+      L.rotation = data.oMi[jid].rotation();
+      L.origin = data.oMi[jid].translation();
+      // the LOCAL_WORLD_ALIGNED joint Jacobian at the joint's origin o from the world-frame one, as
+      // pinocchio::getJointJacobian forms it (the same operations): per supporting column, linear -= o x angular
       L.jacobian.setZero();
-      pinocchio::getJointJacobian(model_, data_, jid, pinocchio::LOCAL_WORLD_ALIGNED, L.jacobian);
+      for (Eigen::Index k = 0; k < L.support.size(); ++k)
+      {
+        const Eigen::Index c = L.support[k];
+        const Eigen::Vector3d w = data.J.col(c).tail<3>();
+        L.jacobian.col(c).tail<3>() = w;
+        L.jacobian.col(c).head<3>() = data.J.col(c).head<3>() - L.origin.cross(w);
+      }
       L.max_trace = -kInf;
       L.floor = 0.0;
       L.best = 0;
       L.best_error = kInf;
       const Eigen::Index m = L.points_local.rows();
-      work_total_ += m > 0 ? static_cast<int>(2 * m) : 1;
+      work_total_ += m > 0 ? static_cast<int>((m + kTracePoints - 1) / kTracePoints + m) : 1;
     }
     cur_link_ = last;
     return true;
@@ -373,14 +327,23 @@ namespace reflexarm
         ++cur_link_;
         continue;
       }
-      const Eigen::Index end = std::min<Eigen::Index>(m, cur_point_ + budget);
-      if (cur_pass_ == 1)
+      if (cur_pass_ == 1) // kTracePoints points a unit, the link's last unit the rest
+      {
+        const long units = std::min<long>((m - cur_point_ + kTracePoints - 1) / kTracePoints, budget);
+        const Eigen::Index end = std::min<Eigen::Index>(m, cur_point_ + units * kTracePoints);
         traceRange(link, cur_point_, end);
-      else
+        work_done_ += static_cast<int>(units);
+        budget -= units;
+        cur_point_ = end;
+      }
+      else // one unit a point
+      {
+        const Eigen::Index end = std::min<Eigen::Index>(m, cur_point_ + budget);
         fitRange(link, cur_point_, end);
-      work_done_ += static_cast<int>(end - cur_point_);
-      budget -= end - cur_point_;
-      cur_point_ = end;
+        work_done_ += static_cast<int>(end - cur_point_);
+        budget -= end - cur_point_;
+        cur_point_ = end;
+      }
       if (cur_point_ < m)
         continue;
       cur_point_ = 0;

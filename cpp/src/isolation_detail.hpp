@@ -1,6 +1,7 @@
 // reflexarm::ContactIsolator, private: the constants of reflexarm.control.collision.identify shared by the isolator's
 // translation units (isolation.cpp: configure, begin/step/finish, the choice and the estimate; isolation_fit.cpp:
-// the constrained fit of the candidate points).
+// the constrained fit of the candidate points, the rank of a link's Jacobian, the wrench fit of a link without
+// geometry).
 #pragma once
 
 #include <limits>

@@ -1,11 +1,22 @@
-// reflexarm::ContactIsolator: the fit of the candidate points, in ranges so that step() can spread it over the ticks.
-// Per link, once (linkTerms): the 3x3 terms P, Q, S of its weighted Jacobian in its joint frame (row c of W J_p^T at
-// the point p is u_c + v_c x p), so that pass 1 has the trace of A = J_p W W J_p^T of a point in closed form, a few
-// flops (traceRange: the edges' floor needs the link's largest trace). Pass 2 per point (fitRange): A and
-// b = J_p W W r as identify.py forms them (world frame, sums of products of W J_p^T), the lower bound below, then
-// unless it rules the point out the least squares min |W (J_p^T f - r)| with f in the friction pyramid, solved
-// exactly over its interior, facets, edges and apex: the port of reflexarm.control.collision.identify, in its order
-// of operations.
+// reflexarm::ContactIsolator: the fit of the candidate points, in ranges so that step() can spread it over the ticks;
+// the rank of a link's Jacobian (the choice) and the wrench fit of a link without geometry.
+//
+// Everything per point is in the link's joint frame, where the points, the pyramid's generators and its facet
+// normals are stored: with u_c, v_c the rows of W J^T rotated into that frame (linkTerms, once per link), row c of
+// W J_p^T at the point p is a_c(p) = u_c + v_c x p, so that
+//   A(p) = sum a_c a_c^T = P + M + M^T + [p]x S [p]x^T,   M = Q [p]x (row i of M: Q_i x p),
+//   b(p) = sum (W r)_c a_c = ur + vr x p,
+// P = sum u u^T, Q = sum u v^T, S = sum v v^T, ur = sum (W r)_c u_c, vr = sum (W r)_c v_c: A and b of a point in a
+// fixed number of flops whatever the number of joints, and no rotation per point (A, b, the force and the error
+// are those of identify.py's world frame rotated by R^T: the same numbers up to round-off; the choice and the
+// estimate rotate only the best point and force back). Pass 1 (traceRange) needs only the trace of A (the edges'
+// floor needs the link's largest trace), a few flops a point. Pass 2 (fitRange): A and b, the lower bound below,
+// then unless it rules the point out the least squares min |W (J_p^T f - r)| with f in the friction pyramid, solved
+// exactly over its interior, facets, edges and apex (the port of reflexarm.control.collision.identify), and the
+// fit error |W (J_p^T f - r)| computed directly from the rows a_c: sum_c (u_c . f + v_c . (p x f) - (W r)_c)^2. Not
+// from the expansion f^T A f - 2 f^T b + |W r|^2: that cancels to eps |W r|^2 / e^2 relative (e ~ 1e-8 |W r| for
+// an exact fit, worse with an ill-conditioned A and a large f), the direct sum keeps identify.py's round-off, so
+// that the best point, its ties and the consistent set (errors <= best + tolerance) are decided as in Python.
 //
 // Exact pruning: the unconstrained minimum |W r|^2 - b^T A^-1 b is a lower bound of the constrained error^2. A point
 // whose bound exceeds (the link's best so far + tolerance)^2 can be neither the link's best point nor in its
@@ -14,6 +25,7 @@
 // and with a margin of kPruneMargin |W r|^2, so that round-off never skips a point that would count.
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "reflexarm/isolation.hpp"
 
@@ -39,16 +51,23 @@ namespace reflexarm
     const LinkBuffers & L = links_[static_cast<size_t>(link)];
     const Eigen::Matrix3d Rt = L.rotation.transpose();
     const Jac & J = L.jacobian;
+    const Eigen::VectorXd & r = weighted_residual_;
     P_.setZero();
     Q_.setZero();
     S_.setZero();
-    for (int c = 0; c < n_; ++c)
+    ur_.setZero();
+    vr_.setZero();
+    for (int c = 0; c < n_; ++c) // columns outside the link's support are zero: rows u_c = v_c = 0
     {
       const Eigen::Vector3d u = Rt * J.col(c).head<3>() * weights_[c];
       const Eigen::Vector3d v = Rt * J.col(c).tail<3>() * weights_[c];
+      uv_.row(c).head<3>() = u.transpose();
+      uv_.row(c).tail<3>() = v.transpose();
       P_ += u * u.transpose();
       Q_ += u * v.transpose();
       S_ += v * v.transpose();
+      ur_ += r[c] * u;
+      vr_ += r[c] * v;
     }
   }
 
@@ -69,51 +88,32 @@ namespace reflexarm
     L.max_trace = max_trace;
   }
 
-  // J_p^T W of the point at d = p - o: row c is (J_v,c + J_w,c x d) w_c
-  void ContactIsolator::pointJacobianT(const Jac & J, const Eigen::Vector3d & d) noexcept
-  {
-    for (int c = 0; c < n_; ++c)
-    {
-      const Eigen::Vector3d jv = J.col(c).head<3>(), jw = J.col(c).tail<3>();
-      jpt_.row(c) = ((jv + jw.cross(d)) * weights_[c]).transpose();
-    }
-  }
-
   void ContactIsolator::fitRange(int link, Eigen::Index begin, Eigen::Index end) noexcept
   {
     LinkBuffers & L = links_[static_cast<size_t>(link)];
-    const Eigen::Matrix3d & R = L.rotation;
-    const Jac & J = L.jacobian;
     const Eigen::VectorXd & r = weighted_residual_;
-
-    // pass 2: A and b, the lower bound, then unless it rules the point out the constrained fit (interior, facets,
-    // edges, apex) and its error
-    const Eigen::Vector3d & o = L.origin;
     const int K = K_;
     const double floor = L.floor;
     int best = L.best;
     double best_error = L.best_error;
     for (Eigen::Index i = begin; i < end; ++i)
     {
-      const Eigen::Vector3d d = R * L.points_local.row(i).transpose(); // p - o
-      L.points.row(i) = (d + o).transpose();
-      pointJacobianT(J, d);
-      Eigen::Matrix3d A;
-      Eigen::Vector3d b;
+      const Eigen::Vector3d p = row3(L.points_local.row(i));
+      // A = P + M + M^T + [p]x S [p]x^T (M = Q [p]x), b = ur + vr x p
+      Eigen::Matrix3d M, N;
       for (int a = 0; a < 3; ++a)
       {
-        for (int bb = 0; bb < 3; ++bb)
-        {
-          double s = 0.0;
-          for (int c = 0; c < n_; ++c)
-            s += jpt_(c, a) * jpt_(c, bb);
-          A(a, bb) = s;
-        }
-        double s = 0.0;
-        for (int c = 0; c < n_; ++c)
-          s += jpt_(c, a) * r[c];
-        b[a] = s;
+        M.row(a) = Q_.row(a).cross(p.transpose());    // (Q [p]x)_a = Q_a x p
+        N.row(a) = p.cross(S_.col(a)).transpose();    // N = S [p]x^T (row a: p x S_a, S symmetric)
       }
+      Eigen::Matrix3d A;
+      for (int a = 0; a < 3; ++a)
+      {
+        const Eigen::Vector3d na = p.cross(N.col(a)); // column (= row) a of [p]x S [p]x^T = [p]x N
+        for (int bb = a; bb < 3; ++bb)
+          A(a, bb) = A(bb, a) = P_(a, bb) + M(a, bb) + M(bb, a) + na[bb];
+      }
+      const Eigen::Vector3d b = ur_ + vr_.cross(p);
       // interior: the unconstrained solve, if inside the pyramid
       Eigen::Matrix3d adj;
       adj(0, 0) = A(1, 1) * A(2, 2) - A(1, 2) * A(2, 1);
@@ -126,9 +126,8 @@ namespace reflexarm
       adj(2, 1) = A(0, 1) * A(2, 0) - A(0, 0) * A(2, 1);
       adj(2, 2) = A(0, 0) * A(1, 1) - A(0, 1) * A(1, 0);
       const double detA = A(0, 0) * adj(0, 0) + A(0, 1) * adj(1, 0) + A(0, 2) * adj(2, 0);
-      const double tr = A(0, 0) + A(1, 1) + A(2, 2);
-      const double tr3 = tr / 3.0;
-      const double tr3_cubed = std::pow(tr3, 3.0);
+      const double tr3 = (A(0, 0) + A(1, 1) + A(2, 2)) / 3.0;
+      const double tr3_cubed = tr3 * tr3 * tr3;
       const bool well = detA > kInteriorCondition * tr3_cubed;
       Eigen::Vector3d f_int = adj * b;
       f_int /= well ? detA : 1.0;
@@ -142,35 +141,35 @@ namespace reflexarm
           continue;
         }
       }
+      const auto D = L.generators.middleRows(i * K, K);
       for (int k = 0; k < K; ++k)
       {
-        d_world_.row(k) = (R * L.generators.row(i * K + k).transpose()).transpose();
-        c_world_.row(k) = (R * L.facet_normals.row(i * K + k).transpose()).transpose();
-      }
-      for (int k = 0; k < K; ++k)
-      {
-        const Eigen::Vector3d dk = d_world_.row(k).transpose();
+        const Eigen::Vector3d dk = row3(D.row(k));
         const Eigen::Vector3d Adk = A * dk;
+        ad_.row(k) = Adk.transpose();
         h_[k] = dk.dot(b);
         gg_[k] = dk.dot(Adk);
       }
-      for (int k = 0; k < K; ++k)
-      {
-        const Eigen::Vector3d dl = d_world_.row((k + 1) % K).transpose();
-        g12_[k] = d_world_.row(k).dot((A * dl).transpose());
-      }
+      for (int k = 0; k < K; ++k) // G[k, k+1] = d_k . A d_k+1
+        g12_[k] = D.row(k).dot(ad_.row(k + 1 < K ? k + 1 : 0));
       // edges: f = t d_k, t >= 0
       for (int k = 0; k < K; ++k)
         t_[k] = gg_[k] > floor ? std::max(h_[k], 0.0) / gg_[k] : 0.0;
-      bool inside = true;
-      for (int k = 0; k < K; ++k)
-        inside = inside && (c_world_.row(k).dot(f_int.transpose()) >= 0.0);
       // the best feasible candidate: first maximum over [interior, facets, edges, apex], as np.argmax
       int choice = 0;
-      double top = (well && inside) ? f_int.dot(b) : -kInf;
+      double top = -kInf;
+      if (well)
+      {
+        bool inside = true;
+        const auto C = L.facet_normals.middleRows(i * K, K);
+        for (int k = 0; k < K; ++k)
+          inside = inside && (C.row(k).dot(f_int.transpose()) >= 0.0);
+        if (inside)
+          top = f_int.dot(b);
+      }
       for (int k = 0; k < K; ++k)
       {
-        const int l = (k + 1) % K;
+        const int l = k + 1 < K ? k + 1 : 0; // (k + 1) mod K without an integer division
         const double det = gg_[k] * gg_[l] - g12_[k] * g12_[k];
         bool ok = gg_[k] > floor && gg_[l] > floor && det > kFacetCondition * gg_[k] * gg_[l];
         const double safe = ok ? det : 1.0;
@@ -201,19 +200,20 @@ namespace reflexarm
       else if (choice <= K)
       {
         const int k = choice - 1;
-        f = x1_[k] * d_world_.row(k).transpose() + x2_[k] * d_world_.row((k + 1) % K).transpose();
+        f = x1_[k] * row3(D.row(k)) + x2_[k] * row3(D.row(k + 1 < K ? k + 1 : 0));
       }
       else if (choice <= 2 * K)
       {
         const int k = choice - 1 - K;
-        f = t_[k] * d_world_.row(k).transpose();
+        f = t_[k] * row3(D.row(k));
       }
       L.forces.row(i) = f.transpose();
-      // error |W (J_p^T f - r)|
+      // error |W (J_p^T f - r)|: row c of W J_p^T . f = u_c . f + (v_c x p) . f = u_c . f + v_c . (p x f)
+      const Eigen::Vector3d g = p.cross(f);
       double e2 = 0.0;
       for (int c = 0; c < n_; ++c)
       {
-        const double e = jpt_.row(c).dot(f.transpose()) - r[c];
+        const double e = uv_.row(c).head<3>().dot(f.transpose()) + uv_.row(c).tail<3>().dot(g.transpose()) - r[c];
         e2 += e * e;
       }
       L.errors[i] = std::sqrt(e2);
@@ -225,6 +225,89 @@ namespace reflexarm
     }
     L.best = best;
     L.best_error = best_error;
+  }
+
+  // ---------------------------------------------------------------- the choice's rank and a link without geometry
+  namespace
+  {
+    /// Eigenvalues of the symmetric tridiagonal (diag, sub) below x: the negative pivots of its LDL^T - x I
+    /// (Sturm count, backward stable).
+    template <typename Diag, typename Sub>
+    int eigenvaluesBelow(const Diag & diag, const Sub & sub, double x)
+    {
+      int count = 0;
+      double q = diag[0] - x;
+      for (Eigen::Index i = 0;; ++i)
+      {
+        if (q == 0.0)
+          q = -std::numeric_limits<double>::epsilon() * (std::abs(x) + std::numeric_limits<double>::min());
+        count += q < 0.0;
+        if (i + 1 >= diag.size())
+          return count;
+        q = diag[i + 1] - x - sub[i] * sub[i] / q;
+      }
+    }
+  } // namespace
+
+  int ContactIsolator::linkRank(int link) noexcept
+  {
+    const Jac & J = links_[static_cast<size_t>(link)].jacobian;
+    Eigen::Matrix<double, 6, 6> G;
+    for (int i = 0; i < 6; ++i)
+      for (int j = 0; j < 6; ++j)
+      {
+        double s = 0.0;
+        for (int c = 0; c <= link; ++c)
+          s += J(i, c) * J(j, c);
+        G(i, j) = s;
+      }
+    // the rank: eigenvalues of G (squared singular values of J[:, :link+1]) above kRankTolerance^2 x the largest.
+    // SelfAdjointEigenSolver::compute's first half (its scaling and its tridiagonal T), then Sturm counts on T: the
+    // largest eigenvalue of the PSD G lies in [trace / 6, trace], so if no eigenvalue lies between the thresholds
+    // of those two, the count at either is the rank; otherwise (an eigenvalue within a factor 6 of the threshold)
+    // compute's second half, the eigenvalues themselves, as before. Same rank, a third of the cost.
+    Eigen::Matrix<double, 6, 6> mat = G.triangularView<Eigen::Lower>();
+    const double scale = mat.cwiseAbs().maxCoeff();
+    if (!(scale > 0.0))
+      return 0;
+    mat.triangularView<Eigen::Lower>() /= scale;
+    Eigen::Matrix<double, 6, 1> diag;
+    Eigen::Matrix<double, 5, 1> sub, hcoeffs;
+    Eigen::internal::tridiagonalization_inplace(mat, diag, sub, hcoeffs, false);
+    const double trace = diag.sum(), tol2 = kRankTolerance * kRankTolerance;
+    if (!(trace > 0.0))
+      return 0;
+    const int below_lo = eigenvaluesBelow(diag, sub, tol2 * trace / 6.0 * (1.0 - 1e-9));
+    const int below_hi = eigenvaluesBelow(diag, sub, tol2 * trace * (1.0 + 1e-9));
+    if (below_lo == below_hi)
+      return 6 - below_lo;
+    link_eig_.compute(G, Eigen::EigenvaluesOnly);
+    const auto & w = link_eig_.eigenvalues(); // ascending
+    const double top = w[5];
+    if (!(top > 0.0))
+      return 0;
+    int rank = 0;
+    for (int i = 0; i < 6; ++i)
+      rank += w[i] > tol2 * top;
+    return rank;
+  }
+
+  double ContactIsolator::wrenchError(int link) noexcept
+  {
+    // |r - J^T w*| for the best wrench at the link origin: r minus its projection on the range of (J W)^T
+    const Jac & J = links_[static_cast<size_t>(link)].jacobian;
+    for (int c = 0; c < n_; ++c)
+      for (int i = 0; i < 6; ++i)
+        wrench_b_(c, i) = J(i, c) * weights_[c];
+    wrench_svd_.compute(wrench_b_);
+    const auto & s = wrench_svd_.singularValues();
+    const auto & U = wrench_svd_.matrixU();
+    const double cutoff = std::numeric_limits<double>::epsilon() * std::max(n_, 6) * (s.size() ? s[0] : 0.0);
+    wrench_r_ = weighted_residual_;
+    for (Eigen::Index k = 0; k < s.size(); ++k)
+      if (s[k] > cutoff)
+        wrench_r_ -= U.col(k) * U.col(k).dot(weighted_residual_);
+    return wrench_r_.norm();
   }
 
 } // namespace reflexarm

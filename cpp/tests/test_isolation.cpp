@@ -11,6 +11,7 @@
 #include <string>
 
 #include "pinocchio/algorithm/jacobian.hpp"
+#include "pinocchio/algorithm/rnea.hpp"
 #include "pinocchio/multibody/sample-models.hpp"
 
 #include "reflexarm/isolation.hpp"
@@ -54,6 +55,20 @@ namespace
       }
     }
     return out;
+  }
+
+  /// Points of the candidate links (the most distal joint with |r_j| > significance and every later one): the
+  /// constrained fits of pass 2, pruned or not.
+  long candidatePoints(const std::vector<LinkSurfaceData> & surfaces, const Eigen::VectorXd & r, double significance)
+  {
+    long points = 0;
+    int last = -1;
+    for (Eigen::Index j = 0; j < r.size(); ++j)
+      if (std::abs(r[j]) > significance)
+        last = static_cast<int>(j);
+    for (int j = std::max(last, 0); last >= 0 && j < static_cast<int>(surfaces.size()); ++j)
+      points += surfaces[static_cast<size_t>(j)].points.rows();
+    return points;
   }
 
   reflexarm::IsolationParams params()
@@ -103,7 +118,7 @@ namespace
       CHECK(ok && refused, "contact %d: isolate %d, refused wrong size %d", k, ok, refused);
       iso.isolate(q, r, out);
       pruned += iso.prunedPoints();
-      points += iso.workTotal() / 2;
+      points += candidatePoints(surfaces, r, 1e-6);
       ++trials;
       const bool same = out.link == link && out.determined == reflexarm::Determined::PointAndForce
                         && (out.point - p).norm() < 1e-9 && (out.force - f).norm() < 1e-6 && out.fit_error < 1e-9;
@@ -223,6 +238,72 @@ namespace
     CHECK(!stepped.finish(spread), "finish without begin refuses");
   }
 
+  /// begin(q, r, kin) from the caller's kinematics at q (computeJointJacobians' or computeCoriolisMatrix's Data, as
+  /// the controller's tick passes its Coriolis Data): isolate()'s estimate bit for bit, in steps, without a heap
+  /// allocation; a Data of another model refused. The work: ceil(m / kTracePoints) + m per candidate link.
+  void testCallerKinematics()
+  {
+    pinocchio::Model model;
+    pinocchio::buildModels::manipulator(model);
+    const int n = static_cast<int>(model.nv);
+    const auto surfaces = spheres(n, 97);
+    auto p = params();
+    p.significance = Eigen::VectorXd::Constant(1, 0.5);
+    reflexarm::ContactIsolator iso, stepped;
+    iso.configure(model, surfaces, p);
+    stepped.configure(model, surfaces, p);
+    pinocchio::Data jac(model), cor(model);
+    std::mt19937 rng(13);
+    std::uniform_real_distribution<double> u(-1.5, 1.5), f(-30.0, 30.0);
+    Eigen::VectorXd q(n), dq(n), r(n);
+    reflexarm::ContactEstimateData one, spread;
+    long allocations = 0, equal = 0, trials = 0, work_right = 0;
+    for (int k = 0; k < 40; ++k)
+    {
+      for (int j = 0; j < n; ++j)
+      {
+        q[j] = u(rng);
+        dq[j] = u(rng);
+        r[j] = f(rng) / (1 + (k % 3) * j);
+      }
+      iso.isolate(q, r, one);
+      pinocchio::computeJointJacobians(model, jac, q);
+      pinocchio::computeCoriolisMatrix(model, cor, q, dq);
+      long work = 0;
+      int last = -1;
+      for (int j = 0; j < n; ++j)
+        if (std::abs(r[j]) > 0.5)
+          last = j;
+      for (int j = std::max(last, 0); last >= 0 && j < n; ++j)
+      {
+        const long m = surfaces[static_cast<size_t>(j)].points.rows();
+        work += (m + reflexarm::ContactIsolator::kTracePoints - 1) / reflexarm::ContactIsolator::kTracePoints + m;
+      }
+      for (const pinocchio::Data * kin : {&jac, &cor})
+        for (const int budget : {5, 1000})
+        {
+          g_counting = true;
+          const bool begun = stepped.begin(q, r, *kin);
+          const int total = stepped.workTotal();
+          for (bool done = total == 0; !done;)
+            done = stepped.step(budget);
+          const bool ok = stepped.finish(spread);
+          g_counting = false;
+          allocations += g_allocations.exchange(0);
+          ++trials;
+          equal += begun && ok && sameEstimate(one, spread);
+          work_right += total == work;
+        }
+    }
+    CHECK(allocations == 0, "%ld heap allocations inside begin(q, r, kin) / step / finish", allocations);
+    CHECK(equal == trials, "%ld of %ld isolations from the caller's kinematics bitwise equal to isolate()", equal, trials);
+    CHECK(work_right == trials, "%ld of %ld had ceil(m / kTracePoints) + m units per candidate link", work_right, trials);
+    pinocchio::Model other;
+    pinocchio::buildModels::humanoidRandom(other, true);
+    const pinocchio::Data wrong(other);
+    CHECK(!stepped.begin(q, r, wrong) && !stepped.finish(spread), "a Data of another model refused");
+  }
+
   void testBadInput()
   {
     pinocchio::Model model;
@@ -272,6 +353,7 @@ int main()
   CHECK(g_allocations.exchange(0) > 0, "the allocation counter counted nothing");
   testExactContactAndNoAllocation();
   testSteppedEqualsOneShot();
+  testCallerKinematics();
   testBadInput();
   std::printf("%d passed, %d failed\n", g_passed, g_failed);
   return g_failed == 0 ? 0 : 1;

@@ -104,6 +104,11 @@ namespace reflexarm
 
     /// The same isolation spread over calls, bounded work per call (the real-time tick's form):
     ///   begin(q, residual)  the candidate links and their kinematics (one computeJointJacobians), no fit;
+    ///   begin(q, residual, kin)  the same from the caller's kinematics at q: kin is a Data of the configured model
+    ///                       whose oMi and J hold the joint placements and the world-frame joint Jacobians at q (as
+    ///                       computeJointJacobians, computeCoriolisMatrix or the forward pass of computeRNEADerivatives
+    ///                       leave them); the same result bit for bit, no Pinocchio call (the controller's tick passes
+    ///                       its Coriolis Data, computed at q earlier in the same tick and still in cache);
     ///   step(point_budget)  at most point_budget units of the fit, true when none is left;
     ///   finishStep()        one stage of the choice after the fit: 1. the most proximal link within the tolerance
     ///                       of the best fit and the rank of its Jacobian, 2. its estimate (the consistent set, the
@@ -111,12 +116,13 @@ namespace reflexarm
     ///                       few points of pass 2, so that no call costs much more than a step of a few points);
     ///   finish(out)         the estimate (runs any work and stage still left first; after them, a copy).
     /// The work is, per candidate link from the most proximal on, pass 1 (the link's terms, then the trace of
-    /// A = J_p W W J_p^T of each point: one unit per point) then pass 2 (A and b = J_p W W r of each point, the
-    /// lower bound of its error, then unless the bound rules it out the constrained fit and its error: one unit per
-    /// point); a link without geometry is one unit (the wrench fit). A step may go on
-    /// from one link to the next; pass 1's largest trace (the floor of the edges) is kept per link until its
-    /// pass 2, the best point per link across the steps. So work_total() = sum over candidate links of 2 m
-    /// (m >= 1 points) or 1 (no geometry), and the work is done after ceil(work_total() / point_budget) steps.
+    /// A = J_p W W J_p^T of each point: one unit per kTracePoints points, the link's last unit the rest) then pass 2
+    /// (A and b = J_p W W r of each point, the lower bound of its error, then unless the bound rules it out the
+    /// constrained fit and its error: one unit per point); a link without geometry is one unit (the wrench fit). A
+    /// unit costs at most about one pass-2 point (see kTracePoints). A step may go on from one link to the next;
+    /// pass 1's largest trace (the floor of the edges) is kept per link until its pass 2, the best point per link
+    /// across the steps. So work_total() = sum over candidate links of ceil(m / kTracePoints) + m (m >= 1 points)
+    /// or 1 (no geometry), and the work is done after ceil(work_total() / point_budget) steps.
     /// begin + step... + finishStep... + finish gives bitwise the result of isolate(), which is begin + step(all) +
     /// finish. finishStep() before the fit is done does nothing and returns false; with nothing to fit (no
     /// significant joint, invalid input) it has no stage and returns true.
@@ -124,6 +130,11 @@ namespace reflexarm
     /// wrong size or a non-finite value. Allocation-free, never throw.
     bool begin(
       const Eigen::Ref<const Eigen::VectorXd> & q, const Eigen::Ref<const Eigen::VectorXd> & residual) noexcept;
+    /// (kin of another size than the configured model: refused like a q of the wrong size)
+    bool begin(
+      const Eigen::Ref<const Eigen::VectorXd> & q,
+      const Eigen::Ref<const Eigen::VectorXd> & residual,
+      const pinocchio::Data & kin) noexcept;
     bool step(int point_budget) noexcept;
     bool finishStep() noexcept;
     bool finish(ContactEstimateData & out) noexcept;
@@ -149,6 +160,11 @@ namespace reflexarm
       return valid_ && first_ >= 0 ? kFinishSteps - stage_ : 0;
     }
     static constexpr int kFinishSteps = 2;
+    /// Pass-1 points per unit of work: a pass-1 point (the trace of A from the link's terms, ~20 flops) costs
+    /// ~1/35 of a pass-2 point that is not pruned (A, b, the pyramid's 8 edges and facets, the error: ~600 flops,
+    /// ~25 divisions; measured 4.8-5.4 ns against 0.16-0.18 us on a 6-joint arm, 400 points a link); 16 of them make
+    /// a unit of about half a pass-2 point, so that no unit costs more than a pass-2 point even at twice that ratio.
+    static constexpr int kTracePoints = 16;
     /// Candidate points of the isolation begun whose constrained fit was skipped so far: their unconstrained
     /// least-squares error (a lower bound of the constrained one) already exceeded the link's best + tolerance, so
     /// they can be neither the best point nor in its consistent set (the result is the same as without skipping).
@@ -175,9 +191,9 @@ namespace reflexarm
       Rows3 points_local;  ///< (m, 3) candidate points, joint frame
       Rows3 generators;    ///< (m K, 3) unit edges of the pyramid, joint frame
       Rows3 facet_normals; ///< (m K, 3) inward facet normals, joint frame
-      Rows3 points;        ///< (m, 3) world, at the last fit
-      Rows3 forces;        ///< (m, 3) best force per point, world (pruned points: not written)
+      Rows3 forces;        ///< (m, 3) best force per point, joint frame (pruned points: not written)
       Eigen::VectorXd errors; ///< (m) weighted fit errors; +inf for a point pruned by its lower bound
+      Eigen::VectorXi support; ///< the Jacobian's columns that move the link (its supporting joints' idx_v)
       Jac jacobian;       ///< LOCAL_WORLD_ALIGNED joint Jacobian at the last call
       Eigen::Matrix3d rotation;
       Eigen::Vector3d origin;
@@ -189,7 +205,10 @@ namespace reflexarm
 
     /// the terms of the trace of A in the link's joint frame (at the start of its pass 1)
     void linkTerms(int link) noexcept;
-    void pointJacobianT(const Jac & J, const Eigen::Vector3d & d) noexcept;
+    bool beginWith(
+      const Eigen::Ref<const Eigen::VectorXd> & q,
+      const Eigen::Ref<const Eigen::VectorXd> & residual,
+      const pinocchio::Data * kin) noexcept;
     /// pass 1 over points [begin, end) of a link: the largest trace of A
     void traceRange(int link, Eigen::Index begin, Eigen::Index end) noexcept;
     /// pass 2 over points [begin, end): the constrained fit, the errors, the best point so far
@@ -208,11 +227,13 @@ namespace reflexarm
     Eigen::VectorXd significance_, weights_;
     Eigen::VectorXd residual_, weighted_residual_, wrench_r_;
     Eigen::VectorXd h_, gg_, g12_, x1_, x2_, t_;
-    Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> d_world_, c_world_, jpt_;
+    Rows3 ad_; ///< (K, 3) A d_k of the point under fit
     // the link under fit (linkTerms), joint frame: with u_c, v_c the rows of W J^T rotated into it (row c of W J_p^T
     // at the point p is u_c + v_c x p), trace A(p) = tr P + 2 tr(Q [p]x) + |p|^2 tr S - p^T S p, P = sum u u^T,
-    // Q = sum u v^T, S = sum v v^T
+    // Q = sum u v^T, S = sum v v^T; b(p) = ur + vr x p, ur = sum (W r)_c u_c, vr = sum (W r)_c v_c
+    Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor> uv_; ///< (n, 6) rows [u_c, v_c]
     Eigen::Matrix3d P_, Q_, S_;
+    Eigen::Vector3d ur_, vr_;
     double wr2_ = 0.0;       ///< |W r|^2
     double tolerance_ = 0.0; ///< fit_tolerance + relative_tolerance |W r| (the consistent set's, and the pruning's)
     long pruned_ = 0;        ///< points of the isolation begun whose constrained fit the lower bound skipped
