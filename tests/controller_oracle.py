@@ -79,9 +79,10 @@ class Oracle:
 
     * brake: tau = g + C dq - M dq / T_b (closed loop ddq = -dq / T_b) until brake_duration has passed, then hold;
     * retract: law (2) (K, D, g, C dq, M(q_d) ddq_d, kappa_f tau_f; no disturbance compensation) along the
-      minimum-jerk path q_detect -> q_target over T, then hold; the motion d moves a point along J J^T f: the
-      sensor frame along the measured force (class contact), else the far end of the most distal crossing link
-      (the next joint's origin, the sensor frame for the last link) along the residual on the joints up to it;
+      minimum-jerk path q_detect -> q_target over T, then hold; the motion d = M(q)^-1 J^T f (the admittance
+      reflex: the velocity an impulse of f gives the free arm) moves a point along J M^-1 J^T f: the sensor frame
+      along the measured force (class contact), else the far end of the most distal crossing link (the next
+      joint's origin, the sensor frame for the last link), J^T f the residual on the joints up to it;
       |J d| = retract_distance, |d_i| <= max_retract_angle, T >= retract_distance / retract_speed, >= 0.1 s, and
       the path's peak speed 1.875 |d_i| / T <= velocity_fraction x v_lim_i; q_target inside the safe range; a T
       beyond max_retract_time shortens d and T in proportion (both scale with d); retract_planned = |J d|;
@@ -527,6 +528,8 @@ class Oracle:
         rs, ev = self.settings, self.event
         assert ev is not None
         d, J = self.retract_direction(q, wrench, measured)
+        Mu = pin.crba(self.model, self.data, q)
+        d = np.linalg.solve(np.triu(Mu) + np.triu(Mu, 1).T, d)  # the admittance reflex M^-1 J^T f
         if np.linalg.norm(d) > 0:
             d = d / np.linalg.norm(d)
         moved = float(np.linalg.norm(J @ d))  # [m/rad]

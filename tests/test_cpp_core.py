@@ -157,6 +157,36 @@ def test_retract_plan_and_phases_equal_oracle(atlas, reaction, measured, discret
     assert ctrl.event["phase"] == "holding" and np.any(ctrl.event["q_target"] != ctrl.event["q_detect"])
 
 
+#: |cos| of the angle between the retract's joint motion and the admittance reflex M(q)^-1 r: both come from the same
+#: M(q) (crba) and r, so they differ by rounding only (~1e-15 relative); the J^T f direction of the core before the
+#: admittance reflex is 64 degrees off here (cos 0.43; asserted below to be < 0.9, so that the test can fail).
+PARALLEL_COS = 1.0 - 1e-9
+
+
+def test_the_retract_moves_the_arm_by_its_admittance(atlas):
+    """An unmeasured collision: the retract's joint motion q_target - q_detect is the admittance reflex M(q)^-1 J^T f
+    at the detecting posture, J^T f the residual on the joints up to the most distal crossing one (the velocity an
+    impulse of the contact force gives the free arm: the heavy proximal joints move less than the light distal
+    ones). The core before it moved along J^T f itself, which is not parallel to M^-1 J^T f here."""
+    o = Oracle(atlas, kappa_eps=1, kappa_ext=0, reaction="retract", detection_observer_gain=30.0, settings=SHORT)
+    ctrl = core_controller(core, atlas, o)
+    run_both(atlas, o, ctrl, tau=False, push=40.0, n_ticks=RUN_TICKS)
+    ev = ctrl.event
+    assert ev["contact_class"] == "collision" and ev["phase"] == "holding"
+    last = int(np.flatnonzero(ev["joints"])[-1])
+    r = np.zeros(atlas.n)
+    r[: last + 1] = np.asarray(ev["residual"])[: last + 1]
+    q = np.asarray(ev["q_detect"])
+    admittance = np.linalg.solve(atlas.compute_mass_matrix(q), r)
+    moved = np.asarray(ev["q_target"]) - q
+
+    def cos(a: np.ndarray, b: np.ndarray) -> float:
+        return float(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)))
+
+    assert cos(moved, admittance) > PARALLEL_COS
+    assert cos(r, admittance) < 0.9  # J^T f alone (the old direction) would fail the line above
+
+
 @pytest.mark.parametrize("reaction", REACTION_PARAMS)
 @pytest.mark.parametrize("contact_class", ["contact", "collision"])
 @pytest.mark.parametrize("discretization", ["euler", "exact"])

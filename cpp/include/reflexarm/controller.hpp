@@ -8,6 +8,7 @@
 
 #include <cstdint>
 
+#include <Eigen/Cholesky>
 #include <Eigen/Core>
 
 #include "pinocchio/multibody.hpp"
@@ -231,6 +232,8 @@ namespace reflexarm
     Eigen::VectorXd dq_f_, p_f_; // low-passed dq and M(q) dq for the guard's kinetic energy
     bool has_filter_ = false;
     Eigen::Matrix<double, 6, Eigen::Dynamic> J_r_;
+    Eigen::MatrixXd M_r_;                             // M(q) of the retract's plan (upper triangle)
+    Eigen::LLT<Eigen::MatrixXd, Eigen::Upper> llt_r_; // its Cholesky factor, sized once (no allocation)
     ContactIsolator isolator_;
     bool has_isolator_ = false;
     double t_phase_ = 0.0, retract_time_ = 0.0, hold_damping_scale_ = 1.0;

@@ -51,7 +51,7 @@ namespace reflexarm
   {
     double brake_time = 0.05;       ///< [s] brake: closed loop ddq = -dq / brake_time (within the torque limit)
     double brake_duration = 0.25;   ///< [s] brake: damping alone this long, then hold the posture reached
-    double retract_distance = 0.05; ///< [m] retract: how far the contact (link end) moves along the residual
+    double retract_distance = 0.05; ///< [m] retract: how far the contact (link end) moves, along J M^-1 J^T f
     double max_retract_angle = 0.5; ///< [rad] retract: largest joint motion of the retract
     double retract_speed = 0.2;     ///< [m/s] retract: mean speed of the link end along its path
     /// [s] retract: longest retract; a longer plan (its joints' velocity bound) is shortened to this, its distance
