@@ -4,16 +4,21 @@ A static arm with a seeded contact on a distal link appearing at tick 100 (tau_m
 with a detection observer (exact, 200 1/s), threshold 11 Nm and the retract reaction; the core's bare ``update``
 timed per call from Python, with the links' geometry (isolation in the ticks) and without, interleaved round by
 round (each tick's time the median over the rounds). The isolation begins 20 ms after detection (its kinematics),
-fits ``isolation_points_per_tick`` candidate points per following tick (ReactionSettings; each point twice: pass 1
-and pass 2), then one tick chooses the link (and its rank), one estimates its point and force, and on the next the
-estimate is in and the retract is planned from it. Printed as ratios in the same run: the median tick with
-geometry / without (the ticks outside the isolation), and over the isolation's ticks (begin to the estimate) /
-the median plain tick: the largest (beside the largest of the same ticks without geometry, the noise floor of a
-largest, and the detection tick without geometry, which plans the retract: the plain controller's own rarely run
-tick), the median, the begin tick, the largest fit step, the three finishing ticks (choice, estimate, in +
-retract planned); the ticks it takes (latency at 1 kHz); and the same with the whole fit in one tick (a budget of
-10^8 points) for comparison. A summary table per arm at the end, with whether the largest isolation tick stays
-within issue 15's 1.2 x a plain tick (on a loaded machine the noise floor alone can exceed it: more rounds).
+does ``isolation_points_per_tick`` units of its fit per following tick (ReactionSettings; a unit: a candidate
+point's constrained fit of pass 2, or 16 points' traces of pass 1), then one tick chooses the link (and its rank),
+one estimates its point and force, and on the next the estimate is in and the retract is planned from it. Printed
+as ratios in the same run: the median tick with geometry / without (the ticks outside the isolation), and over the
+isolation's ticks (begin to the estimate) / the median plain tick: the largest (beside the largest of the same
+ticks without geometry, the noise floor of a largest, and the detection tick without geometry, which plans the
+retract: the plain controller's own rarely run tick), the median, the begin tick, the largest fit step, the three
+finishing ticks (choice, estimate, in + retract planned); the ticks it takes (latency at 1 kHz); and the same with
+the whole fit in one tick (a budget of 10^8 points) for comparison. Beside them the warm cost of a unit: the bound
+C++ isolator's whole isolation of the same contact on the controller's geometry, every constrained fit run (fit
+tolerance 1e9: nothing pruned, the worst case of a step), repeated back to back (caches warm), over its constrained
+fits (pass 1's units charged to them); and
+the points per tick that this principle gives: the most units whose warm cost stays within (BOUND - 1) x the plain
+tick. A summary table per arm at the end, with whether the largest isolation tick stays within issue 15's 1.2 x a
+plain tick (on a loaded machine the noise floor alone can exceed it: more rounds).
 
     python bench/bench_collision_tick.py [--rounds 5] [--points-per-tick 4 8 16 32]
 """
@@ -28,6 +33,8 @@ import numpy as np
 
 from reflexarm import load_robot
 from reflexarm.control import Controller, ReactionSettings
+from reflexarm.control.collision.classify import SIGNIFICANCE_SHARE, controller_geometry
+from reflexarm.control.collision.isolate_core import CoreContactIsolator
 from reflexarm.experiments.isolation_study import draw_contacts
 from reflexarm.robots import link_collision_geometry
 
@@ -69,6 +76,24 @@ def _controller(robot, geometry: object, points_per_tick: int = 24) -> Controlle
                       contact_geometry=geometry)  # fmt: skip
 
 
+def warm_unit_cost(robot, contact, threshold: float = 11.0, calls: int = 200) -> tuple[float, int]:
+    """Seconds per constrained fit (a unit of pass 2; pass 1, the begin and the finishing charged to them too), caches
+    warm, nothing pruned (the worst case of a step), and the units of the isolation."""
+    iso = CoreContactIsolator(robot, significance=SIGNIFICANCE_SHARE * threshold, geometry=controller_geometry(robot),
+                              fit_tolerance=1e9)  # fmt: skip
+    q, r = np.ascontiguousarray(contact.q, dtype=float), np.ascontiguousarray(contact.torque, dtype=float)
+    units = int(iso._core.isolate_in_steps(q, r, 1)["work"])
+    significant = np.flatnonzero(np.abs(r) > SIGNIFICANCE_SHARE * threshold)
+    fits = int(iso.geometry.point_counts()[significant[-1] :].sum())  # pass 2's constrained fits
+    run, clock = iso._core.isolate_only, time.perf_counter
+    ts = np.empty(calls)
+    for i in range(calls):
+        t0 = clock()
+        run(q, r)
+        ts[i] = clock() - t0
+    return float(np.median(ts)) / max(fits, 1), units
+
+
 def bench_arm(name: str, rounds: int, budgets: list[int]) -> dict[str, dict[str, float]]:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -77,6 +102,7 @@ def bench_arm(name: str, rounds: int, budgets: list[int]) -> dict[str, dict[str,
     contact = next(c for c in draw_contacts(robot, truth, 1000, seed=1)
                    if c.link >= robot.n - 3 and np.abs(c.torque).max() > 25)  # fmt: skip
     without = _controller(robot, None)
+    unit_s, units = warm_unit_cost(robot, contact)
     results: dict[str, dict[str, float]] = {}
     for budget in [*budgets, ONE_SHOT]:
         with_geo = _controller(robot, "auto", budget)
@@ -114,6 +140,10 @@ def bench_arm(name: str, rounds: int, budgets: list[int]) -> dict[str, dict[str,
             "finishing_tick_over_plain": float(ta[k_end] / base),  # the estimate in, the retract planned
             "isolation_ticks": float(k_end - k_begin),
             "isolation_latency_ms": (k_end - k_begin) * DT * 1e3,
+            "warm_unit_us": unit_s * 1e6,
+            "units": float(units),
+            # the principle: the most units a tick whose warm cost stays within (BOUND - 1) x the plain tick
+            "points_per_tick_within_bound_warm": float(np.floor((BOUND - 1.0) * base / unit_s)),
         }
         results[str(budget)] = out
         label = "fit in one tick" if budget == ONE_SHOT else f"{budget:4d} points/tick"
@@ -136,6 +166,11 @@ def summary(results: dict[str, dict[str, dict[str, float]]]) -> None:
     print(f"\n{'arm':18s} {'points/tick':>11s} {'largest/plain':>13s} {'(without geometry)':>18s} "
           f"{'(its detection)':>15s} {'median/plain':>12s} {'ticks':>6s} <= {BOUND} x")  # fmt: skip
     for name, by_budget in results.items():
+        first = next(iter(by_budget.values()))
+        print(
+            f"{name:18s} warm unit {first['warm_unit_us']:.3f} us a fit (nothing pruned, {first['units']:.0f} units): "
+            f"points/tick within {BOUND - 1:.1f} x a plain tick {first['points_per_tick_within_bound_warm']:.0f}"
+        )
         for budget, out in by_budget.items():
             label = "fit in 1" if int(budget) == ONE_SHOT else budget
             largest = out["largest_isolation_tick_over_plain"]
