@@ -152,9 +152,9 @@ namespace reflexarm
       }
       for (int k = 0; k < K; ++k) // G[k, k+1] = d_k . A d_k+1
         g12_[k] = D.row(k).dot(ad_.row(k + 1 < K ? k + 1 : 0));
-      // edges: f = t d_k, t >= 0
+      // edges: f = t d_k, t = max(h_k, 0) / gg_k >= 0 (divided only where h_k > 0: else t = 0 as well)
       for (int k = 0; k < K; ++k)
-        t_[k] = gg_[k] > floor ? std::max(h_[k], 0.0) / gg_[k] : 0.0;
+        t_[k] = gg_[k] > floor && h_[k] > 0.0 ? h_[k] / gg_[k] : 0.0;
       // the best feasible candidate: first maximum over [interior, facets, edges, apex], as np.argmax
       int choice = 0;
       double top = -kInf;
@@ -171,12 +171,13 @@ namespace reflexarm
       {
         const int l = k + 1 < K ? k + 1 : 0; // (k + 1) mod K without an integer division
         const double det = gg_[k] * gg_[l] - g12_[k] * g12_[k];
-        bool ok = gg_[k] > floor && gg_[l] > floor && det > kFacetCondition * gg_[k] * gg_[l];
-        const double safe = ok ? det : 1.0;
-        x1_[k] = (gg_[l] * h_[k] - g12_[k] * h_[l]) / safe;
-        x2_[k] = (gg_[k] * h_[l] - g12_[k] * h_[k]) / safe;
-        ok = ok && x1_[k] >= 0.0 && x2_[k] >= 0.0;
-        const double red = ok ? x1_[k] * h_[k] + x2_[k] * h_[l] : -kInf;
+        const double n1 = gg_[l] * h_[k] - g12_[k] * h_[l], n2 = gg_[k] * h_[l] - g12_[k] * h_[k];
+        // feasible: solvable (det > 0) and x = n / det >= 0, i.e. n >= 0: divided only then (~2 of the K facets)
+        if (!(gg_[k] > floor && gg_[l] > floor && det > kFacetCondition * gg_[k] * gg_[l] && n1 >= 0.0 && n2 >= 0.0))
+          continue;
+        x1_[k] = n1 / det;
+        x2_[k] = n2 / det;
+        const double red = x1_[k] * h_[k] + x2_[k] * h_[l];
         if (red > top)
         {
           top = red;

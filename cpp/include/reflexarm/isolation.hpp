@@ -161,9 +161,9 @@ namespace reflexarm
     }
     static constexpr int kFinishSteps = 2;
     /// Pass-1 points per unit of work: a pass-1 point (the trace of A from the link's terms, ~20 flops) costs
-    /// ~1/35 of a pass-2 point that is not pruned (A, b, the pyramid's 8 edges and facets, the error: ~600 flops,
-    /// ~25 divisions; measured 4.8-5.4 ns against 0.16-0.18 us on a 6-joint arm, 400 points a link); 16 of them make
-    /// a unit of about half a pass-2 point, so that no unit costs more than a pass-2 point even at twice that ratio.
+    /// ~1/30 of a pass-2 point that is not pruned (A, b, the pyramid's 8 edges and facets, the error: ~600 flops;
+    /// measured 4.6-5.7 ns against 0.14-0.17 us on a 6-joint arm, 400 points a link); 16 of them make a unit of about
+    /// half a pass-2 point, so that no unit costs more than a pass-2 point even at twice that ratio.
     static constexpr int kTracePoints = 16;
     /// Candidate points of the isolation begun whose constrained fit was skipped so far: their unconstrained
     /// least-squares error (a lower bound of the constrained one) already exceeded the link's best + tolerance, so
