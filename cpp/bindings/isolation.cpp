@@ -104,6 +104,7 @@ void bindIsolation(nb::module_ & m)
       },
       "q"_a.noconvert(), "residual"_a.noconvert(), "point_budget"_a,
       "The same isolation spread over calls as the real-time tick does it (begin, step(point_budget) until done, "
-      "finish): isolate()'s dict (bit for bit the same values) plus work (units: 2 per candidate point, 1 per "
-      "candidate link without geometry) and steps (ceil(work / point_budget)).");
+      "finish): isolate()'s dict (bit for bit the same values) plus work (units: ceil(m / 16) + m per "
+      "candidate link with m points, pass 1 tracing 16 points a unit and pass 2 fitting one; 1 per candidate link "
+      "without geometry) and steps (ceil(work / point_budget)).");
 }

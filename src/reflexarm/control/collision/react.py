@@ -98,15 +98,18 @@ class ReactionSettings:
             residual has grown from the threshold towards the contact's J^T f (0: at detection); a retract brakes
             until then and is planned from the estimate.
         isolation_points_per_tick: the isolation is spread over the ticks: it begins on the tick
-            ``isolation_delay`` after detection (that tick's residual and posture) and fits at most this many
-            candidate points per following tick (each point twice: the gram of pass 1, the constrained fit of
-            pass 2; a link without geometry counts one), then spends three more ticks finishing (the choice of
-            the link, its estimate, the estimate in and a waiting retract planned), so a link collision is
-            isolated ceil(2 x candidate points / this) + 3 ticks after it began (``CollisionEvent.t_estimated``);
-            an integer >= 1. The default, 32, takes 15, 77 and 47 ticks on the 2 cm controller geometry of Atlas,
+            ``isolation_delay`` after detection (that tick's residual and posture) and does at most this many
+            units of its fit per following tick (a unit: one candidate point's constrained fit of pass 2, or 16
+            points' traces of pass 1; a link without geometry counts one), then spends three more ticks
+            finishing (the choice of the link, its estimate, the estimate in and a waiting retract planned), so a
+            link collision is isolated ceil(units / this) + 3 ticks after it began (``CollisionEvent.t_estimated``),
+            units = the sum over the candidate links of ceil(m / 16) + m (m points; 1 without geometry); an
+            integer >= 1. The default, 32, takes 10, 43 and 27 ticks on the 2 cm controller geometry of Atlas,
             Panda and iiwa14 (bench/bench_collision_tick.py), so that a retract waiting for the estimate ends
-            within the guard's 0.5 s; its largest tick, a fit step, costs 1.9-2.4 x a plain tick. At 4 a fit step
-            costs ~1.2 us (~1.17 x a ~7 us plain tick, warm caches) but the isolation takes 99-592 ms.
+            within the guard's 0.5 s. A constrained fit costs 0.115-0.131 us warm (nothing pruned) against a
+            5.7-6.2 us plain tick, so 8 units keep a fit step within 1.2 x a plain tick (warm) but take 29, 160
+            and 96 ticks; the largest tick of an isolation is then the begin or a finishing tick (cold caches,
+            1.3-1.8 x) or the retract's plan (2.3-3.4 x), so a smaller budget buys latency for nothing.
     """
 
     brake_time: float = 0.05
