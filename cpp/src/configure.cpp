@@ -140,7 +140,7 @@ namespace reflexarm
     p_f_.setZero(n);
     J_r_.setZero(6, n);
     M_r_.setZero(n, n);
-    llt_r_ = Eigen::LLT<Eigen::MatrixXd, Eigen::Upper>(n);
+    llt_r_ = definedLlt<RetractLlt>(n);
     t_phase_ = 0.0;
     retract_time_ = 0.1;
     tau_max_ = q.torque_limit;

@@ -233,7 +233,8 @@ namespace reflexarm
     bool has_filter_ = false;
     Eigen::Matrix<double, 6, Eigen::Dynamic> J_r_;
     Eigen::MatrixXd M_r_;                             // M(q) of the retract's plan (upper triangle)
-    Eigen::LLT<Eigen::MatrixXd, Eigen::Upper> llt_r_; // its Cholesky factor, sized once (no allocation)
+    using RetractLlt = Eigen::LLT<Eigen::MatrixXd, Eigen::Upper>;
+    RetractLlt llt_r_ = definedLlt<RetractLlt>(0); // its Cholesky factor, sized once in configure (no allocation)
     ContactIsolator isolator_;
     bool has_isolator_ = false;
     double t_phase_ = 0.0, retract_time_ = 0.0, hold_damping_scale_ = 1.0;

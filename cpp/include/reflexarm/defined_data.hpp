@@ -1,4 +1,5 @@
-// reflexarm: pinocchio::Data without indeterminate enums, for the Controller's and the ContactIsolator's Data members.
+// reflexarm: pinocchio::Data (and Eigen::LLT members) without indeterminate enums, for the Controller's and the
+// ContactIsolator's members.
 //
 // Pinocchio's Data constructors never compute its two Eigen::LLT members (llt_JMinvJt, osim_llt), and Eigen's LLT
 // leaves m_info indeterminate until compute(): copying such a Data (its copy constructor or assignment, so a
@@ -18,6 +19,16 @@ namespace reflexarm
   {
     data.llt_JMinvJt.compute(pinocchio::Data::MatrixXs());
     data.osim_llt.compute(pinocchio::Data::MatrixXs());
+  }
+
+  /// An Eigen::LLT of n x n matrices whose m_info is defined, for LLT members of our own (the same indeterminate enum
+  /// as above when a default or size-constructed LLT is copied): computed on the n x n identity (Success), so its
+  /// storage is sized here and a later compute() of an n x n matrix does not allocate.
+  template <typename Llt> inline Llt definedLlt(Eigen::Index n)
+  {
+    Llt llt(n);
+    llt.compute(Llt::MatrixType::Identity(n, n));
+    return llt;
   }
 
   /// A default Data with defined LLTs (the default of a Data member).
