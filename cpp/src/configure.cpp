@@ -139,7 +139,6 @@ namespace reflexarm
     dq_f_.setZero(n);
     p_f_.setZero(n);
     J_r_.setZero(6, n);
-    M_r_.setZero(n, n);
     llt_r_ = definedLlt<RetractLlt>(n);
     t_phase_ = 0.0;
     retract_time_ = 0.1;

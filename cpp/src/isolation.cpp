@@ -86,10 +86,6 @@ namespace reflexarm
       L.forces.resize(m, 3);
       L.errors.resize(m);
       L.jacobian = Jac::Zero(6, n);
-      const auto & support = model.supports[static_cast<size_t>(link + 1)]; // the universe, then joints 1 .. link+1
-      L.support.resize(static_cast<Eigen::Index>(support.size()) - 1);
-      for (size_t k = 1; k < support.size(); ++k)
-        L.support[static_cast<Eigen::Index>(k - 1)] = model.joints[support[k]].idx_v();
       for (Eigen::Index i = 0; i < m; ++i)
       {
         const Eigen::Vector3d nout = s.normals.row(i).transpose();
@@ -289,16 +285,8 @@ namespace reflexarm
       const auto jid = static_cast<pinocchio::JointIndex>(link + 1);
       L.rotation = data.oMi[jid].rotation();
       L.origin = data.oMi[jid].translation();
-      // the LOCAL_WORLD_ALIGNED joint Jacobian at the joint's origin o from the world-frame one, as
-      // pinocchio::getJointJacobian forms it (the same operations): per supporting column, linear -= o x angular
       L.jacobian.setZero();
-      for (Eigen::Index k = 0; k < L.support.size(); ++k)
-      {
-        const Eigen::Index c = L.support[k];
-        const Eigen::Vector3d w = data.J.col(c).tail<3>();
-        L.jacobian.col(c).tail<3>() = w;
-        L.jacobian.col(c).head<3>() = data.J.col(c).head<3>() - L.origin.cross(w);
-      }
+      pinocchio::getJointJacobian(model_, data, jid, pinocchio::LOCAL_WORLD_ALIGNED, L.jacobian);
       L.max_trace = -kInf;
       L.floor = 0.0;
       L.best = 0;

@@ -181,8 +181,7 @@ namespace reflexarm
     // point then moves along J M^-1 J^T f, with the least kinetic energy for that displacement (d = J^T f moved the
     // heavy proximal joints as much as the light distal ones: the UR5-like arm's held-stick retract swung its base
     // at 1.5 rad/s, 1.09 J against 4.3e-5 J at detection; 0.07 J with M^-1)
-    M_r_ = pinocchio::crba(model_, data_r_, q_buf_);
-    llt_r_.compute(M_r_);
+    llt_r_.compute(pinocchio::crba(model_, data_r_, q_buf_)); // crba's upper triangle, which LLT<Upper> reads
     if (llt_r_.info() == Eigen::Success)
       llt_r_.solveInPlace(dq_plan_);
     const double norm = dq_plan_.norm();

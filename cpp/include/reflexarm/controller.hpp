@@ -232,9 +232,9 @@ namespace reflexarm
     Eigen::VectorXd dq_f_, p_f_; // low-passed dq and M(q) dq for the guard's kinetic energy
     bool has_filter_ = false;
     Eigen::Matrix<double, 6, Eigen::Dynamic> J_r_;
-    Eigen::MatrixXd M_r_;                             // M(q) of the retract's plan (upper triangle)
     using RetractLlt = Eigen::LLT<Eigen::MatrixXd, Eigen::Upper>;
-    RetractLlt llt_r_ = definedLlt<RetractLlt>(0); // its Cholesky factor, sized once in configure (no allocation)
+    // M(q)'s Cholesky factor for the retract's plan, sized once in configure (no allocation)
+    RetractLlt llt_r_ = definedLlt<RetractLlt>(0);
     ContactIsolator isolator_;
     bool has_isolator_ = false;
     double t_phase_ = 0.0, retract_time_ = 0.0, hold_damping_scale_ = 1.0;

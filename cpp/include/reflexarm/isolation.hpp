@@ -193,7 +193,6 @@ namespace reflexarm
       Rows3 facet_normals; ///< (m K, 3) inward facet normals, joint frame
       Rows3 forces;        ///< (m, 3) best force per point, joint frame (pruned points: not written)
       Eigen::VectorXd errors; ///< (m) weighted fit errors; +inf for a point pruned by its lower bound
-      Eigen::VectorXi support; ///< the Jacobian's columns that move the link (its supporting joints' idx_v)
       Jac jacobian;       ///< LOCAL_WORLD_ALIGNED joint Jacobian at the last call
       Eigen::Matrix3d rotation;
       Eigen::Vector3d origin;

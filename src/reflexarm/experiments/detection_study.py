@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -137,23 +137,33 @@ def noise_growth(replays: Sequence[ResidualReplay], gains: Sequence[float]) -> d
     return {"rows": rows}
 
 
+def _crossing_lags(trace: Trace, over: np.ndarray) -> dict[str, Any]:
+    """For ``over`` (N, n), where a signal exceeds its joint's level: the first crossing on any joint, the
+    detection lag after it (None without a detection or a crossing), the detecting joints (1-based) and the
+    lag after the first crossing among them (both None without a detection)."""
+    t = trace.t
+    first = [int(np.argmax(over[:, j])) if over[:, j].any() else None for j in range(over.shape[1])]
+    i_d = int(np.argmax(trace.collision)) if trace.collision.any() else None
+    crossings = [t[i] for i in first if i is not None]
+    out: dict[str, Any] = {"detected_s": None if i_d is None else float(t[i_d])}
+    out["crossing_s"] = float(min(crossings)) if crossings else None
+    out["lag_s"] = None if i_d is None or not crossings else float(t[i_d]) - out["crossing_s"]
+    out["joints"] = out["joint_lag_s"] = None
+    if i_d is not None:
+        joints = np.flatnonzero(trace.collided[i_d])
+        lags = [float(t[i_d] - t[first[j]]) for j in joints if first[j] is not None]
+        out["joints"], out["joint_lag_s"] = [int(j) + 1 for j in joints], min(lags) if lags else None
+    return out
+
+
 def contact_lag(trace: Trace, levels: np.ndarray) -> dict[str, Any]:
     """Detection lag of a run: t_detect - the first time the true |tau_ext_j| exceeds zeta_j on any joint [s]
     (None without detection or without a true crossing; negative: detected before), and on the joints
     that crossed at detection (the detecting joints)."""
-    t = trace.t
-    over = np.abs(trace.tau_ext) > levels
-    first = [int(np.argmax(over[:, j])) if over[:, j].any() else None for j in range(levels.size)]
-    i_d = int(np.argmax(trace.collision)) if trace.collision.any() else None
-    crossings = [t[i] for i in first if i is not None]
-    t_cross = float(min(crossings)) if crossings else None
-    row: dict[str, Any] = {"detected_s": None if i_d is None else float(t[i_d]), "true_crossing_s": t_cross}
-    row["lag_s"] = None if i_d is None or t_cross is None else float(t[i_d]) - t_cross
-    if i_d is not None:
-        joints = np.flatnonzero(trace.collided[i_d])
-        lags = [float(t[i_d] - t[first[j]]) for j in joints if first[j] is not None]
-        row["detecting_joints"] = [int(j) + 1 for j in joints]
-        row["lag_detecting_joint_s"] = min(lags) if lags else None
+    c = _crossing_lags(trace, np.abs(trace.tau_ext) > levels)
+    row: dict[str, Any] = {"detected_s": c["detected_s"], "true_crossing_s": c["crossing_s"], "lag_s": c["lag_s"]}
+    if c["detected_s"] is not None:
+        row["detecting_joints"], row["lag_detecting_joint_s"] = c["joints"], c["joint_lag_s"]
     row["peak_abs_tau_ext_Nm"] = np.abs(trace.tau_ext).max(axis=0).tolist()
     return row
 
@@ -172,12 +182,8 @@ def observer_input(trace: Trace, setting: CollisionSetting, model: Any) -> np.nd
     :data:`INPUT_GAIN` (exact form): the observer with its filter taken out."""
     from reflexarm.control import replay
 
-    ctrl = setting.controller(model)
-    probe = Controller(
-        model, stiffness=setting.stiffness, damping_ratio=setting.damping_ratio,
-        observer_gain=setting.observer_gain, detection_observer_gain=INPUT_GAIN, threshold=None, reaction="none",
-        observer_discretization="exact", kappa_f=ctrl.kappa_f, kappa_ext=ctrl.kappa_ext,
-    )  # fmt: skip
+    probe = replace(setting, detection_observer_gain=INPUT_GAIN, observer_discretization="exact", threshold=None,
+                    reaction="none").controller(model)  # fmt: skip
     return replay(probe, trace.t, trace.q, trace.dq, trace.tau_m, trace.wrench).residual
 
 
@@ -186,18 +192,13 @@ def input_lag(trace: Trace, levels: np.ndarray, disturbance: np.ndarray, contact
     (:func:`observer_input`) exceeds zeta_j on any joint, and on the detecting joints [s] (None without a
     detection or a crossing). Unlike :func:`contact_lag` it does not count the time a contact needs to
     outgrow a model-error bias of the other sign, which depends on how fast the contact builds up."""
-    t = trace.t
-    after = t >= (contact_s if contact_s is not None else np.inf)
-    over = (np.abs(disturbance) > levels) & after[:, None]
-    first = [int(np.argmax(over[:, j])) if over[:, j].any() else None for j in range(levels.size)]
-    i_d = int(np.argmax(trace.collision)) if trace.collision.any() else None
-    crossings = [t[i] for i in first if i is not None]
-    row: dict[str, Any] = {"input_crossing_s": float(min(crossings)) if crossings else None}
-    row["input_lag_s"] = None if i_d is None or not crossings else float(t[i_d] - min(crossings))
-    lags = [] if i_d is None else [float(t[i_d] - t[first[j]]) for j in np.flatnonzero(trace.collided[i_d])
-                                   if first[j] is not None]  # fmt: skip
-    row["input_lag_detecting_joint_s"] = min(lags) if lags else None
-    return row
+    after = trace.t >= (contact_s if contact_s is not None else np.inf)
+    c = _crossing_lags(trace, (np.abs(disturbance) > levels) & after[:, None])
+    return {
+        "input_crossing_s": c["crossing_s"],
+        "input_lag_s": c["lag_s"],
+        "input_lag_detecting_joint_s": c["joint_lag_s"],
+    }
 
 
 @dataclass
