@@ -18,6 +18,7 @@ from reflexarm.experiments.reaction_study import (
     run_reaction_study,
     study_arm,
 )
+from reflexarm.experiments.rest_floor import floor_verdict
 from reflexarm.sim import SensorNoise
 
 
@@ -60,12 +61,25 @@ def test_rows_and_a_refused_reaction(link_study, tmp_path):
             assert r["error"] is None and r["contact_class"] == "link" and r["detected_s"] is not None
             assert r["detected_s"] >= r["contact_s"]
             assert r["run"] == f"{r['arm']}/link/gravity"
+    # each detected run carries its rest floor (the same posture for every reaction of an arm and scenario)
+    floors = {r["arm"]: r["rest_floor_q95_J"] for r in rows if r["error"] is None}
+    for r in rows:
+        if r["error"] is None:
+            assert r["rest_floor_median_J"] <= r["rest_floor_q95_J"] <= r["rest_floor_max_J"]
+            assert r["ke_floor_verdict"] == floor_verdict(r)
+    assert floors["iiwa14_frictionless"] > floors["iiwa14"]  # nothing but the controller damps the trembling
     files = link_study.write(tmp_path)
     doc = json.loads(files["json"].read_text())
     assert doc["conditions"]["model_error"] == 0.1 and doc["conditions"]["threshold_Nm"] == 11.0
     assert len(doc["rows"]) == 4
     lines = files["csv"].read_text().splitlines()
     assert lines[0].startswith("arm,scenario,reaction,plant_friction,error,run,") and len(lines) == 5
+
+
+def test_rest_floors_can_be_left_out():
+    (row,) = run_reaction_study(["iiwa14_frictionless"], ["brake"], ["link"], rest_floors=False).rows
+    assert row["error"] is None and row["detected_s"] is not None
+    assert "rest_floor_q95_J" not in row and "ke_floor_verdict" not in row
 
 
 def test_without_friction_the_arm_moves_on_at_least_as_far(link_study):

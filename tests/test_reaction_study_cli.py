@@ -54,6 +54,11 @@ def test_one_arm_scenario_reaction_runs_and_writes_its_files(one_run, capsys):
     assert m["level_text"] in row
     assert "away at end [m]" in header and f"{r['away_at_end_m']:.3f}" in row
     assert doc["conditions"]["noise"] == "paper"
+    # the rest floor: a column, and the summary counts the misses of the 1 % bar and those at the floor
+    assert "rest floor [J]" in header and f"{r['rest_floor_q95_J']:.2g}" in row
+    miss = int(r["kinetic_energy_ratio"] >= KE_RATIO_GOAL)
+    at_floor = int(miss and r["kinetic_energy_after_J"] <= r["rest_floor_q95_J"])
+    assert f"{miss} run(s) miss the 1 % bar, {at_floor} of them at or below their rest floor" in captured.out
 
 
 def test_noise_none_runs_without_sensor_noise(tmp_path, capsys):

@@ -26,6 +26,7 @@ from reflexarm.errors import ConfigError
 from reflexarm.experiments.collision import (
     EE_SETTINGS,
     LINK_SETTING,
+    CollisionSetting,
     run_ee_collision,
     run_link_collision,
 )
@@ -35,6 +36,7 @@ from reflexarm.experiments.collision_events import (
     collision_outcome,
     write_outcomes,
 )
+from reflexarm.experiments.rest_floor import RestFloor, floor_verdict, rest_floor
 from reflexarm.robots import RobotModel, load_robot
 from reflexarm.sim import PAPER_NOISE, SensorNoise, Trace
 
@@ -146,21 +148,36 @@ def _guard(trace: Trace) -> dict[str, Any]:
     return {"guard": verdict, "guard_still_moving": bool(event.get("still_moving"))}
 
 
+def _setting(scenario: str, reaction: str) -> CollisionSetting:
+    """The collision setting of a scenario's run: the demo's Coll.Det, or the link collision's."""
+    base = next(s for s in EE_SETTINGS if s.name == "Coll.Det") if scenario == "demo" else LINK_SETTING
+    return replace(base, reaction=reaction)
+
+
 def _run_one(arm: StudyArm, scenario: str, reaction: str, kwargs: dict[str, Any]) -> tuple[CollisionOutcome, Trace]:
     if scenario == "demo":
-        coll_det = next(s for s in EE_SETTINGS if s.name == "Coll.Det")
         trace = run_ee_collision(
-            replace(coll_det, reaction=reaction), robot=arm.robot, plant_friction=arm.plant_friction, **kwargs
+            _setting(scenario, reaction), robot=arm.robot, plant_friction=arm.plant_friction, **kwargs
         )
     else:
         trace = run_link_collision(
-            setting=replace(LINK_SETTING, reaction=reaction),
+            setting=_setting(scenario, reaction),
             robot=arm.robot,
             plant_friction=arm.plant_friction,
             stick="held" if scenario == "link_held" else "pushed",
             **kwargs,
         )
     return collision_outcome(trace, arm.robot, name=f"{arm.name}/{scenario}/{reaction}"), trace
+
+
+def _floor(
+    arm: StudyArm, scenario: str, outcome: CollisionOutcome, trace: Trace, kwargs: dict[str, Any]
+) -> RestFloor | None:
+    """The rest floor at the run's posture at detection (None without a detection)."""
+    if outcome.detected_s is None:
+        return None
+    i_d = int(np.searchsorted(trace.t, outcome.detected_s - 1e-9))
+    return rest_floor(arm.robot, _setting(scenario, "none"), trace.q[i_d], plant_friction=arm.plant_friction, **kwargs)
 
 
 def run_reaction_study(
@@ -174,6 +191,7 @@ def run_reaction_study(
     seed: int = 0,
     folder: str | Path | None = None,
     progress: Callable[[dict[str, Any]], None] | None = None,
+    rest_floors: bool = True,
 ) -> ReactionStudy:
     """Run the demo contact and the link collision with each reaction on each arm (module docstring).
 
@@ -188,6 +206,9 @@ def run_reaction_study(
         seed: seed of the sensor noise.
         folder: where the UR5-like arm's files are written (default a temporary folder).
         progress: called with each row when it is done (e.g. to print it).
+        rest_floors: also measure each (arm, scenario)'s kinetic energy floor at rest
+            (:func:`~reflexarm.experiments.rest_floor.rest_floor`, at the posture at detection) and compare each
+            run's energy 0.5 s after detection with it (row keys ``rest_floor_*_J``, ``ke_floor_verdict``).
 
     Raises:
         ConfigError: an unknown arm or scenario, or no reaction.
@@ -212,6 +233,7 @@ def run_reaction_study(
     )
     for arm in resolved:
         for scenario in scenarios:
+            floor: RestFloor | None = None  # the same for every reaction: the runs agree up to detection
             for reaction in reactions:
                 row: dict[str, Any] = {
                     "arm": arm.name,
@@ -224,6 +246,11 @@ def run_reaction_study(
                     outcome, trace = _run_one(arm, scenario, reaction, kwargs)
                     row.update(outcome.as_dict())
                     row.update(_guard(trace))
+                    if rest_floors and floor is None:
+                        floor = _floor(arm, scenario, outcome, trace, kwargs)
+                    if floor is not None:
+                        row.update(floor.as_dict())
+                        row["ke_floor_verdict"] = floor_verdict(row)
                 except ConfigError as e:  # e.g. a reaction this controller does not offer (yet)
                     row["error"] = str(e)
                 study.rows.append(row)
@@ -268,10 +295,18 @@ def reaction_measures(row: dict[str, Any]) -> dict[str, Any]:
     }
 
 
+def _floor_ratio(row: dict[str, Any] | None) -> float:
+    """The row's rest floor (its quantile) over its kinetic energy at detection; NaN without them."""
+    floor = None if row is None else row.get("rest_floor_q95_J")
+    at = None if row is None else row.get("kinetic_energy_at_detection_J")
+    return float(floor) / float(at) if floor is not None and at else float("nan")
+
+
 def reaction_study_figure(study: ReactionStudy) -> Figure:
     """Per scenario (columns), bars per arm grouped by reaction: the kinetic energy ratio at +0.5 s (top, log
-    scale, the issue's 1 % line) and the peak after detection over the level at detection (bottom, the 1.0
-    line). A missing bar: no detection, an error, or a ratio that does not apply."""
+    scale, the issue's 1 % line, each bar's rest floor over the same energy at detection as a black mark) and
+    the peak after detection over the level at detection (bottom, the 1.0 line). A missing bar: no detection,
+    an error, or a ratio that does not apply."""
     from matplotlib.figure import Figure
 
     scenarios = list(dict.fromkeys(r["scenario"] for r in study.rows)) or list(SCENARIOS)
@@ -282,6 +317,7 @@ def reaction_study_figure(study: ReactionStudy) -> Figure:
     width = 0.8 / max(len(reactions), 1)
     x = np.arange(len(arms))
     by_key = {(r["arm"], r["scenario"], r["reaction"]): reaction_measures(r) for r in study.rows}
+    by_row = {(r["arm"], r["scenario"], r["reaction"]): r for r in study.rows}
     for c, scenario in enumerate(scenarios):
         top, bottom = axes[0, c], axes[1, c]
         for i, reaction in enumerate(reactions):
@@ -290,6 +326,9 @@ def reaction_study_figure(study: ReactionStudy) -> Figure:
             ke = [np.nan if v.get("ke_ratio") is None else float(v["ke_ratio"]) for v in m]
             pk = [np.nan if v.get("peak_ratio") is None else float(v["peak_ratio"]) for v in m]
             top.bar(off, ke, width, color=f"C{i}", label=reaction)
+            # the rest floor over the same KE at detection: a bar down to its mark is as still as a hold gets
+            fl = [_floor_ratio(by_row.get((a, scenario, reaction))) for a in arms]
+            top.scatter(off, fl, marker="_", s=60, color="k", label="rest floor" if i == 0 and c == 0 else None)
             bottom.bar(off, pk, width, color=f"C{i}", label=reaction)
         top.axhline(KE_RATIO_GOAL, color="k", ls="--", lw=1, label=f"{100 * KE_RATIO_GOAL:g} % (issue 15)")
         goal = bottom.axhline(PEAK_RATIO_GOAL, color="k", ls="--", lw=1, label=f"{PEAK_RATIO_GOAL:g} (issue 15)")
@@ -302,7 +341,8 @@ def reaction_study_figure(study: ReactionStudy) -> Figure:
         bottom.set_xticks(x, arms, rotation=20, fontsize=7, ha="right")
         for ax in (top, bottom):
             ax.grid(alpha=0.3, axis="y", which="both")
-    axes[0, 0].legend(fontsize=7)
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=7, loc="outside lower center", ncol=len(labels))
     cond = study.conditions
     fig.suptitle(
         f"Reactions after detection: +-{100 * float(cond.get('model_error', 0.1)):g} % model error, "
