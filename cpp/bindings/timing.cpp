@@ -57,17 +57,28 @@ namespace
   };
 
   /// One controller over the whole sequence from reset(), each update() timed into out[0 .. n_states); the number of
-  /// faulted ticks.
-  long timeSequence(reflexarm_bindings::PyController & c, const Sequence & seq, double * out)
+  /// faulted ticks. `warm`: each tick runs twice from the same state (the controller and its command copied before the
+  /// first run and copied back after it, untimed) and the second run is timed: the tick with its own data in cache.
+  long timeSequence(reflexarm_bindings::PyController & c, const Sequence & seq, double * out, bool warm)
   {
     c.ctrl.reset();
     long faults = 0;
+    reflexarm::Controller saved;
+    reflexarm::Command saved_cmd;
     for (size_t i = 0; i < seq.t.shape(0); ++i)
     {
       const Map mq = row(seq.q, i), mdq = row(seq.dq, i), mtau = row(seq.tau_m, i), mw = row(seq.wrench, i);
       const Map mg = row(seq.gravity, i), mqd = row(seq.q_d, i), mdqd = row(seq.dq_d, i), mddqd = row(seq.ddq_d, i);
       const reflexarm::State s{mq, mdq, mtau, mw, mg};
       const reflexarm::Reference r{mqd, mdqd, mddqd};
+      if (warm)
+      {
+        saved = c.ctrl;
+        saved_cmd = c.cmd;
+        c.ctrl.update(seq.t.data()[i], 0.0, s, r, c.cmd);
+        c.ctrl = saved;
+        c.cmd = saved_cmd;
+      }
       const auto c0 = Clock::now();
       faults += c.ctrl.update(seq.t.data()[i], 0.0, s, r, c.cmd) != reflexarm::FaultCode::None;
       const auto c1 = Clock::now();
@@ -81,7 +92,7 @@ namespace
   /// run one after the other from the (k mod count)-th on (so that none is always first after another), each the
   /// whole sequence from reset(). Times [s] as (rounds, controllers, ticks), and the number of faulted ticks.
   std::tuple<nb::ndarray<nb::numpy, double, nb::ndim<3>>, long> timeTicks(
-    const nb::list & controllers, const Sequence & seq, int rounds)
+    const nb::list & controllers, const Sequence & seq, int rounds, bool warm)
   {
     std::vector<reflexarm_bindings::PyController *> cs;
     for (nb::handle h : controllers)
@@ -98,12 +109,12 @@ namespace
     nb::capsule owner(data, [](void * p) noexcept { delete static_cast<std::vector<double> *>(p); });
     long faults = 0;
     for (auto * c : cs)
-      timeSequence(*c, seq, nullptr);
+      timeSequence(*c, seq, nullptr, warm);
     for (size_t round = 0; round < count; ++round)
       for (size_t j = 0; j < n_ctrl; ++j)
       {
         const size_t k = (round + j) % n_ctrl;
-        faults += timeSequence(*cs[k], seq, data->data() + (round * n_ctrl + k) * n_states);
+        faults += timeSequence(*cs[k], seq, data->data() + (round * n_ctrl + k) * n_states, warm);
       }
     return {nb::ndarray<nb::numpy, double, nb::ndim<3>>(data->data(), {count, n_ctrl, n_states}, owner), faults};
   }
@@ -177,13 +188,15 @@ void registerTiming(nb::module_ & m)
   m.def(
     "time_ticks_in_cpp",
     [](const nb::list & controllers, const Col & t, const Rows & q, const Rows & dq, const Rows & tau_m,
-       const Rows & wrench, const Rows & gravity, const Rows & q_d, const Rows & dq_d, const Rows & ddq_d, int rounds) {
-      return timeTicks(controllers, Sequence{t, q, dq, tau_m, wrench, gravity, q_d, dq_d, ddq_d}, rounds);
+       const Rows & wrench, const Rows & gravity, const Rows & q_d, const Rows & dq_d, const Rows & ddq_d, int rounds,
+       bool warm) {
+      return timeTicks(controllers, Sequence{t, q, dq, tau_m, wrench, gravity, q_d, dq_d, ddq_d}, rounds, warm);
     },
     "controllers"_a, "t"_a, "q"_a, "dq"_a, "tau_m"_a, "wrench"_a, "gravity"_a, "q_d"_a, "dq_d"_a, "ddq_d"_a,
-    "rounds"_a,
+    "rounds"_a, "warm"_a = false,
     "Per-tick times [s] of the given bound Controllers' update() (period from the time stamps) inside C++ over one "
     "state sequence (one row per tick), as an array (rounds, controllers, ticks): an untimed warm-up pass of each, "
     "then per round each controller from reset() over the whole sequence, the first one rotating round by round; "
-    "and the number of faulted ticks.");
+    "and the number of faulted ticks. warm: each tick is run twice from the same state (copied before the first "
+    "run, restored after it, untimed) and the second run timed, its data in cache.");
 }

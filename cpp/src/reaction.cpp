@@ -185,11 +185,13 @@ namespace reflexarm
     retract_time_ = duration;
   }
 
-  // M(q)'s Cholesky factor at s.q for the retract's plan: crba's upper triangle, which LLT<Upper> reads
+  // M(q)'s Cholesky factor at s.q for the retract's plan: crba's upper triangle, which LLT<Upper> reads. In the modal
+  // damping's Data (its crba runs every damping_update_period ticks, the result copied into M_, so its crba buffers are
+  // free and in cache): a Data of its own, untouched since configure, made this tick's largest (cold misses, ~1 x a tick)
   void Controller::factorRetractMass(const State & s) noexcept
   {
     q_buf_ = s.q;
-    llt_r_.compute(pinocchio::crba(model_, data_r_, q_buf_));
+    llt_r_.compute(pinocchio::crba(model_, data_m_, q_buf_));
   }
 
   // The retract's direction J^T f into dq_plan_ and the translational Jacobian of the point it moves into J_r_'s first
