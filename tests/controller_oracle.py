@@ -45,7 +45,8 @@ N_TICKS = 300
 DAMPING_TICKS = 4
 
 #: Ticks of a collision's isolation after its fit (the class docstring's rule): one chooses the link and its rank,
-#: one estimates its point and force, and on the next the estimate is in (the retract planned from it).
+#: one estimates its point and force, and on the next the estimate is in (a waiting retract factorises M(q) on it and
+#: is planned on the tick after).
 FINISHING_TICKS = 3
 #: Pass-1 points per unit of the isolation's work (ContactIsolator::kTracePoints, cpp/include/reflexarm/isolation.hpp).
 TRACE_POINTS = 16
@@ -104,7 +105,7 @@ class Oracle:
       link's last unit the rest; pass 2, the constrained fit, one unit a point), a candidate link without geometry
       is one unit (the wrench fit); the tick that begins
       does no unit, each following tick at most points_per_tick units, then one tick chooses the link (and its
-      rank), one estimates its point and force, and the estimate is in (and a waiting retract planned from it) on
+      rank), one estimates its point and force, and the estimate is in on
       the tick after: ceil(units / points_per_tick) + 3 ticks after the beginning (on that tick if there are no
       units: nothing significant); a retract waiting for it factorises M(q) of that tick and is planned on the next
       accepted tick (its q and Jacobians, that M; retracting from that tick on);

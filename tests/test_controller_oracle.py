@@ -339,7 +339,7 @@ def test_tick_isolation_and_retract_equal_the_plain_isolator(panda_contact, reac
     event = ctrl.event
     assert event is not None and event.estimate is not None and event.contact_class == "collision"
     # isolated from the detection residual isolation_delay (20 ms) after detection, spread over the ticks: the
-    # estimate in (and the retract planned) on the tick the oracle's rule gives from the candidate point counts
+    # estimate in (the retract planned on the tick after) on the tick the oracle's rule gives from the point counts
     assert event.t_estimate == pytest.approx(event.t_detect + settings.isolation_delay, abs=0.5 * DT)
     spread = o.isolation_ticks(residuals[event.t_estimate])
     assert spread > 1  # the default budget spreads the Panda's distal links over several ticks
@@ -381,9 +381,10 @@ def test_retract_after_isolation_factorises_m_on_the_tick_before_its_plan(panda_
     ctrl = controller_like(robot, o)
     u = np.linspace(1.0, -1.0, robot.n) / np.linalg.norm(np.linspace(1.0, -1.0, robot.n))
     dq, zeros, gravity = 0.5 * u, np.zeros(robot.n), np.array([0.0, 0.0, -9.81])
+    data = robot.pin_model.createData()
     for k in range(400):
         q = c.q + dq * (k * DT)
-        tau_m = robot.compute_gravity(q) + pin.computeCoriolisMatrix(robot.pin_model, robot.pin_model.createData(), q, dq) @ dq
+        tau_m = robot.compute_gravity(q) + pin.computeCoriolisMatrix(robot.pin_model, data, q, dq) @ dq
         tau_m = tau_m - (c.torque if k >= 100 else 0.0)
         args = ((k + 1) * DT, q, dq, tau_m, np.zeros(6), gravity, q, dq, zeros)
         want = o.step(*args)
