@@ -45,7 +45,8 @@ N_TICKS = 300
 DAMPING_TICKS = 4
 
 #: Ticks of a collision's isolation after its fit (the class docstring's rule): one chooses the link and its rank,
-#: one estimates its point and force, and on the next the estimate is in (the retract planned from it).
+#: one estimates its point and force, and on the next the estimate is in (a waiting retract factorises M(q) on it and
+#: is planned on the tick after).
 FINISHING_TICKS = 3
 #: Pass-1 points per unit of the isolation's work (ContactIsolator::kTracePoints, cpp/include/reflexarm/isolation.hpp).
 TRACE_POINTS = 16
@@ -104,9 +105,10 @@ class Oracle:
       link's last unit the rest; pass 2, the constrained fit, one unit a point), a candidate link without geometry
       is one unit (the wrench fit); the tick that begins
       does no unit, each following tick at most points_per_tick units, then one tick chooses the link (and its
-      rank), one estimates its point and force, and the estimate is in (and a waiting retract planned from it) on
+      rank), one estimates its point and force, and the estimate is in on
       the tick after: ceil(units / points_per_tick) + 3 ticks after the beginning (on that tick if there are no
-      units: nothing significant);
+      units: nothing significant); a retract waiting for it factorises M(q) of that tick and is planned on the next
+      accepted tick (its q and Jacobians, that M; retracting from that tick on);
     * the tick whose isolation comes in does not advance the reaction (brake / retract timing) that tick.
     """
 
@@ -191,6 +193,7 @@ class Oracle:
         self.dq_f: np.ndarray | None = None  # the guard's low-passed dq and M(q) dq
         self.p_f = np.zeros(self.n)
         self.isolating: tuple[Any, int] | None = None  # (estimate, ticks until it is in) of an isolation under way
+        self.retract_mass_q: np.ndarray | None = None  # q of M(q) for a retract planned on the next tick
         self.t_estimate = self.t_estimated = math.nan
 
     def set_switches(self, kappa_eps: int) -> None:
@@ -524,11 +527,13 @@ class Oracle:
         J[:, last + 1 :] = 0.0
         return d, J
 
-    def plan_retract(self, q, wrench, measured) -> None:
+    def plan_retract(self, q, wrench, measured, mass_q: np.ndarray | None = None) -> None:
+        """The retract's plan at q; M(q) at mass_q if given (a retract that waited for the isolation: M of the tick
+        its estimate came in, the plan on the next)."""
         rs, ev = self.settings, self.event
         assert ev is not None
         d, J = self.retract_direction(q, wrench, measured)
-        Mu = pin.crba(self.model, self.data, q)
+        Mu = pin.crba(self.model, self.data, q if mass_q is None else mass_q)
         d = np.linalg.solve(np.triu(Mu) + np.triu(Mu, 1).T, d)  # the admittance reflex M^-1 J^T f
         if np.linalg.norm(d) > 0:
             d = d / np.linalg.norm(d)
@@ -556,9 +561,12 @@ class Oracle:
         elif self.awaiting and t - ev["t_detect"] >= rs.isolation_delay - 1e-12:
             isolated = self.begin_isolation(t, q, self.r_det())
         if isolated:
-            if self.reacted and ev["reaction"] == "retract":
-                self.plan_retract(q, np.zeros(6), False)
-                ev["phase"], self.t_phase, self.q_from = "retracting", t, q.copy()
+            if self.reacted and ev["reaction"] == "retract":  # M(q) of this tick; the plan on the next tick
+                self.retract_mass_q = q.copy()
+        elif self.retract_mass_q is not None:  # the retract from the estimate: this tick's q, M(q) of the tick before
+            self.plan_retract(q, np.zeros(6), False, mass_q=self.retract_mass_q)
+            self.retract_mass_q = None
+            ev["phase"], self.t_phase, self.q_from = "retracting", t, q.copy()
         elif self.reacted:
             braking = ev["phase"] == "braking" and ev["reaction"] == "brake"
             done_braking = braking and t - self.t_phase >= rs.brake_duration

@@ -13,6 +13,7 @@ fail the same comparison.
 from __future__ import annotations
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
 from controller_oracle import (
@@ -326,7 +327,7 @@ def test_tick_isolation_and_retract_equal_the_plain_isolator(panda_contact, reac
     ctrl = controller_like(robot, o)
     g = robot.compute_gravity(c.q)
     zeros, gravity = np.zeros(robot.n), np.array([0.0, 0.0, -9.81])
-    residuals = {}
+    residuals, modes = {}, []
     for k in range(400):
         tau_m = g - (c.torque if k >= 100 else 0.0)
         args = ((k + 1) * DT, c.q, zeros, tau_m, np.zeros(6), gravity, c.q, zeros, zeros)
@@ -334,15 +335,19 @@ def test_tick_isolation_and_retract_equal_the_plain_isolator(panda_contact, reac
         cmd = ctrl.step(Measurement(*args[:6]), Reference(*args[6:]))
         compare(k, want, cmd, ctrl, o)
         residuals[args[0]] = ctrl.detection_residual.copy()
+        modes.append(cmd.mode)
     event = ctrl.event
     assert event is not None and event.estimate is not None and event.contact_class == "collision"
     # isolated from the detection residual isolation_delay (20 ms) after detection, spread over the ticks: the
-    # estimate in (and the retract planned) on the tick the oracle's rule gives from the candidate point counts
+    # estimate in (the retract planned on the tick after) on the tick the oracle's rule gives from the point counts
     assert event.t_estimate == pytest.approx(event.t_detect + settings.isolation_delay, abs=0.5 * DT)
     spread = o.isolation_ticks(residuals[event.t_estimate])
     assert spread > 1  # the default budget spreads the Panda's distal links over several ticks
     assert event.t_estimated == pytest.approx(event.t_estimate + spread * DT, abs=0.5 * DT)
     assert (event.t_estimate, event.t_estimated) == (o.t_estimate, o.t_estimated)
+    k_in = int(round(event.t_estimated / DT)) - 1
+    if reaction == "retract":  # M(q) factorised on the tick the estimate is in, the plan (retracting) on the next
+        assert modes[k_in - 1 : k_in + 2] == ["braking", "braking", "retracting"]
     plain = ContactIsolator(robot, significance=0.25 * 11.0, geometry=geometry).isolate(
         c.q, residuals[event.t_estimate]
     )
@@ -362,6 +367,32 @@ def test_tick_isolation_and_retract_equal_the_plain_isolator(panda_contact, reac
         moved = Jp @ (event.q_target - event.q_detect)
         assert moved @ c.force > 0.8 * np.linalg.norm(moved) * np.linalg.norm(c.force)
         assert abs(np.linalg.norm(moved) - event.retract_planned) < 0.2 * event.retract_planned
+
+
+def test_retract_after_isolation_factorises_m_on_the_tick_before_its_plan(panda_contact):
+    """The contact of the test above on an arm that keeps moving (0.5 rad/s along one direction, q changes by 5e-4 rad
+    a tick; tau_m = g + C dq - J_c^T f from tick 100): the retract that waited for the estimate uses M(q) of the tick
+    the estimate came in and the q and Jacobians of the next tick, its plan, as the oracle does (q_target to 1e-9:
+    M of the plan's own tick instead moves it by ~1e-5 rad here, a one-tick shift of the plan by ~5e-4 rad)."""
+    robot, geometry, c = panda_contact
+    settings = ReactionSettings(brake_duration=0.04, retract_speed=0.5, rest_time=0.1)
+    o = Oracle(robot, threshold=11.0, reaction="retract", detection_observer_gain=200.0, discretization="exact",
+               settings=settings, geometry=geometry)  # fmt: skip
+    ctrl = controller_like(robot, o)
+    u = np.linspace(1.0, -1.0, robot.n) / np.linalg.norm(np.linspace(1.0, -1.0, robot.n))
+    dq, zeros, gravity = 0.5 * u, np.zeros(robot.n), np.array([0.0, 0.0, -9.81])
+    data = robot.pin_model.createData()
+    for k in range(400):
+        q = c.q + dq * (k * DT)
+        tau_m = robot.compute_gravity(q) + pin.computeCoriolisMatrix(robot.pin_model, data, q, dq) @ dq
+        tau_m = tau_m - (c.torque if k >= 100 else 0.0)
+        args = ((k + 1) * DT, q, dq, tau_m, np.zeros(6), gravity, q, dq, zeros)
+        want = o.step(*args)
+        cmd = ctrl.step(Measurement(*args[:6]), Reference(*args[6:]))
+        compare(k, want, cmd, ctrl, o)
+    event = ctrl.event
+    assert event is not None and event.estimate is not None and event.phase in ("retracting", "holding")
+    assert np.isfinite(event.retract_planned) and event.retract_planned > 0.0
 
 
 @pytest.mark.parametrize("points_per_tick", [1, 24, 100000])

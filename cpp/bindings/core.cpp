@@ -21,18 +21,20 @@
 #include "reflexarm/model_io.hpp"
 #include "reflexarm/reflexarm.hpp"
 #include "event_dict.hpp"
+#include "py_controller.hpp"
 #include "replay.hpp"
 #include "tick_io.hpp"
 
 namespace nb = nanobind;
 using namespace nb::literals;
 
-void registerTiming(nb::module_ & m); // timing.cpp: time_tick_in_cpp, for bench/bench_cpp_core.py
+void registerTiming(nb::module_ & m); // timing.cpp: time_tick_in_cpp (bench_cpp_core.py), time_ticks_in_cpp
 void bindIsolation(nb::module_ & m);  // isolation.cpp: ContactIsolator
 
 namespace
 {
   using reflexarm_bindings::Map;
+  using reflexarm_bindings::PyController;
   using reflexarm_bindings::newArrayCopy;
   using reflexarm_bindings::readFloat;
   using reflexarm_bindings::TickInputs;
@@ -42,14 +44,6 @@ namespace
   using WritableView = nb::ndarray<nb::numpy, double, nb::ndim<1>>;
   constexpr int kSatShift = 8; // status = n_collided + (n_saturated << kSatShift)
 
-  struct PyController
-  {
-    reflexarm::Controller ctrl;
-    reflexarm::Command cmd;
-    // step(): the Python Command type and the constant parts of a plain command, made once
-    nb::object command_type, empty_tuple, empty_str, zero;
-    nb::object mode_names[reflexarm::kModeCount];
-  };
 
   reflexarm::Reaction reactionFromName(const std::string & name)
   {

@@ -187,6 +187,7 @@ namespace reflexarm
     if (reacted_ && event_.reaction == Reaction::Compliant)
       kappa_eps_ = kappa_eps_before_reaction_;
     reacted_ = false;
+    retract_due_ = false;
     event_.clear();
     dq_f_.setZero();
     p_f_.setZero();

@@ -142,60 +142,26 @@ namespace reflexarm
   // Scaled so that the point moves retract_distance; bounded by max_retract_angle per joint and by the joint
   // limits (minus the reaction's margin); the duration keeps the mean speed of the point at retract_speed and the
   // minimum-jerk path's peak joint speed (1.875 x its mean) below velocity_fraction x the velocity limits.
-  void Controller::planRetract(const State & s) noexcept
+  // The Jacobians are this tick's (data_c_: computeDynamics' computeCoriolisMatrix at s.q left the joint placements
+  // and world Jacobians in it, as computeJointJacobians would). M(q)'s factor: computed here at s.q unless `factored`
+  // (a retract that waited for the isolation: factorRetractMass() on the tick before, see followEvent).
+  void Controller::planRetract(const State & s, bool factored) noexcept
   {
     const ReactionParams & rp = params_.reaction_params;
     CollisionEvent & e = event_;
-    const bool measured = e.contact_class == ContactClass::Contact;
-    // the isolated link when isolation ran (it may be more distal than the most distal crossing joint)
-    const int isolated = (!measured && e.estimated && e.estimate.link >= 0) ? e.estimate.link : -1;
-    const int last = measured ? n_ - 1 : isolated >= 0 ? isolated : e.distal_joint < 0 ? n_ - 1 : e.distal_joint;
-    q_buf_ = s.q;
-    J_r_.setZero();
-    dq_plan_.setZero();
-    if (!retractFromEstimate()) // no estimated point: the sensor frame or the link's far end
-    {
-      if (measured || last + 1 >= n_)
-        pinocchio::computeFrameJacobian(
-          model_, data_r_, q_buf_, static_cast<pinocchio::FrameIndex>(params_.sensor_frame_id),
-          pinocchio::LOCAL_WORLD_ALIGNED, J_r_);
-      else
-      {
-        pinocchio::computeJointJacobians(model_, data_r_, q_buf_);
-        pinocchio::getJointJacobian(
-          model_, data_r_, static_cast<pinocchio::JointIndex>(last + 2), pinocchio::LOCAL_WORLD_ALIGNED, J_r_);
-      }
-      if (measured)
-      {
-        // the sensor measures the wrench on the arm beyond it in its own frame: rotate the force to the world
-        const auto & R = data_r_.oMf[params_.sensor_frame_id].rotation();
-        const Eigen::Vector3d f = R * s.wrench.head<3>();
-        for (int i = 0; i < n_; ++i)
-          dq_plan_[i] = J_r_.col(i).head<3>().dot(f);
-      }
-      else
-        for (int i = 0; i <= last; ++i)
-          dq_plan_[i] = e.residual[i];
-    }
+    const int last = retractDirection(s);
     // the admittance reflex: d = M(q)^-1 J^T f, the joint velocity the contact force's impulse gives the free arm; the
     // point then moves along J M^-1 J^T f, with the least kinetic energy for that displacement (d = J^T f moved the
     // heavy proximal joints as much as the light distal ones: the UR5-like arm's held-stick retract swung its base
     // at 1.5 rad/s, 1.09 J against 4.3e-5 J at detection; 0.07 J with M^-1)
-    llt_r_.compute(pinocchio::crba(model_, data_r_, q_buf_)); // crba's upper triangle, which LLT<Upper> reads
+    if (!factored)
+      factorRetractMass(s);
     if (llt_r_.info() == Eigen::Success)
       llt_r_.solveInPlace(dq_plan_);
     const double norm = dq_plan_.norm();
     if (norm > 0.0)
       dq_plan_ /= norm;
-    double moved = 0.0; // |J_lin d| [m/rad]
-    for (int k = 0; k < 3; ++k)
-    {
-      double v = 0.0;
-      for (int i = 0; i <= last; ++i)
-        v += J_r_(k, i) * dq_plan_[i];
-      moved += v * v;
-    }
-    moved = std::sqrt(moved);
+    const double moved = pointMotion(last); // |J_lin d| [m/rad]
     double scale = moved > 1e-9 ? rp.retract_distance / moved : rp.max_retract_angle;
     const double largest = dq_plan_.cwiseAbs().maxCoeff();
     if (largest * scale > rp.max_retract_angle)
@@ -214,17 +180,67 @@ namespace reflexarm
       dq_plan_ *= rp.max_retract_time / duration;
       duration = rp.max_retract_time;
     }
-    double planned = 0.0; // how far the point moves [m] (the joints after its link do not move it)
+    e.retract_planned = pointMotion(last); // how far the point moves [m] (the joints after its link do not move it)
+    e.q_target = s.q + dq_plan_;
+    retract_time_ = duration;
+  }
+
+  // M(q)'s Cholesky factor at s.q for the retract's plan: crba's upper triangle, which LLT<Upper> reads. In the modal
+  // damping's Data (its crba runs every damping_update_period ticks, the result copied into M_, so its crba buffers are
+  // free and in cache): a Data of its own, untouched since configure, made this tick's largest (cold misses, ~1 x a tick)
+  void Controller::factorRetractMass(const State & s) noexcept
+  {
+    q_buf_ = s.q;
+    llt_r_.compute(pinocchio::crba(model_, data_m_, q_buf_));
+  }
+
+  // The retract's direction J^T f into dq_plan_ and the translational Jacobian of the point it moves into J_r_'s first
+  // rows (from this tick's kinematics in data_c_); returns the last joint that moves the point.
+  int Controller::retractDirection(const State & s) noexcept
+  {
+    CollisionEvent & e = event_;
+    const bool measured = e.contact_class == ContactClass::Contact;
+    // the isolated link when isolation ran (it may be more distal than the most distal crossing joint)
+    const int isolated = (!measured && e.estimated && e.estimate.link >= 0) ? e.estimate.link : -1;
+    const int last = measured ? n_ - 1 : isolated >= 0 ? isolated : e.distal_joint < 0 ? n_ - 1 : e.distal_joint;
+    J_r_.setZero();
+    dq_plan_.setZero();
+    if (retractFromEstimate())
+      return last;
+    // no estimated point: the sensor frame or the link's far end
+    const auto fid = static_cast<pinocchio::FrameIndex>(params_.sensor_frame_id);
+    if (measured || last + 1 >= n_)
+      pinocchio::getFrameJacobian(model_, data_c_, fid, pinocchio::LOCAL_WORLD_ALIGNED, J_r_);
+    else
+      pinocchio::getJointJacobian(
+        model_, data_c_, static_cast<pinocchio::JointIndex>(last + 2), pinocchio::LOCAL_WORLD_ALIGNED, J_r_);
+    if (measured)
+    {
+      // the sensor measures the wrench on the arm beyond it in its own frame: rotate the force to the world
+      const auto & frame = model_.frames[fid];
+      const Eigen::Matrix3d R = data_c_.oMi[frame.parentJoint].rotation() * frame.placement.rotation();
+      const Eigen::Vector3d f = R * s.wrench.head<3>();
+      for (int i = 0; i < n_; ++i)
+        dq_plan_[i] = J_r_.col(i).head<3>().dot(f);
+    }
+    else
+      for (int i = 0; i <= last; ++i)
+        dq_plan_[i] = e.residual[i];
+    return last;
+  }
+
+  // |J_lin dq_plan| over the joints 0..last (those that move the point) [m]
+  double Controller::pointMotion(int last) const noexcept
+  {
+    double moved = 0.0;
     for (int k = 0; k < 3; ++k)
     {
       double v = 0.0;
       for (int i = 0; i <= last; ++i)
         v += J_r_(k, i) * dq_plan_[i];
-      planned += v * v;
+      moved += v * v;
     }
-    e.retract_planned = std::sqrt(planned);
-    e.q_target = s.q + dq_plan_;
-    retract_time_ = duration;
+    return std::sqrt(moved);
   }
 
   // The limits every reaction keeps (added to its law, (13) included): a joint outside its range (minus the
@@ -254,10 +270,9 @@ namespace reflexarm
     const double f_norm = est.force.norm();
     if (!(f_norm > 0.0))
       return false;
-    pinocchio::computeJointJacobians(model_, data_r_, q_buf_);
     const auto jid = static_cast<pinocchio::JointIndex>(est.link + 1);
-    pinocchio::getJointJacobian(model_, data_r_, jid, pinocchio::LOCAL_WORLD_ALIGNED, J_r_);
-    const Eigen::Vector3d arm = est.point - data_r_.oMi[jid].translation();
+    pinocchio::getJointJacobian(model_, data_c_, jid, pinocchio::LOCAL_WORLD_ALIGNED, J_r_); // this tick's (q)
+    const Eigen::Vector3d arm = est.point - data_c_.oMi[jid].translation();
     for (int i = 0; i < n_; ++i)
     {
       const Eigen::Vector3d v = J_r_.col(i).head<3>() + J_r_.col(i).tail<3>().cross(arm);
@@ -357,14 +372,22 @@ namespace reflexarm
       isolated = beginIsolation(t, s, detectionResidual());
     if (isolated)
     {
-      if (reacted_ && e.reaction == Reaction::Retract) // the brake so far; now the retract from the estimate
+      // the brake so far; the retract from the estimate is planned on the next accepted tick, M(q) factorised now
+      // (crba and its Cholesky factor: no tick runs both them and the plan)
+      if (reacted_ && e.reaction == Reaction::Retract)
       {
-        planRetract(s);
-        e.phase = ReactionPhase::Retracting;
-        t_phase_ = t;
-        q_from_ = s.q;
-        updateMode();
+        factorRetractMass(s);
+        retract_due_ = true;
       }
+    }
+    else if (retract_due_) // the retract from the estimate: its plan on this tick's q, M(q) of the tick before
+    {
+      retract_due_ = false;
+      planRetract(s, true);
+      e.phase = ReactionPhase::Retracting;
+      t_phase_ = t;
+      q_from_ = s.q;
+      updateMode();
     }
     else if (reacted_)
       advanceReaction(t, s);

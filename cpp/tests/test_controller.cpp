@@ -188,6 +188,10 @@ namespace
       CHECK(run.allocations == 0, "pipeline variant %d: %ld allocations in update()", variant, run.allocations);
       CHECK(run.detected && e.detected, "pipeline variant %d: the 80 Nm push was not detected", variant);
       CHECK(e.estimated, "pipeline variant %d: the collision was not isolated in the run", variant);
+      // the retract's ticks after the estimate (M(q) factorised, then the plan on the next tick) ran in the count
+      if (p.reaction == reflexarm::Reaction::Retract)
+        CHECK(e.phase == reflexarm::ReactionPhase::Retracting || e.phase == reflexarm::ReactionPhase::Holding,
+              "pipeline variant %d: the retract was not planned after the estimate", variant);
       CHECK(run.non_finite == 0 && run.beyond_limit == 0, "pipeline variant %d: %ld non-finite, %ld beyond the limit",
             variant, run.non_finite, run.beyond_limit);
     }

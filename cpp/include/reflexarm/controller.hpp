@@ -189,7 +189,10 @@ namespace reflexarm
     void writeCommand(int n_sat, Command & cmd) const noexcept;
     // the collision pipeline after detection (reaction.cpp)
     void startReaction(double t, const State & s) noexcept;
-    void planRetract(const State & s) noexcept;
+    void planRetract(const State & s, bool factored = false) noexcept;
+    void factorRetractMass(const State & s) noexcept;
+    int retractDirection(const State & s) noexcept;
+    double pointMotion(int last) const noexcept;
     void estimateContact(const State & s) noexcept;
     bool beginIsolation(double t, const State & s, const Eigen::VectorXd & residual) noexcept;
     bool stepIsolation(double t) noexcept;
@@ -235,6 +238,7 @@ namespace reflexarm
     using RetractLlt = Eigen::LLT<Eigen::MatrixXd, Eigen::Upper>;
     // M(q)'s Cholesky factor for the retract's plan, sized once in configure (no allocation)
     RetractLlt llt_r_ = definedLlt<RetractLlt>(0);
+    bool retract_due_ = false; // llt_r_ holds M(q) of the tick the isolation came in: the retract's plan is due
     ContactIsolator isolator_;
     bool has_isolator_ = false;
     double t_phase_ = 0.0, retract_time_ = 0.0, hold_damping_scale_ = 1.0;

@@ -74,12 +74,12 @@ namespace reflexarm
     /// a retract brakes until then and is planned from the estimate
     double isolation_delay = 0.02;
     /// The isolation is spread over the ticks: it begins on the tick isolation_delay after detection (the
-    /// residual and posture of that tick; kinematics only) and fits at most this many candidate points per
-    /// following tick (ContactIsolator::step: each point once in pass 1, once in pass 2); the estimate is
-    /// applied on the tick its work runs out (values below 1 count as 1). 32: ~150 ns a unit on the bench machine,
-    /// a step tick ~2 x a plain one (bench/bench_collision_tick.py: 8 units ~1.3 x); a 2 cm geometry's 1300-2300
-    /// units then take 12-74 ms (Atlas, Panda, iiwa14; 48-295 ms at 8), so that a retract waiting for the estimate
-    /// ends within the guard's 0.5 s
+    /// residual and posture of that tick; kinematics only) and does at most this many units of its fit per following
+    /// tick (ContactIsolator::step; a unit: one point's constrained fit, or kTracePoints points' traces of pass 1),
+    /// then one tick chooses the link, one estimates, and the estimate is in on the next: ceil(units / this) + 3 ticks
+    /// after the beginning; a retract waiting for it factorises M(q) on that tick and is planned on the next (values
+    /// below 1 count as 1). 32: 10 / 43 / 27 ticks on Atlas, Panda, iiwa14's 2 cm geometry; the tick costs per
+    /// budget: ReactionSettings.isolation_points_per_tick (Python) and bench/bench_collision_tick.py
     int isolation_points_per_tick = 32;
   };
 

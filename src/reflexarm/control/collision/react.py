@@ -101,15 +101,18 @@ class ReactionSettings:
             ``isolation_delay`` after detection (that tick's residual and posture) and does at most this many
             units of its fit per following tick (a unit: one candidate point's constrained fit of pass 2, or 16
             points' traces of pass 1; a link without geometry counts one), then spends three more ticks
-            finishing (the choice of the link, its estimate, the estimate in and a waiting retract planned), so a
-            link collision is isolated ceil(units / this) + 3 ticks after it began (``CollisionEvent.t_estimated``),
-            units = the sum over the candidate links of ceil(m / 16) + m (m points; 1 without geometry); an
-            integer >= 1. The default, 32, takes 10, 43 and 27 ticks on the 2 cm controller geometry of Atlas,
-            Panda and iiwa14 (bench/bench_collision_tick.py), so that a retract waiting for the estimate ends
-            within the guard's 0.5 s. A constrained fit costs 0.115-0.131 us warm (nothing pruned) against a
-            5.7-6.2 us plain tick, so 8 units keep a fit step within 1.2 x a plain tick (warm) but take 29, 160
-            and 96 ticks; the largest tick of an isolation is then the begin or a finishing tick (cold caches,
-            1.3-1.8 x) or the retract's plan (2.3-3.4 x), so a smaller budget buys latency for nothing.
+            finishing (the choice of the link, its estimate, the estimate in), so a link collision is isolated
+            ceil(units / this) + 3 ticks after it began (``CollisionEvent.t_estimated``), units = the sum over the
+            candidate links of ceil(m / 16) + m (m points; 1 without geometry); a retract waiting for the estimate
+            factorises M(q) on the tick the estimate comes in and is planned (and retracts) from the next tick on,
+            ceil(units / this) + 4 ticks after the beginning; an integer >= 1. The default, 32, takes 10, 43 and
+            27 ticks on the 2 cm controller geometry of Atlas, Panda and iiwa14 (bench/bench_collision_tick.py), so
+            that a retract waiting for the estimate ends within the guard's 0.5 s. Inside C++, each isolation tick
+            against the same tick of the controller without geometry (paired, warm caches; noise floor <= 1.03): at
+            32 the largest is a fit step, 1.64-1.69 x; at 4-16 (55-317 ticks on Panda) 1.32-1.46 x, the tick with
+            M(q)'s crba + Cholesky factor (1.30-1.40 x), the choice 1.22-1.27 x, the estimate 1.20-1.30 x, the begin
+            and the plan 1.15-1.19 x, a fit step of 4 units 1.21-1.23 x: no budget keeps every tick within issue
+            15's 1.2 x, so a smaller one buys latency for little.
     """
 
     brake_time: float = 0.05
