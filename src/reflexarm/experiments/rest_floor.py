@@ -27,7 +27,7 @@ from reflexarm.robots import RobotModel
 from reflexarm.sim import PAPER_NOISE, JointTrajectory, Plant, SensorNoise
 from reflexarm.sim.compiled_loop import run_fast
 
-__all__ = ["REST_FLOOR_QUANTILE", "REST_FLOOR_S", "REST_FLOOR_WINDOW_S", "RestFloor", "rest_floor"]
+__all__ = ["REST_FLOOR_QUANTILE", "REST_FLOOR_S", "REST_FLOOR_WINDOW_S", "RestFloor", "floor_verdict", "rest_floor"]
 
 #: How long the arm is held [s].
 REST_FLOOR_S = 1.5

@@ -108,7 +108,7 @@ class ReactionSettings:
             ceil(units / this) + 4 ticks after the beginning; an integer >= 1. The default, 32, takes 10, 43 and
             27 ticks on the 2 cm controller geometry of Atlas, Panda and iiwa14 (bench/bench_collision_tick.py), so
             that a retract waiting for the estimate ends within the guard's 0.5 s. Inside C++, each isolation tick
-            against the same tick of the controller without geometry (paired, warm caches; noise floor <= 1.03): at
+            against the same tick of the controller without geometry (paired, warm caches; noise floor <= 1.04): at
             32 the largest is a fit step, 1.64-1.69 x; at 4-16 (55-317 ticks on Panda) 1.32-1.46 x, the tick with
             M(q)'s crba + Cholesky factor (1.30-1.40 x), the choice 1.22-1.27 x, the estimate 1.20-1.30 x, the begin
             and the plan 1.15-1.19 x, a fit step of 4 units 1.21-1.23 x: no budget keeps every tick within issue
