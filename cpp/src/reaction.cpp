@@ -217,9 +217,7 @@ namespace reflexarm
     if (measured)
     {
       // the sensor measures the wrench on the arm beyond it in its own frame: rotate the force to the world
-      const auto & frame = model_.frames[fid];
-      const Eigen::Matrix3d R = data_c_.oMi[frame.parentJoint].rotation() * frame.placement.rotation();
-      const Eigen::Vector3d f = R * s.wrench.head<3>();
+      const Eigen::Vector3d f = pinocchio::updateFramePlacement(model_, data_c_, fid).rotation() * s.wrench.head<3>();
       for (int i = 0; i < n_; ++i)
         dq_plan_[i] = J_r_.col(i).head<3>().dot(f);
     }

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from reflexarm.experiments.collision import CollisionSetting, _true_friction, controller_model
+from reflexarm.experiments.collision_events import _kinetic_energy
 from reflexarm.robots import RobotModel
 from reflexarm.sim import PAPER_NOISE, JointTrajectory, Plant, SensorNoise
 from reflexarm.sim.compiled_loop import run_fast
@@ -77,8 +78,7 @@ def rest_floor(
     ctrl = replace(setting, reaction="none").controller(ctrl_model)
     trace = run_fast(plant, ctrl, hold, REST_FLOOR_S)
     window = trace.t >= trace.t[-1] - REST_FLOOR_WINDOW_S + 1e-9
-    ke = np.array([0.5 * v @ robot.compute_mass_matrix(p) @ v for p, v in zip(trace.q[window], trace.dq[window],
-                                                                           strict=True)])  # fmt: skip
+    ke = _kinetic_energy(robot, trace.q[window], trace.dq[window])
     return RestFloor(float(np.median(ke)), float(np.quantile(ke, REST_FLOOR_QUANTILE)), float(ke.max()))
 
 
