@@ -500,9 +500,9 @@ class Oracle:
         self.estimate, self.awaiting, self.isolating, self.t_estimated = estimate, False, None, t
         return True
 
-    def retract_direction(self, q, wrench, measured) -> tuple[np.ndarray, np.ndarray]:
-        """(d, J): the joint direction and the translational Jacobian (rows in any frame: only |J d| is used) of
-        the point it moves, both over the joints that move it."""
+    def retract_direction(self, q, wrench, measured) -> tuple[np.ndarray, list[np.ndarray], int]:
+        """(d, Js, last): the joint direction J^T f, the translational Jacobians (rows in any frame: only |J d| is used)
+        of the points whose motion sets the retract's scale, and the last joint that moves the contact."""
         ev, n = self.event, self.n
         assert ev is not None
         est = self.estimate
@@ -512,32 +512,36 @@ class Oracle:
             J6 = pin.getJointJacobian(self.model, self.data, est.link + 1, pin.LOCAL_WORLD_ALIGNED)
             arm = est.point - self.data.oMi[est.link + 1].translation
             Jp = J6[:3] + np.cross(J6[3:].T, arm).T
-            return Jp.T @ (est.force / np.linalg.norm(est.force)), Jp
-        last = n - 1 if measured else (est.link if est is not None and est.link >= 0 else ev["distal_joint"])
-        if last == n - 1:  # the sensor frame (LOCAL: the wrench is measured in it)
-            J = pin.computeFrameJacobian(self.model, self.data, q, self.robot.sensor_frame_id, pin.LOCAL)[:3]
-        else:  # the origin of the next joint (Pinocchio joint ids are 1-based: joint i is id i + 1)
-            J = pin.computeJointJacobian(self.model, self.data, q, last + 2)[:3]
+            return Jp.T @ (est.force / np.linalg.norm(est.force)), [Jp], est.link
+        sensor = pin.computeFrameJacobian(self.model, self.data, q, self.robot.sensor_frame_id, pin.LOCAL)[:3]
+        if measured:  # the sensor frame (LOCAL: the wrench is measured in it); J d = J J^T f along the force
+            return sensor.T @ wrench[:3], [sensor], n - 1
+        last = est.link if est is not None and est.link >= 0 else ev["distal_joint"]
+        last = n - 1 if last < 0 else last
         d = np.zeros(n)
-        if measured:
-            d = J.T @ wrench[:3]  # J d = J J^T f: a positive component along the force on the arm
-        else:
-            d[: last + 1] = ev["residual"][: last + 1]  # r = J_c^T f on the joints a force on that link reaches
-        J = J.copy()
-        J[:, last + 1 :] = 0.0
-        return d, J
+        d[: last + 1] = ev["residual"][: last + 1]  # r = J_c^T f on the joints a force on that link reaches
+        # the point on the link is unknown: every point from its far end on (the later joints' origins, Pinocchio id
+        # i + 1 for joint i, and the sensor frame) bounds the motion
+        Js = [pin.computeJointJacobian(self.model, self.data, q, j)[:3] for j in range(last + 2, self.model.njoints)]
+        return d, [*Js, sensor], last
 
     def plan_retract(self, q, wrench, measured, mass_q: np.ndarray | None = None) -> None:
         """The retract's plan at q; M(q) at mass_q if given (a retract that waited for the isolation: M of the tick
         its estimate came in, the plan on the next)."""
         rs, ev = self.settings, self.event
         assert ev is not None
-        d, J = self.retract_direction(q, wrench, measured)
+        d, Js, last = self.retract_direction(q, wrench, measured)
         Mu = pin.crba(self.model, self.data, q if mass_q is None else mass_q)
-        d = np.linalg.solve(np.triu(Mu) + np.triu(Mu, 1).T, d)  # the admittance reflex M^-1 J^T f
+        M = np.triu(Mu) + np.triu(Mu, 1).T
+        k = last + 1  # the admittance reflex of the joints up to the contact's link; the later ones stay put
+        d = np.concatenate([np.linalg.solve(M[:k, :k], d[:k]), np.zeros(self.n - k)])
         if np.linalg.norm(d) > 0:
             d = d / np.linalg.norm(d)
-        moved = float(np.linalg.norm(J @ d))  # [m/rad]
+
+        def motion(dq: np.ndarray) -> float:  # the farthest-moving point [m]
+            return max(float(np.linalg.norm(J[:, :k] @ dq[:k])) for J in Js)
+
+        moved = motion(d)  # [m/rad]
         scale = rs.retract_distance / moved if moved > 1e-9 else rs.max_retract_angle
         scale = min(scale, rs.max_retract_angle / float(np.max(np.abs(d)))) if np.any(d) else scale
         goal = np.clip(q + scale * d, self.safe_lo, self.safe_hi)
@@ -549,7 +553,7 @@ class Oracle:
             self.dq_plan = self.dq_plan * (rs.max_retract_time / self.retract_time)
             self.retract_time = rs.max_retract_time
         ev["q_target"] = q + self.dq_plan
-        ev["retract_planned"] = float(np.linalg.norm(J @ self.dq_plan))
+        ev["retract_planned"] = motion(self.dq_plan)
 
     def advance(self, t, q, dq, over, saturated) -> None:
         """A tick after the detecting one: phase changes, then the record (peak, motion, re-contacts, guard)."""

@@ -164,27 +164,32 @@ PARALLEL_COS = 1.0 - 1e-9
 
 
 def test_the_retract_moves_the_arm_by_its_admittance(atlas):
-    """An unmeasured collision: the retract's joint motion q_target - q_detect is the admittance reflex M(q)^-1 J^T f
-    at the detecting posture, J^T f the residual on the joints up to the most distal crossing one (the velocity an
-    impulse of the contact force gives the free arm: the heavy proximal joints move less than the light distal
-    ones). The core before it moved along J^T f itself, which is not parallel to M^-1 J^T f here."""
+    """An unmeasured collision: the retract's joint motion q_target - q_detect is the admittance reflex M11^-1 J^T f
+    of the joints up to the most distal crossing one at the detecting posture (M11 their block of M(q), J^T f the
+    residual on them; the later joints stay put): the velocity an impulse of the contact force gives those joints
+    (the heavy proximal joints move less than the light distal ones). The core before it moved along J^T f itself,
+    which is not parallel to M11^-1 J^T f here, and then along M(q)^-1 J^T f over all joints, which moved the
+    later joints too."""
     o = Oracle(atlas, kappa_eps=1, kappa_ext=0, reaction="retract", detection_observer_gain=30.0, settings=SHORT)
     ctrl = core_controller(core, atlas, o)
     run_both(atlas, o, ctrl, tau=False, push=40.0, n_ticks=RUN_TICKS)
     ev = ctrl.event
     assert ev["contact_class"] == "collision" and ev["phase"] == "holding"
-    last = int(np.flatnonzero(ev["joints"])[-1])
+    k = int(np.flatnonzero(ev["joints"])[-1]) + 1
     r = np.zeros(atlas.n)
-    r[: last + 1] = np.asarray(ev["residual"])[: last + 1]
+    r[:k] = np.asarray(ev["residual"])[:k]
     q = np.asarray(ev["q_detect"])
-    admittance = np.linalg.solve(atlas.compute_mass_matrix(q), r)
+    M = atlas.compute_mass_matrix(q)
+    admittance = np.concatenate([np.linalg.solve(M[:k, :k], r[:k]), np.zeros(atlas.n - k)])
     moved = np.asarray(ev["q_target"]) - q
 
     def cos(a: np.ndarray, b: np.ndarray) -> float:
         return float(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)))
 
-    assert cos(moved, admittance) > PARALLEL_COS
-    assert cos(r, admittance) < 0.9  # J^T f alone (the old direction) would fail the line above
+    assert k < atlas.n and cos(moved, admittance) > PARALLEL_COS
+    np.testing.assert_array_equal(moved[k:], 0.0)
+    assert cos(r, admittance) < PARALLEL_COS  # J^T f alone (the first direction) would fail the line above
+    assert cos(np.linalg.solve(M, r), admittance) < PARALLEL_COS  # so would M^-1 J^T f over all joints
 
 
 @pytest.mark.parametrize("reaction", REACTION_PARAMS)

@@ -244,3 +244,59 @@ def test_compliant_holds_q_detect_at_a_tenth_of_the_stiffness(atlas):
     # misses by 0.15 Nm, q_d = home instead of q_detect by ~1 Nm.
     np.testing.assert_allclose(0.1 * 300.0 * (q_end - event.q_detect), tau_ext, rtol=0, atol=1e-4)
     assert np.abs(q_end - event.q_detect)[3] > 0.4  # the arm did give way
+
+
+def test_link_retract_moves_only_the_joints_up_to_the_link_and_no_later_point_beyond_retract_distance(atlas):
+    """A 60 N push on the forearm (link 3, after the elbow joint elx) that no sensor measures and no geometry locates:
+    the retract knows the link (the most distal crossing joint, 3: joints 4-6 get thresholds they cannot reach), not
+    the point. Its plan is the admittance reflex of the joints up to the link, d = M11^-1 r (M11 M(q)'s leading 4 x 4
+    block, r the residual at detection): the wrist joints stay put, and the farthest-moving point from the link's far
+    end on (the later joints' origins, the sensor frame) moves retract_distance, so no point there moves more. Fails
+    on the retract before (d = M^-1 r on all joints, scaled to the link's far end alone: the wrist joints moved, and
+    here the sensor frame moves more than the elbow's far end)."""
+    settings = ReactionSettings()
+    model, data = atlas.pin_model, atlas.pin_model.createData()
+    jid, arm = 4, np.array([0.05, 0.0, -0.12])  # Pinocchio joint id of elx (joint 3), the point in its frame [m]
+    f_world = np.array([-20.0, 45.0, 35.0])
+    contact = {"on": True}
+
+    def tau_ext(t, q):
+        if not (contact["on"] and t >= 0.05):
+            return np.zeros(atlas.n)
+        pin.computeJointJacobians(model, data, q)
+        J6 = pin.getJointJacobian(model, data, jid, pin.LOCAL_WORLD_ALIGNED)
+        lever = data.oMi[jid].rotation @ arm
+        return (J6[:3] + np.cross(J6[3:].T, lever).T).T @ f_world
+
+    class ContactPlant(RigidBodyPlant):
+        def _f(self, t, q, dq, tau):
+            return dq, pin.aba(self.model, self.data, q, dq, tau + tau_ext(t, q))
+
+    plant = ContactPlant(atlas)
+    plant.reset(atlas.home)
+    threshold = np.array([11.0, 11.0, 11.0, 2.0, 1e6, 1e6, 1e6])
+    ctrl = Controller(atlas, reaction="retract", threshold=threshold, detection_observer_gain=100.0,
+                      contact_geometry=None, reaction_settings=settings)  # fmt: skip
+    z = np.zeros(atlas.n)
+    run_plant(ctrl, plant, 700, lambda t: Reference(atlas.home, z, z), on_detect=lambda: contact.update(on=False))
+    event = ctrl.event
+    assert event is not None and (event.contact_class, event.reaction) == ("collision", "retract")
+    assert event.phase == "holding" and event.distal_joint == 3
+    q0, d = event.q_detect, event.q_target - event.q_detect
+    np.testing.assert_array_equal(d[4:], 0.0)  # the wrist joints stay put
+    M = atlas.compute_mass_matrix(q0)
+    want = np.linalg.solve(M[:4, :4], np.asarray(event.residual)[:4])
+    # 1e-9: the same Pinocchio M and residual, solved by Eigen's Cholesky factor there and LAPACK here
+    np.testing.assert_allclose(d[:4] / np.linalg.norm(d), want / np.linalg.norm(want), rtol=0, atol=1e-9)
+    points = [pin.computeJointJacobian(model, data, q0, j)[:3] for j in range(5, model.njoints)]
+    points.append(pin.computeFrameJacobian(model, data, q0, atlas.sensor_frame_id, pin.LOCAL_WORLD_ALIGNED)[:3])
+    motion = [float(np.linalg.norm(J @ d)) for J in points]
+    assert max(motion) == pytest.approx(event.retract_planned, abs=1e-9)
+    assert event.retract_planned <= settings.retract_distance + 1e-12
+    assert motion[0] < max(motion)  # the case matters: scaled to the elbow's far end (wrist's origin), some point
+    # beyond it would have moved retract_distance x max / motion[0]
+    # the pushed point moves away: along J_c M11^-1 J_c^T f, a positive component along f
+    pin.computeJointJacobians(model, data, q0)
+    J6 = pin.getJointJacobian(model, data, jid, pin.LOCAL_WORLD_ALIGNED)
+    Jc = J6[:3] + np.cross(J6[3:].T, data.oMi[jid].rotation @ arm).T
+    assert (Jc @ d) @ f_world > 0.0

@@ -8,10 +8,11 @@
 //   brake     tau = g(q) + C dq - M(q) dq / brake_time                          closed loop ddq = -dq / T_b,
 //             for brake_duration, then hold the posture reached                  (damping injection, no spring)
 //   retract   law (2) towards q_detect + dq_plan along a minimum-jerk path, then hold there; dq_plan moves the
-//             contact by retract_distance along J M^-1 J^T f: dq ~ M(q)^-1 J_c^T f (a contact force f gives the
-//             residual r = J_c^T f) is the velocity an impulse of the contact force gives the free arm, the motion
-//             of least kinetic energy for that displacement, with a positive component along f, away from the
-//             obstacle (De Luca et al., IROS 2006, "admittance reflex")
+//             contact by retract_distance along J M11^-1 J^T f: dq ~ M11^-1 J_c^T f (a contact force f gives the
+//             residual r = J_c^T f; M11 M(q)'s block of the joints up to the contact's link, the later ones held)
+//             is the velocity an impulse of the contact force gives those joints, the motion of least kinetic
+//             energy for that displacement, with a positive component along f, away from the obstacle (De Luca et
+//             al., IROS 2006, "admittance reflex")
 //   compliant hold q_detect at c K (c = compliant_stiffness_factor) with the damping sqrt(c) D (the modal damping
 //             of c K: same modes, frequencies scaled by sqrt(c)), kappa_eps -> 0 (the compliant mode of Fig. 3)
 //   hold      law (2) with q_d = q_target, dq_d = ddq_d = 0, no disturbance compensation
@@ -134,14 +135,15 @@ namespace reflexarm
   //  * an isolated collision with an estimated point and force: that point along that force (retractFromEstimate);
   //  * a contact the wrist sensor measures (class Contact): the sensor frame, along the measured force f (the
   //    environment's force on the arm): J_s^T f;
-  //  * otherwise: the far end of the isolated link (without isolation: of the most distal link whose joint crossed
-  //    its threshold): the next joint's origin, the sensor frame for the last link, along the residual
-  //    r = J_c^T f on the joints up to that one (the joints after it carry no torque of a force on its link).
-  // The joint motion d = M(q)^-1 J^T f of that J^T f (the admittance reflex below): J d = J M^-1 J^T f / |f| has a
-  // positive component along f.
-  // Scaled so that the point moves retract_distance; bounded by max_retract_angle per joint and by the joint
-  // limits (minus the reaction's margin); the duration keeps the mean speed of the point at retract_speed and the
-  // minimum-jerk path's peak joint speed (1.875 x its mean) below velocity_fraction x the velocity limits.
+  //  * otherwise the link, not the point: the isolated link (without isolation: the most distal link whose joint
+  //    crossed its threshold), along the residual r = J_c^T f on the joints up to it (the joints after it carry no
+  //    torque of a force on its link); the farthest-moving of its far end and every later point (retractMotion).
+  // The joint motion d = M11^-1 J^T f of the joints up to the contact's link (M11 M(q)'s leading block; the later
+  // joints stay put): the admittance reflex below. J d = J M11^-1 J^T f / |f| has a positive component along f.
+  // Scaled so that the point (the farthest-moving one) moves retract_distance; bounded by max_retract_angle per
+  // joint and by the joint limits (minus the reaction's margin); the duration keeps the mean speed of the point at
+  // retract_speed and the minimum-jerk path's peak joint speed (1.875 x its mean) below velocity_fraction x the
+  // velocity limits.
   // The Jacobians are this tick's (data_c_: computeDynamics' computeCoriolisMatrix at s.q left the joint placements
   // and world Jacobians in it, as computeJointJacobians would). M(q)'s factor: computed here at s.q unless `factored`
   // (a retract that waited for the isolation: factorRetractMass() on the tick before, see followEvent).
@@ -150,18 +152,28 @@ namespace reflexarm
     const ReactionParams & rp = params_.reaction_params;
     CollisionEvent & e = event_;
     const int last = retractDirection(s);
-    // the admittance reflex: d = M(q)^-1 J^T f, the joint velocity the contact force's impulse gives the free arm; the
-    // point then moves along J M^-1 J^T f, with the least kinetic energy for that displacement (d = J^T f moved the
-    // heavy proximal joints as much as the light distal ones: the UR5-like arm's held-stick retract swung its base
-    // at 1.5 rad/s, 1.09 J against 4.3e-5 J at detection; 0.07 J with M^-1)
+    // the admittance reflex of the joints up to the contact's link: d = M11^-1 J^T f, the joint velocity the contact
+    // force's impulse gives those joints with the later ones held; the contact then moves along J M11^-1 J^T f, with
+    // the least kinetic energy among their motions for that displacement. (d = J^T f moved the heavy proximal joints
+    // as much as the light distal ones: the UR5-like arm's held-stick retract swung its base at 1.5 rad/s, 1.09 J
+    // against 4.3e-5 J at detection. The full M^-1 moved the later joints too, against their own inertia coupling:
+    // on Atlas' forearm push the wrist joints by up to 0.5 rad, and the pushed stick's retract kept 70 % of its
+    // energy at detection 0.5 s later; 0.015 % with M11.)
     if (!factored)
       factorRetractMass(s);
     if (llt_r_.info() == Eigen::Success)
-      llt_r_.solveInPlace(dq_plan_);
+    {
+      // M's leading (last + 1) block: the joints after the contact's link stay put. M11 = U11^T U11 with U11 the
+      // leading block of M's factor U, so the solve needs no factor of its own.
+      const auto U = llt_r_.matrixLLT().topLeftCorner(last + 1, last + 1);
+      auto head = dq_plan_.head(last + 1);
+      U.template triangularView<Eigen::Upper>().transpose().solveInPlace(head);
+      U.template triangularView<Eigen::Upper>().solveInPlace(head);
+    }
     const double norm = dq_plan_.norm();
     if (norm > 0.0)
       dq_plan_ /= norm;
-    const double moved = pointMotion(last); // |J_lin d| [m/rad]
+    const double moved = retractMotion(last); // |J_lin d| [m/rad]
     double scale = moved > 1e-9 ? rp.retract_distance / moved : rp.max_retract_angle;
     const double largest = dq_plan_.cwiseAbs().maxCoeff();
     if (largest * scale > rp.max_retract_angle)
@@ -180,7 +192,7 @@ namespace reflexarm
       dq_plan_ *= rp.max_retract_time / duration;
       duration = rp.max_retract_time;
     }
-    e.retract_planned = pointMotion(last); // how far the point moves [m] (the joints after its link do not move it)
+    e.retract_planned = retractMotion(last); // how far the contact moves [m]
     e.q_target = s.q + dq_plan_;
     retract_time_ = duration;
   }
@@ -194,8 +206,9 @@ namespace reflexarm
     llt_r_.compute(pinocchio::crba(model_, data_m_, q_buf_));
   }
 
-  // The retract's direction J^T f into dq_plan_ and the translational Jacobian of the point it moves into J_r_'s first
-  // rows (from this tick's kinematics in data_c_); returns the last joint that moves the point.
+  // The retract's direction J^T f into dq_plan_ and, when the point it moves is known (the estimate's point, the
+  // sensor frame), that point's translational Jacobian into J_r_'s first rows (from this tick's kinematics in
+  // data_c_); returns the last joint that moves the contact.
   int Controller::retractDirection(const State & s) noexcept
   {
     CollisionEvent & e = event_;
@@ -205,26 +218,44 @@ namespace reflexarm
     const int last = measured ? n_ - 1 : isolated >= 0 ? isolated : e.distal_joint < 0 ? n_ - 1 : e.distal_joint;
     J_r_.setZero();
     dq_plan_.setZero();
+    retract_point_known_ = true;
     if (retractFromEstimate())
       return last;
-    // no estimated point: the sensor frame or the link's far end
-    const auto fid = static_cast<pinocchio::FrameIndex>(params_.sensor_frame_id);
-    if (measured || last + 1 >= n_)
-      pinocchio::getFrameJacobian(model_, data_c_, fid, pinocchio::LOCAL_WORLD_ALIGNED, J_r_);
-    else
-      pinocchio::getJointJacobian(
-        model_, data_c_, static_cast<pinocchio::JointIndex>(last + 2), pinocchio::LOCAL_WORLD_ALIGNED, J_r_);
     if (measured)
     {
       // the sensor measures the wrench on the arm beyond it in its own frame: rotate the force to the world
+      const auto fid = static_cast<pinocchio::FrameIndex>(params_.sensor_frame_id);
+      pinocchio::getFrameJacobian(model_, data_c_, fid, pinocchio::LOCAL_WORLD_ALIGNED, J_r_);
       const Eigen::Vector3d f = pinocchio::updateFramePlacement(model_, data_c_, fid).rotation() * s.wrench.head<3>();
       for (int i = 0; i < n_; ++i)
         dq_plan_[i] = J_r_.col(i).head<3>().dot(f);
+      return last;
     }
-    else
-      for (int i = 0; i <= last; ++i)
-        dq_plan_[i] = e.residual[i];
+    retract_point_known_ = false; // the link, not the point on it: the residual r = J_c^T f on the joints up to it
+    for (int i = 0; i <= last; ++i)
+      dq_plan_[i] = e.residual[i];
     return last;
+  }
+
+  // How far dq_plan_ moves the contact [m]: the known point (J_r_ of retractDirection); without one, the farthest-moving
+  // of the link's far end and every point after it (the later joints' origins and the sensor frame). The contact is on
+  // that link or, when the isolation erred towards the base (a later link whose joints carry little of the force), on a
+  // later one; the link's far end alone can sit near the axis the retract turns about (the UR5-like arm's upper arm
+  // stands on its base axis in the held-stick scene: scaled to its elbow, the forearm swept 19 cm). Uses J_r_.
+  double Controller::retractMotion(int last) noexcept
+  {
+    if (retract_point_known_)
+      return pointMotion(last);
+    double moved = 0.0;
+    for (int id = last + 2; id < model_.njoints; ++id) // joint i's origin (Pinocchio's id i + 1) ends link i - 1
+    {
+      pinocchio::getJointJacobian(
+        model_, data_c_, static_cast<pinocchio::JointIndex>(id), pinocchio::LOCAL_WORLD_ALIGNED, J_r_);
+      moved = std::max(moved, pointMotion(last));
+    }
+    const auto fid = static_cast<pinocchio::FrameIndex>(params_.sensor_frame_id);
+    pinocchio::getFrameJacobian(model_, data_c_, fid, pinocchio::LOCAL_WORLD_ALIGNED, J_r_);
+    return std::max(moved, pointMotion(last));
   }
 
   // |J_lin dq_plan| over the joints 0..last (those that move the point) [m]

@@ -193,6 +193,7 @@ namespace reflexarm
     void factorRetractMass(const State & s) noexcept;
     int retractDirection(const State & s) noexcept;
     double pointMotion(int last) const noexcept;
+    double retractMotion(int last) noexcept;
     void estimateContact(const State & s) noexcept;
     bool beginIsolation(double t, const State & s, const Eigen::VectorXd & residual) noexcept;
     bool stepIsolation(double t) noexcept;
@@ -238,6 +239,7 @@ namespace reflexarm
     using RetractLlt = Eigen::LLT<Eigen::MatrixXd, Eigen::Upper>;
     // M(q)'s Cholesky factor for the retract's plan, sized once in configure (no allocation)
     RetractLlt llt_r_ = definedLlt<RetractLlt>(0);
+    bool retract_point_known_ = true; // retractDirection found the point it moves (else the link only)
     bool retract_due_ = false; // llt_r_ holds M(q) of the tick the isolation came in: the retract's plan is due
     ContactIsolator isolator_;
     bool has_isolator_ = false;

@@ -51,9 +51,10 @@ namespace reflexarm
   {
     double brake_time = 0.05;       ///< [s] brake: closed loop ddq = -dq / brake_time (within the torque limit)
     double brake_duration = 0.25;   ///< [s] brake: damping alone this long, then hold the posture reached
-    double retract_distance = 0.05; ///< [m] retract: how far the contact (link end) moves, along J M^-1 J^T f
+    /// [m] retract: how far the contact moves along J M11^-1 J^T f (the point; the farthest from the link's end on)
+    double retract_distance = 0.05;
     double max_retract_angle = 0.5; ///< [rad] retract: largest joint motion of the retract
-    double retract_speed = 0.2;     ///< [m/s] retract: mean speed of the link end along its path
+    double retract_speed = 0.2;     ///< [m/s] retract: mean speed of the contact along its path
     /// [s] retract: longest retract; a longer plan (its joints' velocity bound) is shortened to this, its distance
     /// with it, so that the arm rests within the guard's rest_time
     double max_retract_time = 0.3;

@@ -13,16 +13,20 @@ stay below ``velocity_fraction`` x the joints' velocity limits and ``position_ma
 * ``"brake"``: damping injection tau = g(q) + C(q, dq) dq - M(q) dq / brake_time, the closed loop
   ddq = -dq / brake_time, for ``brake_duration``; then the posture reached is held (impedance (2) around it,
   no disturbance compensation).
-* ``"retract"``: moves the contact away along the joint motion M(q)^-1 J^T f, the velocity an impulse of the contact
-  force f gives the free arm (the "torque reflex" direction of De Luca, Albu-Schaeffer, Haddadin, Hirzinger,
-  IROS 2006): J^T f is the residual (a contact force f gives r = J_c^T f) on the joints up to the isolated (else the
-  most distal crossing) link, the estimated point's J_p^T f, or the wrist sensor's J_s^T f for a measured contact.
-  The point then moves along J M^-1 J^T f, which has a positive component along f (away from the obstacle), with
-  the least kinetic energy for that displacement: the light joints move more than the heavy ones (along J^T f
-  itself, the reaction study's held-stick retracts peaked at 1.0-1.4 J and Atlas' still had 2.3 % of its energy at
-  detection 0.5 s later; 0.07-0.74 J and 0.02 % with M^-1). The point moves by ``retract_distance`` on a
-  minimum-jerk path (less when the joints' velocity bound and ``max_retract_time`` shorten it: the light wrist
-  joints move most, so the end-effector retracts of the study plan 2.7-3.5 cm); then holds.
+* ``"retract"``: moves the contact away along the joint motion M11^-1 J^T f of the joints up to the contact's link
+  (M11 the block of M(q) of those joints; the later joints stay put), the velocity an impulse of the contact force f
+  gives them (the "torque reflex" direction of De Luca, Albu-Schaeffer, Haddadin, Hirzinger, IROS 2006): J^T f is the
+  estimated point's J_p^T f, the wrist sensor's J_s^T f for a measured contact, or, when the isolation names the
+  link but not the point (or did not run), the residual (a contact force f gives r = J_c^T f) on the joints up to
+  the isolated (else the most distal crossing) link. The contact then moves along J M11^-1 J^T f, which has a positive
+  component along f (away from the obstacle), with the least kinetic energy for that displacement among motions of
+  those joints: the light joints move more than the heavy ones (along J^T f itself, the reaction study's
+  held-stick retracts peaked at 1.0-1.4 J; with the full M^-1 the later joints moved too, the wrist by up to 0.5 rad
+  on Atlas' forearm push). The point (without an estimated point: the farthest-moving of the link's far end and every
+  later joint origin and the sensor frame, so that no part of the arm from the contact's link on moves more) moves
+  by ``retract_distance`` on a minimum-jerk path (less when the joints' velocity bound and ``max_retract_time``
+  shorten it: the light wrist joints move most, so the end-effector retracts of the study plan 2.7-3.5 cm); then
+  holds.
 * ``"compliant"``: holds the posture at detection at c K (c = ``compliant_stiffness_factor``) with the damping
   sqrt(c) D (the modal damping of c K: the same modes at sqrt(c) times the frequencies), with the disturbance
   compensation off (kappa_eps -> 0, the compliant mode of Fig. 3).
@@ -77,9 +81,10 @@ class ReactionSettings:
     Attributes:
         brake_time: brake: time constant of the stop, closed loop ddq = -dq / brake_time [s].
         brake_duration: brake: damping alone this long, then the posture reached is held [s].
-        retract_distance: retract: how far the contacted link's far end moves away [m].
+        retract_distance: retract: how far the contact moves away [m] (the estimated point, the sensor frame, or,
+            with the link only, the farthest-moving point from the link's far end on).
         max_retract_angle: retract: largest motion of any joint [rad].
-        retract_speed: retract: mean speed of the link end along the retract [m/s].
+        retract_speed: retract: mean speed of the contact (as ``retract_distance``) along the retract [m/s].
         max_retract_time: retract: longest retract [s]; a plan that its joints' velocity bound makes longer is
             shortened to this (and its distance with it: ``CollisionEvent.retract_planned``), so that the arm
             rests within ``rest_time``.
