@@ -43,10 +43,13 @@ N_TICKS = 300
 #: Accepted ticks over which the core spreads one computation of the modal damping (at most): the contract of
 #: ControllerParams.damping_update_period / Controller.kDampingParts (cpp/include/reflexarm/params.hpp).
 DAMPING_TICKS = 4
+#: The retract plans with the M(q) of the modal damping's last crba when that is at most this many accepted ticks old,
+#: else with M(q) of its own tick: the contract of Controller::kRetractMassAge (cpp/include/reflexarm/controller.hpp).
+RETRACT_MASS_AGE = 10
 
 #: Ticks of a collision's isolation after its fit (the class docstring's rule): one chooses the link and its rank,
-#: one estimates its point and force, and on the next the estimate is in (a waiting retract factorises M(q) on it and
-#: is planned on the tick after).
+#: one estimates its point and force, and on the next the estimate is in (a waiting retract is planned on the tick
+#: after).
 FINISHING_TICKS = 3
 #: Pass-1 points per unit of the isolation's work (ContactIsolator::kTracePoints, cpp/include/reflexarm/isolation.hpp).
 TRACE_POINTS = 16
@@ -107,8 +110,10 @@ class Oracle:
       does no unit, each following tick at most points_per_tick units, then one tick chooses the link (and its
       rank), one estimates its point and force, and the estimate is in on
       the tick after: ceil(units / points_per_tick) + 3 ticks after the beginning (on that tick if there are no
-      units: nothing significant); a retract waiting for it factorises M(q) of that tick and is planned on the next
-      accepted tick (its q and Jacobians, that M; retracting from that tick on);
+      units: nothing significant); a retract waiting for it is planned on the next
+      accepted tick (its q and Jacobians; retracting from that tick on);
+    * a retract's M(q): the modal damping's (its last crba, on an accepted tick) when that is at most
+      RETRACT_MASS_AGE accepted ticks old, else M(q) of the plan's tick;
     * the tick whose isolation comes in does not advance the reaction (brake / retract timing) that tick.
     """
 
@@ -193,7 +198,10 @@ class Oracle:
         self.dq_f: np.ndarray | None = None  # the guard's low-passed dq and M(q) dq
         self.p_f = np.zeros(self.n)
         self.isolating: tuple[Any, int] | None = None  # (estimate, ticks until it is in) of an isolation under way
-        self.retract_mass_q: np.ndarray | None = None  # q of M(q) for a retract planned on the next tick
+        self.retract_due = False  # the isolation's estimate came in on the tick before: the retract's plan is due
+        self.mass: np.ndarray | None = None  # M(q) of the damping's last crba (on an accepted tick) ...
+        self.mass_age = 1 << 20  # ... and the accepted ticks since
+        self.retract_mass = ""  # which M(q) the retract's plan used: "damping" (the damping's) or "own" (its tick's)
         self.t_estimate = self.t_estimated = math.nan
 
     def set_switches(self, kappa_eps: int) -> None:
@@ -281,12 +289,13 @@ class Oracle:
         # D from M(q) every damping_update_period accepted ticks, put in use min(DAMPING_TICKS, period) - 1 ticks
         # later (the core spreads the computation over that many ticks); whole on the first tick after a reset
         D: np.ndarray | None = self.D
-        pending, full = self.pending, self.full
+        pending, full, mass = self.pending, self.full, None
         if self.gravity_mode:
             pending = None
         elif self.countdown == 0:
             Mu = pin.crba(model, self.data, q)
-            new_D = self.modal_damping(np.triu(Mu) + np.triu(Mu, 1).T)
+            mass = np.triu(Mu) + np.triu(Mu, 1).T
+            new_D = self.modal_damping(mass)
             span = 1 if full else min(DAMPING_TICKS, self.damping_update_period)
             D, pending = (new_D, None) if span == 1 else (D, (new_D, span - 1))
             full = False
@@ -296,6 +305,7 @@ class Oracle:
                 D, pending = pending[0], None
         assert D is not None and all(np.all(np.isfinite(x)) for x in (g, C, p, ff, J))
         self.D, self.last_q, self.pending, self.full = D, q.copy(), pending, full
+        self.mass, self.mass_age = (mass, 0) if mass is not None else (self.mass, min(self.mass_age + 1, 1 << 20))
         h = DT if self.last_t is None else min(max(t - self.last_t, 0.5 * DT), 2.0 * DT)
         self.last_t = t
         if self.invalid:
@@ -525,14 +535,18 @@ class Oracle:
         Js = [pin.computeJointJacobian(self.model, self.data, q, j)[:3] for j in range(last + 2, self.model.njoints)]
         return d, [*Js, sensor], last
 
-    def plan_retract(self, q, wrench, measured, mass_q: np.ndarray | None = None) -> None:
-        """The retract's plan at q; M(q) at mass_q if given (a retract that waited for the isolation: M of the tick
-        its estimate came in, the plan on the next)."""
+    def plan_retract(self, q, wrench, measured) -> None:
+        """The retract's plan at q, with the modal damping's M when it is at most RETRACT_MASS_AGE ticks old, else
+        M(q)."""
         rs, ev = self.settings, self.event
         assert ev is not None
         d, Js, last = self.retract_direction(q, wrench, measured)
-        Mu = pin.crba(self.model, self.data, q if mass_q is None else mass_q)
-        M = np.triu(Mu) + np.triu(Mu, 1).T
+        self.retract_mass = "damping" if self.mass is not None and self.mass_age <= RETRACT_MASS_AGE else "own"
+        if self.retract_mass == "damping":
+            M = self.mass
+        else:
+            Mu = pin.crba(self.model, self.data, q)
+            M = np.triu(Mu) + np.triu(Mu, 1).T
         k = last + 1  # the admittance reflex of the joints up to the contact's link; the later ones stay put
         d = np.concatenate([np.linalg.solve(M[:k, :k], d[:k]), np.zeros(self.n - k)])
         if np.linalg.norm(d) > 0:
@@ -565,11 +579,11 @@ class Oracle:
         elif self.awaiting and t - ev["t_detect"] >= rs.isolation_delay - 1e-12:
             isolated = self.begin_isolation(t, q, self.r_det())
         if isolated:
-            if self.reacted and ev["reaction"] == "retract":  # M(q) of this tick; the plan on the next tick
-                self.retract_mass_q = q.copy()
-        elif self.retract_mass_q is not None:  # the retract from the estimate: this tick's q, M(q) of the tick before
-            self.plan_retract(q, np.zeros(6), False, mass_q=self.retract_mass_q)
-            self.retract_mass_q = None
+            if self.reacted and ev["reaction"] == "retract":  # the plan on the next tick
+                self.retract_due = True
+        elif self.retract_due:  # the retract from the estimate, on this tick's q
+            self.plan_retract(q, np.zeros(6), False)
+            self.retract_due = False
             ev["phase"], self.t_phase, self.q_from = "retracting", t, q.copy()
         elif self.reacted:
             braking = ev["phase"] == "braking" and ev["reaction"] == "brake"

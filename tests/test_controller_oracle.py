@@ -369,15 +369,18 @@ def test_tick_isolation_and_retract_equal_the_plain_isolator(panda_contact, reac
         assert abs(np.linalg.norm(moved) - event.retract_planned) < 0.2 * event.retract_planned
 
 
-def test_retract_after_isolation_factorises_m_on_the_tick_before_its_plan(panda_contact):
+@pytest.mark.parametrize(("period", "mass"), [(10, "damping"), (41, "own")])
+def test_retract_after_isolation_plans_with_the_dampings_m_while_it_is_recent(panda_contact, period, mass):
     """The contact of the test above on an arm that keeps moving (0.5 rad/s along one direction, q changes by 5e-4 rad
-    a tick; tau_m = g + C dq - J_c^T f from tick 100): the retract that waited for the estimate uses M(q) of the tick
-    the estimate came in and the q and Jacobians of the next tick, its plan, as the oracle does (q_target to 1e-9:
-    M of the plan's own tick instead moves it by ~1e-5 rad here, a one-tick shift of the plan by ~5e-4 rad)."""
+    a tick; tau_m = g + C dq - J_c^T f from tick 100): the retract that waited for the estimate is planned on the tick
+    after it came in, from that tick's q and Jacobians, with the modal damping's M(q) (its last crba, every
+    `period` accepted ticks) when that is at most 10 ticks old, else with M(q) of the plan's own tick: at period 10
+    always the damping's, at 41 here its own (the plan falls 29 ticks after the last crba). Every tick is compared with
+    the oracle (q_target to 1e-9; the other M moves it by 1e-4 rad at period 10, 1.5e-3 rad at 41)."""
     robot, geometry, c = panda_contact
     settings = ReactionSettings(brake_duration=0.04, retract_speed=0.5, rest_time=0.1)
     o = Oracle(robot, threshold=11.0, reaction="retract", detection_observer_gain=200.0, discretization="exact",
-               settings=settings, geometry=geometry)  # fmt: skip
+               settings=settings, geometry=geometry, damping_update_period=period)  # fmt: skip
     ctrl = controller_like(robot, o)
     u = np.linspace(1.0, -1.0, robot.n) / np.linalg.norm(np.linspace(1.0, -1.0, robot.n))
     dq, zeros, gravity = 0.5 * u, np.zeros(robot.n), np.array([0.0, 0.0, -9.81])
@@ -393,6 +396,7 @@ def test_retract_after_isolation_factorises_m_on_the_tick_before_its_plan(panda_
     event = ctrl.event
     assert event is not None and event.estimate is not None and event.phase in ("retracting", "holding")
     assert np.isfinite(event.retract_planned) and event.retract_planned > 0.0
+    assert o.retract_mass == mass
 
 
 @pytest.mark.parametrize("points_per_tick", [1, 24, 100000])

@@ -170,7 +170,9 @@ def test_the_retract_moves_the_arm_by_its_admittance(atlas):
     (the heavy proximal joints move less than the light distal ones). The core before it moved along J^T f itself,
     which is not parallel to M11^-1 J^T f here, and then along M(q)^-1 J^T f over all joints, which moved the
     later joints too."""
-    o = Oracle(atlas, kappa_eps=1, kappa_ext=0, reaction="retract", detection_observer_gain=30.0, settings=SHORT)
+    # damping_update_period 1: the modal damping's M(q), which the retract uses, is the detecting tick's
+    o = Oracle(atlas, kappa_eps=1, kappa_ext=0, reaction="retract", detection_observer_gain=30.0, settings=SHORT,
+               damping_update_period=1)  # fmt: skip
     ctrl = core_controller(core, atlas, o)
     run_both(atlas, o, ctrl, tau=False, push=40.0, n_ticks=RUN_TICKS)
     ev = ctrl.event

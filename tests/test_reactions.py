@@ -195,8 +195,9 @@ def test_retract_moves_the_sensor_frame_away_along_the_measured_force_and_holds(
 
     plant = ContactPlant(atlas)
     plant.reset(atlas.home)
+    # damping_update_period 1: the modal damping's M(q), which the retract uses, is the detecting tick's
     ctrl = Controller(atlas, reaction="none", contact_reaction="retract", detection_observer_gain=100.0,
-                      reaction_settings=settings)  # fmt: skip
+                      reaction_settings=settings, damping_update_period=1)  # fmt: skip
     z = np.zeros(atlas.n)
     log = run_plant(ctrl, plant, 1500, lambda t: Reference(atlas.home, z, z), wrench=lambda t, q: wrist_force(t, q)[1],
                     on_detect=lambda: contact.update(on=False))  # fmt: skip
@@ -275,8 +276,9 @@ def test_link_retract_moves_only_the_joints_up_to_the_link_and_no_later_point_be
     plant = ContactPlant(atlas)
     plant.reset(atlas.home)
     threshold = np.array([11.0, 11.0, 11.0, 2.0, 1e6, 1e6, 1e6])
+    # damping_update_period 1: the modal damping's M(q), which the retract uses, is the detecting tick's
     ctrl = Controller(atlas, reaction="retract", threshold=threshold, detection_observer_gain=100.0,
-                      contact_geometry=None, reaction_settings=settings)  # fmt: skip
+                      contact_geometry=None, reaction_settings=settings, damping_update_period=1)  # fmt: skip
     z = np.zeros(atlas.n)
     run_plant(ctrl, plant, 700, lambda t: Reference(atlas.home, z, z), on_detect=lambda: contact.update(on=False))
     event = ctrl.event

@@ -23,10 +23,8 @@ namespace reflexarm
   // candidate links only), then one part per following accepted tick (stepIsolation): the fit's units,
   // isolation_points_per_tick a tick; the choice of the link and its rank; its estimate (point, force, what is
   // determined); the estimate in on the tick after: ceil(units / points_per_tick) + 3 ticks after the beginning. A
-  // retract waiting for it factorises M(q) on that tick (crba + LLT) and is planned on the next accepted tick (the
-  // solve M^-1 J^T f and the path from that tick's q and Jacobians; the arm brakes meanwhile, q moves < 1e-3 rad a
-  // tick, so M of one tick earlier changes the direction by O(1e-3) and the distance, scaled with that tick's J, not
-  // at all): no tick runs both. So no tick costs much more than a step of the fit. True if it is in already (no
+  // retract waiting for it is planned on the next accepted tick (the Cholesky factor of the modal damping's M(q),
+  // the solve M11^-1 J^T f and the path from that tick's q and Jacobians; see factorRetractMass): no tick runs both. So no tick costs much more than a step of the fit. True if it is in already (no
   // work: nothing significant, on the tick it began).
   bool Controller::beginIsolation(double t, const State & s, const Eigen::VectorXd & residual) noexcept
   {

@@ -145,9 +145,8 @@ namespace reflexarm
   // retract_speed and the minimum-jerk path's peak joint speed (1.875 x its mean) below velocity_fraction x the
   // velocity limits.
   // The Jacobians are this tick's (data_c_: computeDynamics' computeCoriolisMatrix at s.q left the joint placements
-  // and world Jacobians in it, as computeJointJacobians would). M(q)'s factor: computed here at s.q unless `factored`
-  // (a retract that waited for the isolation: factorRetractMass() on the tick before, see followEvent).
-  void Controller::planRetract(const State & s, bool factored) noexcept
+  // and world Jacobians in it, as computeJointJacobians would). M(q): factorRetractMass's.
+  void Controller::planRetract(const State & s) noexcept
   {
     const ReactionParams & rp = params_.reaction_params;
     CollisionEvent & e = event_;
@@ -159,8 +158,7 @@ namespace reflexarm
     // against 4.3e-5 J at detection. The full M^-1 moved the later joints too, against their own inertia coupling:
     // on Atlas' forearm push the wrist joints by up to 0.5 rad, and the pushed stick's retract kept 70 % of its
     // energy at detection 0.5 s later; 0.015 % with M11.)
-    if (!factored)
-      factorRetractMass(s);
+    factorRetractMass(s);
     if (llt_r_.info() == Eigen::Success)
     {
       // M's leading (last + 1) block: the joints after the contact's link stay put. M11 = U11^T U11 with U11 the
@@ -197,11 +195,19 @@ namespace reflexarm
     retract_time_ = duration;
   }
 
-  // M(q)'s Cholesky factor at s.q for the retract's plan: crba's upper triangle, which LLT<Upper> reads. In the modal
-  // damping's Data (its crba runs every damping_update_period ticks, the result copied into M_, so its crba buffers are
-  // free and in cache): a Data of its own, untouched since configure, made this tick's largest (cold misses, ~1 x a tick)
+  // M(q)'s Cholesky factor for the retract's plan: the modal damping's M_ (crba's upper triangle, which LLT<Upper>
+  // reads) when it is at most kRetractMassAge accepted ticks old, so that the retract's tick runs no crba: every
+  // damping_update_period ticks, 10 by default. The arm is braking or at the detecting tick's speed: at 1 kHz it
+  // moved < 1e-2 rad since (2 rad/s), a 1 % change of M and of the plan. Older (a damping_update_period above
+  // kRetractMassAge + 1): a crba at s.q of its own, in the modal damping's Data (its result is in M_ already, so its
+  // buffers are free and warm).
   void Controller::factorRetractMass(const State & s) noexcept
   {
+    if (mass_age_ <= kRetractMassAge)
+    {
+      llt_r_.compute(M_);
+      return;
+    }
     q_buf_ = s.q;
     llt_r_.compute(pinocchio::crba(model_, data_m_, q_buf_));
   }
@@ -401,18 +407,15 @@ namespace reflexarm
       isolated = beginIsolation(t, s, detectionResidual());
     if (isolated)
     {
-      // the brake so far; the retract from the estimate is planned on the next accepted tick, M(q) factorised now
-      // (crba and its Cholesky factor: no tick runs both them and the plan)
+      // the brake so far; the retract from the estimate is planned on the next accepted tick (no tick runs both
+      // the estimate's last step and the plan)
       if (reacted_ && e.reaction == Reaction::Retract)
-      {
-        factorRetractMass(s);
         retract_due_ = true;
-      }
     }
-    else if (retract_due_) // the retract from the estimate: its plan on this tick's q, M(q) of the tick before
+    else if (retract_due_) // the retract from the estimate: its plan on this tick's q
     {
       retract_due_ = false;
-      planRetract(s, true);
+      planRetract(s);
       e.phase = ReactionPhase::Retracting;
       t_phase_ = t;
       q_from_ = s.q;

@@ -119,6 +119,9 @@ namespace reflexarm
     int dampingPartsRun() const noexcept { return damping_parts_run_; }
     /// Parts of one computation of the modal damping, run on as many consecutive accepted ticks (at most).
     static constexpr int kDampingParts = 4;
+    /// The retract plans with the modal damping's M(q) (crba of its part 0) when that is at most this many accepted
+    /// ticks old (the default damping_update_period is 10: always), else with a crba of its own.
+    static constexpr int kRetractMassAge = 10;
     /// The residual the detector looks at (the detection observer's if there is one).
     const Eigen::VectorXd & detectionResidual() const noexcept
     {
@@ -189,7 +192,7 @@ namespace reflexarm
     void writeCommand(int n_sat, Command & cmd) const noexcept;
     // the collision pipeline after detection (reaction.cpp)
     void startReaction(double t, const State & s) noexcept;
-    void planRetract(const State & s, bool factored = false) noexcept;
+    void planRetract(const State & s) noexcept;
     void factorRetractMass(const State & s) noexcept;
     int retractDirection(const State & s) noexcept;
     double pointMotion(int last) const noexcept;
@@ -240,7 +243,9 @@ namespace reflexarm
     // M(q)'s Cholesky factor for the retract's plan, sized once in configure (no allocation)
     RetractLlt llt_r_ = definedLlt<RetractLlt>(0);
     bool retract_point_known_ = true; // retractDirection found the point it moves (else the link only)
-    bool retract_due_ = false; // llt_r_ holds M(q) of the tick the isolation came in: the retract's plan is due
+    bool retract_due_ = false; // the isolation's estimate came in on the tick before: the retract's plan is due
+    static constexpr int kStaleMass = 1 << 20;
+    int mass_age_ = kStaleMass; // accepted ticks since M_'s crba (the modal damping's part 0), up to kStaleMass
     ContactIsolator isolator_;
     bool has_isolator_ = false;
     double t_phase_ = 0.0, retract_time_ = 0.0, hold_damping_scale_ = 1.0;
