@@ -247,21 +247,25 @@ namespace reflexarm
   // of the link's far end and every point after it (the later joints' origins and the sensor frame). The contact is on
   // that link or, when the isolation erred towards the base (a later link whose joints carry little of the force), on a
   // later one; the link's far end alone can sit near the axis the retract turns about (the UR5-like arm's upper arm
-  // stands on its base axis in the held-stick scene: scaled to its elbow, the forearm swept 19 cm). Uses J_r_.
+  // stands on its base axis in the held-stick scene: scaled to its elbow, the forearm swept 19 cm). The joints after
+  // the link do not move, so every one of those points moves with the link's frame: v + w x (p - o) from the link
+  // joint's twist (v, w) at its origin o, one Jacobian for all of them (into J_r_).
   double Controller::retractMotion(int last) noexcept
   {
     if (retract_point_known_)
       return pointMotion(last);
+    const auto jid = static_cast<pinocchio::JointIndex>(last + 1);
+    pinocchio::getJointJacobian(model_, data_c_, jid, pinocchio::LOCAL_WORLD_ALIGNED, J_r_);
+    Eigen::Matrix<double, 6, 1> twist = Eigen::Matrix<double, 6, 1>::Zero();
+    for (int i = 0; i <= last; ++i)
+      twist += J_r_.col(i) * dq_plan_[i];
+    const Eigen::Vector3d v = twist.head<3>(), w = twist.tail<3>(), o = data_c_.oMi[jid].translation();
     double moved = 0.0;
     for (int id = last + 2; id < model_.njoints; ++id) // joint i's origin (Pinocchio's id i + 1) ends link i - 1
-    {
-      pinocchio::getJointJacobian(
-        model_, data_c_, static_cast<pinocchio::JointIndex>(id), pinocchio::LOCAL_WORLD_ALIGNED, J_r_);
-      moved = std::max(moved, pointMotion(last));
-    }
+      moved = std::max(moved, (v + w.cross(data_c_.oMi[static_cast<std::size_t>(id)].translation() - o)).norm());
     const auto fid = static_cast<pinocchio::FrameIndex>(params_.sensor_frame_id);
-    pinocchio::getFrameJacobian(model_, data_c_, fid, pinocchio::LOCAL_WORLD_ALIGNED, J_r_);
-    return std::max(moved, pointMotion(last));
+    const Eigen::Vector3d p = pinocchio::updateFramePlacement(model_, data_c_, fid).translation();
+    return std::max(moved, (v + w.cross(p - o)).norm());
   }
 
   // |J_lin dq_plan| over the joints 0..last (those that move the point) [m]
