@@ -5,8 +5,8 @@ with a detection observer (exact, 200 1/s), threshold 11 Nm and the retract reac
 (isolation in the ticks) and without. The isolation begins 20 ms after detection (its kinematics), does
 ``isolation_points_per_tick`` units of its fit per following tick (ReactionSettings; a unit: a candidate point's
 constrained fit of pass 2, or 16 points' traces of pass 1), then one tick chooses the link (and its rank), one
-estimates its point and force, on the next the estimate is in, and a waiting retract is planned on the tick after
-(the Cholesky factor of the modal damping's M(q), the solve M11^-1 J^T f and the path, from that tick's q).
+estimates its point and force, on the next the estimate is in (and a waiting retract factorises the modal damping's
+M(q)), and the retract is planned on the tick after (the solve M11^-1 J^T f and the path, from that tick's q).
 
 Timed two ways, in the same run:
 
@@ -56,7 +56,7 @@ ONSET = 100
 DT = 1e-3
 #: A budget that fits the whole fit in the tick after it began (the one-shot fit, for comparison).
 ONE_SHOT = 10**8
-#: Ticks after the fit: the choice of the link, its estimate, the estimate in.
+#: Ticks after the fit: the choice of the link, its estimate, the estimate in (a waiting retract factorises M(q)).
 FINISHING_TICKS = 3
 #: Ticks from the estimate in to the retract's plan (the solve and the path, on the next tick).
 PLAN_TICKS = 1

@@ -113,7 +113,8 @@ class Oracle:
       units: nothing significant); a retract waiting for it is planned on the next
       accepted tick (its q and Jacobians; retracting from that tick on);
     * a retract's M(q): the modal damping's (its last crba, on an accepted tick) when that is at most
-      RETRACT_MASS_AGE accepted ticks old, else M(q) of the plan's tick;
+      RETRACT_MASS_AGE accepted ticks old, else M(q) of that tick; chosen on the tick the estimate comes in (for a
+      retract that waited for it), else on the plan's tick;
     * the tick whose isolation comes in does not advance the reaction (brake / retract timing) that tick.
     """
 
@@ -198,7 +199,7 @@ class Oracle:
         self.dq_f: np.ndarray | None = None  # the guard's low-passed dq and M(q) dq
         self.p_f = np.zeros(self.n)
         self.isolating: tuple[Any, int] | None = None  # (estimate, ticks until it is in) of an isolation under way
-        self.retract_due = False  # the isolation's estimate came in on the tick before: the retract's plan is due
+        self.retract_due: np.ndarray | None = None  # the retract's M, chosen on the tick the estimate came in: plan due
         self.mass: np.ndarray | None = None  # M(q) of the damping's last crba (on an accepted tick) ...
         self.mass_age = 1 << 20  # ... and the accepted ticks since
         self.retract_mass = ""  # which M(q) the retract's plan used: "damping" (the damping's) or "own" (its tick's)
@@ -535,18 +536,22 @@ class Oracle:
         Js = [pin.computeJointJacobian(self.model, self.data, q, j)[:3] for j in range(last + 2, self.model.njoints)]
         return d, [*Js, sensor], last
 
-    def plan_retract(self, q, wrench, measured) -> None:
-        """The retract's plan at q, with the modal damping's M when it is at most RETRACT_MASS_AGE ticks old, else
-        M(q)."""
+    def retract_mass_matrix(self, q) -> np.ndarray:
+        """The retract's M: the modal damping's when it is at most RETRACT_MASS_AGE ticks old, else M(q)."""
+        self.retract_mass = "damping" if self.mass is not None and self.mass_age <= RETRACT_MASS_AGE else "own"
+        if self.retract_mass == "damping":
+            assert self.mass is not None
+            return self.mass
+        Mu = pin.crba(self.model, self.data, q)
+        return np.triu(Mu) + np.triu(Mu, 1).T
+
+    def plan_retract(self, q, wrench, measured, M: np.ndarray | None = None) -> None:
+        """The retract's plan at q; M (a retract that waited for the isolation: chosen on the tick its estimate came
+        in) or, if None, this tick's retract_mass_matrix."""
         rs, ev = self.settings, self.event
         assert ev is not None
         d, Js, last = self.retract_direction(q, wrench, measured)
-        self.retract_mass = "damping" if self.mass is not None and self.mass_age <= RETRACT_MASS_AGE else "own"
-        if self.retract_mass == "damping":
-            M = self.mass
-        else:
-            Mu = pin.crba(self.model, self.data, q)
-            M = np.triu(Mu) + np.triu(Mu, 1).T
+        M = self.retract_mass_matrix(q) if M is None else M
         k = last + 1  # the admittance reflex of the joints up to the contact's link; the later ones stay put
         d = np.concatenate([np.linalg.solve(M[:k, :k], d[:k]), np.zeros(self.n - k)])
         if np.linalg.norm(d) > 0:
@@ -579,11 +584,11 @@ class Oracle:
         elif self.awaiting and t - ev["t_detect"] >= rs.isolation_delay - 1e-12:
             isolated = self.begin_isolation(t, q, self.r_det())
         if isolated:
-            if self.reacted and ev["reaction"] == "retract":  # the plan on the next tick
-                self.retract_due = True
-        elif self.retract_due:  # the retract from the estimate, on this tick's q
-            self.plan_retract(q, np.zeros(6), False)
-            self.retract_due = False
+            if self.reacted and ev["reaction"] == "retract":  # its M chosen now, the plan on the next tick
+                self.retract_due = self.retract_mass_matrix(q)
+        elif self.retract_due is not None:  # the retract from the estimate, on this tick's q
+            self.plan_retract(q, np.zeros(6), False, M=self.retract_due)
+            self.retract_due = None
             ev["phase"], self.t_phase, self.q_from = "retracting", t, q.copy()
         elif self.reacted:
             braking = ev["phase"] == "braking" and ev["reaction"] == "brake"

@@ -370,13 +370,14 @@ def test_tick_isolation_and_retract_equal_the_plain_isolator(panda_contact, reac
 
 
 @pytest.mark.parametrize(("period", "mass"), [(10, "damping"), (41, "own")])
-def test_retract_after_isolation_plans_with_the_dampings_m_while_it_is_recent(panda_contact, period, mass):
+def test_retract_after_isolation_factorises_the_dampings_m_while_it_is_recent(panda_contact, period, mass):
     """The contact of the test above on an arm that keeps moving (0.5 rad/s along one direction, q changes by 5e-4 rad
-    a tick; tau_m = g + C dq - J_c^T f from tick 100): the retract that waited for the estimate is planned on the tick
-    after it came in, from that tick's q and Jacobians, with the modal damping's M(q) (its last crba, every
-    `period` accepted ticks) when that is at most 10 ticks old, else with M(q) of the plan's own tick: at period 10
-    always the damping's, at 41 here its own (the plan falls 29 ticks after the last crba). Every tick is compared with
-    the oracle (q_target to 1e-9; the other M moves it by 1e-4 rad at period 10, 1.5e-3 rad at 41)."""
+    a tick; tau_m = g + C dq - J_c^T f from tick 100): the retract that waited for the estimate factorises its M(q) on
+    the tick the estimate comes in, the modal damping's (its last crba, every `period` accepted ticks) when that is at
+    most 10 ticks old, else that tick's own, and is planned on the next tick from that tick's q and Jacobians: at
+    period 10 always the damping's M, at 41 here its own (the estimate comes in 28 ticks after the last crba). Every
+    tick is compared with the oracle (q_target to 1e-9; the other M moves it by 4e-5 rad at period 10, 1.1e-3 rad at
+    41)."""
     robot, geometry, c = panda_contact
     settings = ReactionSettings(brake_duration=0.04, retract_speed=0.5, rest_time=0.1)
     o = Oracle(robot, threshold=11.0, reaction="retract", detection_observer_gain=200.0, discretization="exact",

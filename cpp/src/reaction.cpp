@@ -145,8 +145,9 @@ namespace reflexarm
   // retract_speed and the minimum-jerk path's peak joint speed (1.875 x its mean) below velocity_fraction x the
   // velocity limits.
   // The Jacobians are this tick's (data_c_: computeDynamics' computeCoriolisMatrix at s.q left the joint placements
-  // and world Jacobians in it, as computeJointJacobians would). M(q): factorRetractMass's.
-  void Controller::planRetract(const State & s) noexcept
+  // and world Jacobians in it, as computeJointJacobians would). M(q): factorRetractMass's, on this tick unless `factored`
+  // (a retract that waited for the isolation: on the tick its estimate came in, see followEvent).
+  void Controller::planRetract(const State & s, bool factored) noexcept
   {
     const ReactionParams & rp = params_.reaction_params;
     CollisionEvent & e = event_;
@@ -158,7 +159,8 @@ namespace reflexarm
     // against 4.3e-5 J at detection. The full M^-1 moved the later joints too, against their own inertia coupling:
     // on Atlas' forearm push the wrist joints by up to 0.5 rad, and the pushed stick's retract kept 70 % of its
     // energy at detection 0.5 s later; 0.015 % with M11.)
-    factorRetractMass(s);
+    if (!factored)
+      factorRetractMass(s);
     if (llt_r_.info() == Eigen::Success)
     {
       // M's leading (last + 1) block: the joints after the contact's link stay put. M11 = U11^T U11 with U11 the
@@ -200,7 +202,8 @@ namespace reflexarm
   // damping_update_period ticks, 10 by default. The arm is braking or at the detecting tick's speed: at 1 kHz it
   // moved < 1e-2 rad since (2 rad/s), a 1 % change of M and of the plan. Older (a damping_update_period above
   // kRetractMassAge + 1): a crba at s.q of its own, in the modal damping's Data (its result is in M_ already, so its
-  // buffers are free and warm).
+  // buffers are free and warm). A retract that waited for the isolation factorises on the tick its estimate comes in
+  // and is planned on the next (followEvent): the factor is ~0.1 x a plain tick, the plan as much again.
   void Controller::factorRetractMass(const State & s) noexcept
   {
     if (mass_age_ <= kRetractMassAge)
@@ -411,15 +414,18 @@ namespace reflexarm
       isolated = beginIsolation(t, s, detectionResidual());
     if (isolated)
     {
-      // the brake so far; the retract from the estimate is planned on the next accepted tick (no tick runs both
-      // the estimate's last step and the plan)
+      // the brake so far; the retract from the estimate: M(q)'s factor now, the plan on the next accepted tick (no
+      // tick runs both the estimate's last step and the plan)
       if (reacted_ && e.reaction == Reaction::Retract)
+      {
+        factorRetractMass(s);
         retract_due_ = true;
+      }
     }
-    else if (retract_due_) // the retract from the estimate: its plan on this tick's q
+    else if (retract_due_) // the retract from the estimate: its plan on this tick's q, M(q)'s factor of the tick before
     {
       retract_due_ = false;
-      planRetract(s);
+      planRetract(s, true);
       e.phase = ReactionPhase::Retracting;
       t_phase_ = t;
       q_from_ = s.q;

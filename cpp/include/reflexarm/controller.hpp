@@ -192,7 +192,7 @@ namespace reflexarm
     void writeCommand(int n_sat, Command & cmd) const noexcept;
     // the collision pipeline after detection (reaction.cpp)
     void startReaction(double t, const State & s) noexcept;
-    void planRetract(const State & s) noexcept;
+    void planRetract(const State & s, bool factored = false) noexcept;
     void factorRetractMass(const State & s) noexcept;
     int retractDirection(const State & s) noexcept;
     double pointMotion(int last) const noexcept;
@@ -243,7 +243,7 @@ namespace reflexarm
     // M(q)'s Cholesky factor for the retract's plan, sized once in configure (no allocation)
     RetractLlt llt_r_ = definedLlt<RetractLlt>(0);
     bool retract_point_known_ = true; // retractDirection found the point it moves (else the link only)
-    bool retract_due_ = false; // the isolation's estimate came in on the tick before: the retract's plan is due
+    bool retract_due_ = false; // llt_r_ holds M(q)'s factor of the tick the isolation came in: the plan is due
     static constexpr int kStaleMass = 1 << 20;
     int mass_age_ = kStaleMass; // accepted ticks since M_'s crba (the modal damping's part 0), up to kStaleMass
     ContactIsolator isolator_;

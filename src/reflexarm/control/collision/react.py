@@ -109,7 +109,7 @@ class ReactionSettings:
             finishing (the choice of the link, its estimate, the estimate in), so a link collision is isolated
             ceil(units / this) + 3 ticks after it began (``CollisionEvent.t_estimated``), units = the sum over the
             candidate links of ceil(m / 16) + m (m points; 1 without geometry); a retract waiting for the estimate
-            is planned (and retracts) from the tick after the estimate comes in,
+            factorises M(q) on the tick it comes in and is planned (and retracts) from the next tick on,
             ceil(units / this) + 4 ticks after the beginning; an integer >= 1. The default, 32, takes 10, 43 and
             27 ticks on the 2 cm controller geometry of Atlas, Panda and iiwa14 (bench/bench_collision_tick.py), so
             that a retract waiting for the estimate ends within the guard's 0.5 s. Inside C++, each isolation tick
