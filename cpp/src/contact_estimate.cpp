@@ -24,8 +24,9 @@ namespace reflexarm
   // isolation_points_per_tick a tick; the choice of the link and its rank; its estimate (point, force, what is
   // determined); the estimate in on the tick after: ceil(units / points_per_tick) + 3 ticks after the beginning. A
   // retract waiting for it factorises M(q) on that tick (the modal damping's, see factorRetractMass) and is planned on
-  // the next accepted tick (the solve M11^-1 J^T f and the path from that tick's q and Jacobians): no tick runs both. So no tick costs much more than a step of the fit. True if it is in already (no
-  // work: nothing significant, on the tick it began).
+  // the next accepted tick (the solve M11^-1 J^T f and the path from that tick's q and Jacobians): no tick runs both.
+  // So no tick costs much more than a step of the fit. True if it is in already (no work: nothing significant, on the
+  // tick it began).
   bool Controller::beginIsolation(double t, const State & s, const Eigen::VectorXd & residual) noexcept
   {
     CollisionEvent & e = event_;

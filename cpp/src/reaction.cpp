@@ -145,8 +145,8 @@ namespace reflexarm
   // retract_speed and the minimum-jerk path's peak joint speed (1.875 x its mean) below velocity_fraction x the
   // velocity limits.
   // The Jacobians are this tick's (data_c_: computeDynamics' computeCoriolisMatrix at s.q left the joint placements
-  // and world Jacobians in it, as computeJointJacobians would). M(q): factorRetractMass's, on this tick unless `factored`
-  // (a retract that waited for the isolation: on the tick its estimate came in, see followEvent).
+  // and world Jacobians in it, as computeJointJacobians would). M(q): factorRetractMass's, on this tick unless
+  // `factored` (a retract that waited for the isolation: on the tick its estimate came in, see followEvent).
   void Controller::planRetract(const State & s, bool factored) noexcept
   {
     const ReactionParams & rp = params_.reaction_params;
@@ -199,11 +199,12 @@ namespace reflexarm
 
   // M(q)'s Cholesky factor for the retract's plan: the modal damping's M_ (crba's upper triangle, which LLT<Upper>
   // reads) when it is at most kRetractMassAge accepted ticks old, so that the retract's tick runs no crba: every
-  // damping_update_period ticks, 10 by default. The arm is braking or at the detecting tick's speed: at 1 kHz it
-  // moved < 1e-2 rad since (2 rad/s), a 1 % change of M and of the plan. Older (a damping_update_period above
-  // kRetractMassAge + 1): a crba at s.q of its own, in the modal damping's Data (its result is in M_ already, so its
-  // buffers are free and warm). A retract that waited for the isolation factorises on the tick its estimate comes in
-  // and is planned on the next (followEvent): the factor is ~0.1 x a plain tick, the plan as much again.
+  // damping_update_period ticks, 10 by default. The arm is braking or at the detecting tick's speed: at 1 kHz and
+  // 2 rad/s it moved < 2e-2 rad since (tests/test_controller_oracle.py: M 28 ticks old at 0.5 rad/s moves the plan's
+  // goal by 1.1e-3 rad). Older (a damping_update_period above kRetractMassAge + 1): a crba at s.q of its own, in the
+  // modal damping's Data (its result is in M_ already, so its buffers are free and warm). A retract that waited for
+  // the isolation factorises on the tick its estimate comes in and is planned on the next (followEvent): the factor
+  // costs ~0.1 x a plain tick, the plan ~0.15 x (bench/bench_collision_tick.py).
   void Controller::factorRetractMass(const State & s) noexcept
   {
     if (mass_age_ <= kRetractMassAge)
@@ -246,13 +247,13 @@ namespace reflexarm
     return last;
   }
 
-  // How far dq_plan_ moves the contact [m]: the known point (J_r_ of retractDirection); without one, the farthest-moving
-  // of the link's far end and every point after it (the later joints' origins and the sensor frame). The contact is on
-  // that link or, when the isolation erred towards the base (a later link whose joints carry little of the force), on a
-  // later one; the link's far end alone can sit near the axis the retract turns about (the UR5-like arm's upper arm
-  // stands on its base axis in the held-stick scene: scaled to its elbow, the forearm swept 19 cm). The joints after
-  // the link do not move, so every one of those points moves with the link's frame: v + w x (p - o) from the link
-  // joint's twist (v, w) at its origin o, one Jacobian for all of them (into J_r_).
+  // How far dq_plan_ moves the contact [m]: the known point (J_r_ of retractDirection); without one, the farthest-
+  // moving of the link's far end and every point after it (the later joints' origins and the sensor frame). The
+  // contact is on that link or, when the isolation erred towards the base (a later link whose joints carry little of
+  // the force), on a later one; the link's far end alone can sit near the axis the retract turns about (the UR5-like
+  // arm's upper arm stands on its base axis in the held-stick scene: scaled to its elbow, the forearm swept 19 cm).
+  // The joints after the link do not move, so every one of those points moves with the link's frame: v + w x (p - o)
+  // from the link joint's twist (v, w) at its origin o, one Jacobian for all of them (into J_r_).
   double Controller::retractMotion(int last) noexcept
   {
     if (retract_point_known_)
