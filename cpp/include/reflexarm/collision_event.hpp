@@ -63,7 +63,8 @@ namespace reflexarm
     double moved = 0.0;          ///< largest max_i |q_i - q_detect_i| from detection on [rad]
     double t_hold = kNaN;        ///< stamp the reaction started to hold a posture
     Eigen::VectorXd q_target;    ///< posture the reaction holds (brake / compliant) or retracts to [rad]
-    double retract_planned = kNaN; ///< retract: how far its plan moves the point it moves [m]
+    /// retract: how far its plan moves the point it moves (the link only: the farthest from the link's end on) [m]
+    double retract_planned = kNaN;
     /// Where and how hard: a measured contact from the wrist sensor at detection (its link, the measured force in the
     /// world frame, the point of its line of action closest to the sensor origin); a collision isolated from the
     /// residual isolation_delay after detection (ContactIsolator, spread over the ticks: t_estimate, t_estimated)

@@ -37,7 +37,8 @@ class CollisionEvent:
         residual: the detection residual at detection (n,) [Nm].
         q_detect: posture at detection (n,) [rad].
         q_target: posture the reaction holds or retracts to (n,) [rad] (q_detect for gravity / none).
-        retract_planned: retract: how far its plan moves the point it moves (NaN for other reactions) [m].
+        retract_planned: retract: how far its plan moves the point it moves (the estimated point, the sensor frame,
+            or, with the link only, the farthest-moving point from the link's far end on; NaN for other reactions) [m].
         wrist_force: |wrist force| at detection [N].
         peak_residual: largest max_i |residual_i| / threshold_i from detection on [-].
         energy_detect: kinetic energy 0.5 dq_f^T (M(q) dq)_f at detection, from the measured dq and M dq low-passed
