@@ -16,7 +16,8 @@ from reflexarm.signals import Measurement
 
 
 class RigidBodyPlant:
-    """M ddq + C dq + g = tau_m + tau_ext(t), integrated with RK4 at ``substeps`` per control period."""
+    """M ddq + C dq + g = tau_m + tau_ext(t) + posture_torque(t, q), integrated with RK4 at ``substeps`` per control
+    period (``posture_torque``: an external torque that depends on the posture, e.g. J_c(q)^T f of a contact force)."""
 
     def __init__(
         self,
@@ -24,6 +25,7 @@ class RigidBodyPlant:
         dt: float = 1e-3,
         substeps: int = 10,
         tau_ext: Callable[[float], np.ndarray] | None = None,
+        posture_torque: Callable[[float, np.ndarray], np.ndarray] | None = None,
     ) -> None:
         self.model = robot.pin_model.copy()
         self.data = self.model.createData()
@@ -31,6 +33,7 @@ class RigidBodyPlant:
         self.h = dt / substeps
         self.substeps = substeps
         self.tau_ext = tau_ext
+        self.posture_torque = posture_torque
         self.n = self.model.nv
         self.t = 0.0
         self.q = np.zeros(self.n)
@@ -49,6 +52,8 @@ class RigidBodyPlant:
 
     def _f(self, t: float, q: np.ndarray, dq: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         total = tau if self.tau_ext is None else tau + self.tau_ext(t)
+        if self.posture_torque is not None:
+            total = total + self.posture_torque(t, q)
         return dq, pin.aba(self.model, self.data, q, dq, total)
 
     def step(self, tau: np.ndarray) -> None:

@@ -189,11 +189,7 @@ def test_retract_moves_the_sensor_frame_away_along_the_measured_force_and_holds(
         R = data.oMf[atlas.sensor_frame_id].rotation  # placed by computeFrameJacobian
         return J[:3].T @ f_world, np.concatenate([R.T @ f_world, np.zeros(3)])
 
-    class ContactPlant(RigidBodyPlant):
-        def _f(self, t, q, dq, tau):
-            return dq, pin.aba(self.model, self.data, q, dq, tau + wrist_force(t, q)[0])
-
-    plant = ContactPlant(atlas)
+    plant = RigidBodyPlant(atlas, posture_torque=lambda t, q: wrist_force(t, q)[0])
     plant.reset(atlas.home)
     # damping_update_period 1: the modal damping's M(q), which the retract uses, is the detecting tick's
     ctrl = Controller(atlas, reaction="none", contact_reaction="retract", detection_observer_gain=100.0,
@@ -261,19 +257,16 @@ def test_link_retract_moves_only_the_joints_up_to_the_link_and_no_later_point_be
     f_world = np.array([-20.0, 45.0, 35.0])
     contact = {"on": True}
 
-    def tau_ext(t, q):
-        if not (contact["on"] and t >= 0.05):
-            return np.zeros(atlas.n)
+    def point_jacobian(q):  # the pushed point's translational Jacobian (world-aligned)
         pin.computeJointJacobians(model, data, q)
         J6 = pin.getJointJacobian(model, data, jid, pin.LOCAL_WORLD_ALIGNED)
-        lever = data.oMi[jid].rotation @ arm
-        return (J6[:3] + np.cross(J6[3:].T, lever).T).T @ f_world
+        return J6[:3] + np.cross(J6[3:].T, data.oMi[jid].rotation @ arm).T
 
-    class ContactPlant(RigidBodyPlant):
-        def _f(self, t, q, dq, tau):
-            return dq, pin.aba(self.model, self.data, q, dq, tau + tau_ext(t, q))
+    def tau_ext(t, q):
+        on = contact["on"] and t >= 0.05
+        return point_jacobian(q).T @ f_world if on else np.zeros(atlas.n)
 
-    plant = ContactPlant(atlas)
+    plant = RigidBodyPlant(atlas, posture_torque=tau_ext)
     plant.reset(atlas.home)
     threshold = np.array([11.0, 11.0, 11.0, 2.0, 1e6, 1e6, 1e6])
     # damping_update_period 1: the modal damping's M(q), which the retract uses, is the detecting tick's
@@ -298,7 +291,4 @@ def test_link_retract_moves_only_the_joints_up_to_the_link_and_no_later_point_be
     assert motion[0] < max(motion)  # the case matters: scaled to the elbow's far end (wrist's origin), some point
     # beyond it would have moved retract_distance x max / motion[0]
     # the pushed point moves away: along J_c M11^-1 J_c^T f, a positive component along f
-    pin.computeJointJacobians(model, data, q0)
-    J6 = pin.getJointJacobian(model, data, jid, pin.LOCAL_WORLD_ALIGNED)
-    Jc = J6[:3] + np.cross(J6[3:].T, data.oMi[jid].rotation @ arm).T
-    assert (Jc @ d) @ f_world > 0.0
+    assert (point_jacobian(q0) @ d) @ f_world > 0.0

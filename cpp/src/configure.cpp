@@ -204,7 +204,6 @@ namespace reflexarm
     damping_countdown_ = 0;
     damping_next_part_ = -1;
     damping_full_ = true;
-    mass_age_ = kStaleMass;
     modal_.has_basis = false; // the first damping after a reset starts cold, as after configure(): bitwise the same
     started_ = false;
     has_t_ = false;

@@ -159,7 +159,6 @@ namespace reflexarm
   {
     last_q_ = q;
     has_last_q_ = true;
-    mass_age_ = parts.first == 0 ? 0 : std::min(mass_age_ + 1, kStaleMass); // M_ is this tick's on part 0
     commitDamping(parts);
   }
 

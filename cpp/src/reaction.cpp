@@ -151,7 +151,8 @@ namespace reflexarm
   {
     const ReactionParams & rp = params_.reaction_params;
     CollisionEvent & e = event_;
-    const int last = retractDirection(s);
+    const RetractTarget target = retractDirection(s);
+    const int last = target.last;
     // the admittance reflex of the joints up to the contact's link: d = M11^-1 J^T f, the joint velocity the contact
     // force's impulse gives those joints with the later ones held; the contact then moves along J M11^-1 J^T f, with
     // the least kinetic energy among their motions for that displacement. (d = J^T f moved the heavy proximal joints
@@ -173,7 +174,7 @@ namespace reflexarm
     const double norm = dq_plan_.norm();
     if (norm > 0.0)
       dq_plan_ /= norm;
-    const double moved = retractMotion(last); // |J_lin d| [m/rad]
+    const double moved = retractMotion(target); // |J_lin d| [m/rad]
     double scale = moved > 1e-9 ? rp.retract_distance / moved : rp.max_retract_angle;
     const double largest = dq_plan_.cwiseAbs().maxCoeff();
     if (largest * scale > rp.max_retract_angle)
@@ -192,7 +193,7 @@ namespace reflexarm
       dq_plan_ *= rp.max_retract_time / duration;
       duration = rp.max_retract_time;
     }
-    e.retract_planned = retractMotion(last); // how far the contact moves [m]
+    e.retract_planned = retractMotion(target); // how far the contact moves [m]
     e.q_target = s.q + dq_plan_;
     retract_time_ = duration;
   }
@@ -207,7 +208,7 @@ namespace reflexarm
   // costs ~0.1 x a plain tick, the plan ~0.15 x (bench/bench_collision_tick.py).
   void Controller::factorRetractMass(const State & s) noexcept
   {
-    if (mass_age_ <= kRetractMassAge)
+    if (massAge() <= kRetractMassAge)
     {
       llt_r_.compute(M_);
       return;
@@ -216,10 +217,10 @@ namespace reflexarm
     llt_r_.compute(pinocchio::crba(model_, data_m_, q_buf_));
   }
 
-  // The retract's direction J^T f into dq_plan_ and, when the point it moves is known (the estimate's point, the
-  // sensor frame), that point's translational Jacobian into J_r_'s first rows (from this tick's kinematics in
-  // data_c_); returns the last joint that moves the contact.
-  int Controller::retractDirection(const State & s) noexcept
+  // The retract's direction J^T f into dq_plan_, and into J_r_ (from this tick's kinematics in data_c_) the Jacobian
+  // its motion is measured with: the translational one of the point it moves when that is known (the estimate's point,
+  // the sensor frame), else the link joint's (world-aligned at its origin; the sensor frame's placement updated too).
+  Controller::RetractTarget Controller::retractDirection(const State & s) noexcept
   {
     CollisionEvent & e = event_;
     const bool measured = e.contact_class == ContactClass::Contact;
@@ -228,23 +229,25 @@ namespace reflexarm
     const int last = measured ? n_ - 1 : isolated >= 0 ? isolated : e.distal_joint < 0 ? n_ - 1 : e.distal_joint;
     J_r_.setZero();
     dq_plan_.setZero();
-    retract_point_known_ = true;
     if (retractFromEstimate())
-      return last;
+      return {last, true};
+    const auto fid = static_cast<pinocchio::FrameIndex>(params_.sensor_frame_id);
+    const pinocchio::SE3 & sensor = pinocchio::updateFramePlacement(model_, data_c_, fid);
     if (measured)
     {
       // the sensor measures the wrench on the arm beyond it in its own frame: rotate the force to the world
-      const auto fid = static_cast<pinocchio::FrameIndex>(params_.sensor_frame_id);
       pinocchio::getFrameJacobian(model_, data_c_, fid, pinocchio::LOCAL_WORLD_ALIGNED, J_r_);
-      const Eigen::Vector3d f = pinocchio::updateFramePlacement(model_, data_c_, fid).rotation() * s.wrench.head<3>();
+      const Eigen::Vector3d f = sensor.rotation() * s.wrench.head<3>();
       for (int i = 0; i < n_; ++i)
         dq_plan_[i] = J_r_.col(i).head<3>().dot(f);
-      return last;
+      return {last, true};
     }
-    retract_point_known_ = false; // the link, not the point on it: the residual r = J_c^T f on the joints up to it
+    // the link, not the point on it: the residual r = J_c^T f on the joints up to it
+    pinocchio::getJointJacobian(
+      model_, data_c_, static_cast<pinocchio::JointIndex>(last + 1), pinocchio::LOCAL_WORLD_ALIGNED, J_r_);
     for (int i = 0; i <= last; ++i)
       dq_plan_[i] = e.residual[i];
-    return last;
+    return {last, false};
   }
 
   // How far dq_plan_ moves the contact [m]: the known point (J_r_ of retractDirection); without one, the farthest-
@@ -253,23 +256,22 @@ namespace reflexarm
   // the force), on a later one; the link's far end alone can sit near the axis the retract turns about (the UR5-like
   // arm's upper arm stands on its base axis in the held-stick scene: scaled to its elbow, the forearm swept 19 cm).
   // The joints after the link do not move, so every one of those points moves with the link's frame: v + w x (p - o)
-  // from the link joint's twist (v, w) at its origin o, one Jacobian for all of them (into J_r_).
-  double Controller::retractMotion(int last) noexcept
+  // from the link joint's twist (v, w) at its origin o (J_r_ of retractDirection).
+  double Controller::retractMotion(const RetractTarget & target) const noexcept
   {
-    if (retract_point_known_)
+    const int last = target.last;
+    if (target.point_known)
       return pointMotion(last);
-    const auto jid = static_cast<pinocchio::JointIndex>(last + 1);
-    pinocchio::getJointJacobian(model_, data_c_, jid, pinocchio::LOCAL_WORLD_ALIGNED, J_r_);
     Eigen::Matrix<double, 6, 1> twist = Eigen::Matrix<double, 6, 1>::Zero();
     for (int i = 0; i <= last; ++i)
       twist += J_r_.col(i) * dq_plan_[i];
-    const Eigen::Vector3d v = twist.head<3>(), w = twist.tail<3>(), o = data_c_.oMi[jid].translation();
-    double moved = 0.0;
+    const Eigen::Vector3d v = twist.head<3>(), w = twist.tail<3>();
+    const Eigen::Vector3d o = data_c_.oMi[static_cast<std::size_t>(last + 1)].translation();
+    const Eigen::Vector3d sensor = data_c_.oMf[static_cast<std::size_t>(params_.sensor_frame_id)].translation();
+    double moved = (v + w.cross(sensor - o)).norm();
     for (int id = last + 2; id < model_.njoints; ++id) // joint i's origin (Pinocchio's id i + 1) ends link i - 1
       moved = std::max(moved, (v + w.cross(data_c_.oMi[static_cast<std::size_t>(id)].translation() - o)).norm());
-    const auto fid = static_cast<pinocchio::FrameIndex>(params_.sensor_frame_id);
-    const Eigen::Vector3d p = pinocchio::updateFramePlacement(model_, data_c_, fid).translation();
-    return std::max(moved, (v + w.cross(p - o)).norm());
+    return moved;
   }
 
   // |J_lin dq_plan| over the joints 0..last (those that move the point) [m]

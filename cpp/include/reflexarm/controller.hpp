@@ -194,9 +194,20 @@ namespace reflexarm
     void startReaction(double t, const State & s) noexcept;
     void planRetract(const State & s, bool factored = false) noexcept;
     void factorRetractMass(const State & s) noexcept;
-    int retractDirection(const State & s) noexcept;
+    // Accepted ticks since M_'s crba, after commitTick: the damping's part 0 runs when the countdown is 0, and
+    // commitTick then sets it to damping_update_period - 1. (Not in gravity compensation (13), where the countdown
+    // stands still; no retract runs then.)
+    int massAge() const noexcept { return params_.damping_update_period - 1 - damping_countdown_; }
+    /// What the retract moves: the last joint that moves the contact, and whether J_r_ is the contact point's own
+    /// Jacobian (else the link joint's: the contact is somewhere from that link on).
+    struct RetractTarget
+    {
+      int last;
+      bool point_known;
+    };
+    RetractTarget retractDirection(const State & s) noexcept;
     double pointMotion(int last) const noexcept;
-    double retractMotion(int last) noexcept;
+    double retractMotion(const RetractTarget & target) const noexcept;
     void estimateContact(const State & s) noexcept;
     bool beginIsolation(double t, const State & s, const Eigen::VectorXd & residual) noexcept;
     bool stepIsolation(double t) noexcept;
@@ -242,10 +253,7 @@ namespace reflexarm
     using RetractLlt = Eigen::LLT<Eigen::MatrixXd, Eigen::Upper>;
     // M(q)'s Cholesky factor for the retract's plan, sized once in configure (no allocation)
     RetractLlt llt_r_ = definedLlt<RetractLlt>(0);
-    bool retract_point_known_ = true; // retractDirection found the point it moves (else the link only)
     bool retract_due_ = false; // llt_r_ holds M(q)'s factor of the tick the isolation came in: the plan is due
-    static constexpr int kStaleMass = 1 << 20;
-    int mass_age_ = kStaleMass; // accepted ticks since M_'s crba (the modal damping's part 0), up to kStaleMass
     ContactIsolator isolator_;
     bool has_isolator_ = false;
     double t_phase_ = 0.0, retract_time_ = 0.0, hold_damping_scale_ = 1.0;
