@@ -139,6 +139,24 @@ def test_core_matches_python(arms, name, noisy):
     assert Determined.POINT_AND_FORCE in seen  # the comparison covered the determined case
 
 
+@pytest.mark.parametrize("edges", [5, 12])
+def test_core_matches_python_with_another_pyramid(arms, edges):
+    """The core's fit has a compiled form for the default 8-edge pyramid (fitRangeK<8>) and a run-time one for any
+    other edge count: the latter against Python too (noisy Panda contacts, so that facets and edges are chosen)."""
+    robot = _arm(arms, "panda")
+    geometry = link_collision_geometry(robot, spacing=SPACING)
+    truth = link_collision_geometry(robot, spacing=0.004, seed=3)
+    kw = {"significance": np.full(robot.n, NOISY_SIGNIFICANCE), "fit_tolerance": NOISY_FIT_TOLERANCE,
+          "cone_edges": edges}  # fmt: skip
+    py = ContactIsolator(robot, geometry=geometry, **kw)
+    cc = CoreContactIsolator(robot, geometry=geometry, **kw)
+    rng = np.random.default_rng(11)
+    for i, c in enumerate(draw_contacts(robot, truth, CONTACTS // 4, seed=31)):
+        r = c.torque + rng.normal(0.0, NOISE, robot.n)
+        a, b = py.isolate(c.q, r), cc.isolate(c.q, r)
+        _assert_same(a, b, f"{edges} edges, contact {i}", _tie_check(py, cc, c.q, r, f"{edges} edges, contact {i}"))
+
+
 def test_no_contact_and_undetectable(arms):
     robot = arms["panda"]
     geometry = link_collision_geometry(robot, spacing=SPACING)

@@ -16,6 +16,12 @@ namespace reflexarm
 {
   using namespace isolation_detail;
 
+  namespace
+  {
+    /// estimateLink: the relative band of joint-frame distances within which the world distance is formed
+    constexpr double kSpreadTies = 1e-9;
+  } // namespace
+
   void ContactIsolator::configure(
     const pinocchio::Model & model, const std::vector<LinkSurfaceData> & surfaces, const IsolationParams & params)
   {
@@ -154,20 +160,27 @@ namespace reflexarm
     out.point = pb;
     out.force = fb;
     out.fit_error = std::sqrt(e2);
-    // the consistent set: the forces in the joint frame (magnitudes and angles do not depend on it), the points'
-    // distances from the world points as identify.py forms them (R p + o), so that a distance on the candidate grid
-    // (e.g. exactly 5.25 cm) rounds as in Python where the reason prints it
+    // the consistent set, in the joint frame (magnitudes, angles and distances do not depend on it); the largest
+    // distance from the best point formed from the world points as identify.py forms them (R p + o), so that a
+    // distance on the candidate grid (e.g. exactly 5.25 cm) rounds as in Python where the reason prints it: for the
+    // points within a relative kSpreadTies of the largest joint-frame distance so far only: they include every point
+    // where the world distance can be largest (the two frames' squared distances differ by round-off, ~1e-16 |p|^2)
     const double limit = L.errors[best] + tolerance;
     int count = 0;
-    double spread2 = 0.0, max_rel = 0.0, min_cos = kInf;
+    double far2 = 0.0, spread2 = 0.0, max_rel = 0.0, min_cos = kInf;
     const double ref = fl.norm();
     for (Eigen::Index i = 0; i < L.errors.size(); ++i)
     {
       if (!(L.errors[i] <= limit))
         continue;
       ++count;
-      const Eigen::Vector3d pi = L.rotation * L.points_local.row(i).transpose() + L.origin;
-      spread2 = std::max(spread2, (pi - pb).squaredNorm());
+      const double d2 = (L.points_local.row(i).transpose() - pl).squaredNorm();
+      if (d2 >= far2 * (1.0 - kSpreadTies))
+      {
+        far2 = std::max(far2, d2);
+        const Eigen::Vector3d pi = L.rotation * L.points_local.row(i).transpose() + L.origin;
+        spread2 = std::max(spread2, (pi - pb).squaredNorm());
+      }
       const Eigen::Vector3d fi = L.forces.row(i).transpose();
       const double mag = fi.norm();
       min_cos = std::min(min_cos, fi.dot(fl) / std::max(mag * ref, kTiny));
@@ -177,13 +190,19 @@ namespace reflexarm
     out.point_spread = std::sqrt(spread2); // the largest distance (sqrt is monotonic)
     out.force_variation = max_rel / std::max(ref, kTiny);
     out.direction_variation_deg = std::acos(std::clamp(min_cos, -1.0, 1.0)) * (180.0 / M_PI);
-    // rank of J_p J_p^T at the best point (eigenvalues: squared singular values)
-    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(A, Eigen::EigenvaluesOnly);
-    const auto & ev = eig.eigenvalues();
-    int force_rank = 0;
-    if (ev[2] > 0.0)
-      for (int i = 0; i < 3; ++i)
-        force_rank += ev[i] > kRankTolerance * kRankTolerance * ev[2];
+    // rank of J_p J_p^T at the best point (eigenvalues: squared singular values), by Sturm counts (psdRank); only when
+    // an eigenvalue lies within a factor 3 of the threshold, the eigenvalues themselves
+    const double tol2 = kRankTolerance * kRankTolerance;
+    int force_rank = psdRank<3>(A, tol2);
+    if (force_rank < 0)
+    {
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(A, Eigen::EigenvaluesOnly);
+      const auto & ev = eig.eigenvalues();
+      force_rank = 0;
+      if (ev[2] > 0.0)
+        for (int i = 0; i < 3; ++i)
+          force_rank += ev[i] > tol2 * ev[2];
+    }
     out.force_rank = force_rank;
     if (force_rank < 3)
     {

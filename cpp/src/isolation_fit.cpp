@@ -90,9 +90,31 @@ namespace reflexarm
 
   void ContactIsolator::fitRange(int link, Eigen::Index begin, Eigen::Index end) noexcept
   {
+    if (K_ == kDefaultConeEdges)
+      fitRangeK<kDefaultConeEdges>(link, begin, end);
+    else
+      fitRangeK<0>(link, begin, end);
+  }
+
+  // KC > 0: the pyramid's K = KC edges known at compile time (the default 8): the per-edge values live in local arrays
+  // and the loops over the edges unroll; KC = 0: K_ edges, the members' buffers. The same operations in the same
+  // order either way (the same numbers bit for bit).
+  template <int KC>
+  void ContactIsolator::fitRangeK(int link, Eigen::Index begin, Eigen::Index end) noexcept
+  {
+    constexpr int KS = KC > 0 ? KC : 1;
+    double h_local[KS], gg_local[KS], g12_local[KS], x1_local[KS], x2_local[KS], t_local[KS];
+    Eigen::Matrix<double, KS, 3, Eigen::RowMajor> ad_local;
+    double * const hk = KC > 0 ? h_local : h_.data();
+    double * const gg = KC > 0 ? gg_local : gg_.data();
+    double * const g12 = KC > 0 ? g12_local : g12_.data();
+    double * const x1 = KC > 0 ? x1_local : x1_.data();
+    double * const x2 = KC > 0 ? x2_local : x2_.data();
+    double * const tk = KC > 0 ? t_local : t_.data();
+    Eigen::Map<Rows3> ad(KC > 0 ? ad_local.data() : ad_.data(), KC > 0 ? KC : K_, 3);
     LinkBuffers & L = links_[static_cast<size_t>(link)];
     const Eigen::VectorXd & r = weighted_residual_;
-    const int K = K_;
+    const int K = KC > 0 ? KC : K_;
     const double floor = L.floor;
     int best = L.best;
     double best_error = L.best_error;
@@ -146,15 +168,15 @@ namespace reflexarm
       {
         const Eigen::Vector3d dk = row3(D.row(k));
         const Eigen::Vector3d Adk = A * dk;
-        ad_.row(k) = Adk.transpose();
-        h_[k] = dk.dot(b);
-        gg_[k] = dk.dot(Adk);
+        ad.row(k) = Adk.transpose();
+        hk[k] = dk.dot(b);
+        gg[k] = dk.dot(Adk);
       }
       for (int k = 0; k < K; ++k) // G[k, k+1] = d_k . A d_k+1
-        g12_[k] = D.row(k).dot(ad_.row(k + 1 < K ? k + 1 : 0));
+        g12[k] = D.row(k).dot(ad.row(k + 1 < K ? k + 1 : 0));
       // edges: f = t d_k, t = max(h_k, 0) / gg_k >= 0 (divided only where h_k > 0: else t = 0 as well)
       for (int k = 0; k < K; ++k)
-        t_[k] = gg_[k] > floor && h_[k] > 0.0 ? h_[k] / gg_[k] : 0.0;
+        tk[k] = gg[k] > floor && hk[k] > 0.0 ? hk[k] / gg[k] : 0.0;
       // the best feasible candidate: first maximum over [interior, facets, edges, apex], as np.argmax
       int choice = 0;
       double top = -kInf;
@@ -170,14 +192,14 @@ namespace reflexarm
       for (int k = 0; k < K; ++k)
       {
         const int l = k + 1 < K ? k + 1 : 0; // (k + 1) mod K without an integer division
-        const double det = gg_[k] * gg_[l] - g12_[k] * g12_[k];
-        const double n1 = gg_[l] * h_[k] - g12_[k] * h_[l], n2 = gg_[k] * h_[l] - g12_[k] * h_[k];
+        const double det = gg[k] * gg[l] - g12[k] * g12[k];
+        const double n1 = gg[l] * hk[k] - g12[k] * hk[l], n2 = gg[k] * hk[l] - g12[k] * hk[k];
         // feasible: solvable (det > 0) and x = n / det >= 0, i.e. n >= 0: divided only then (~2 of the K facets)
-        if (!(gg_[k] > floor && gg_[l] > floor && det > kFacetCondition * gg_[k] * gg_[l] && n1 >= 0.0 && n2 >= 0.0))
+        if (!(gg[k] > floor && gg[l] > floor && det > kFacetCondition * gg[k] * gg[l] && n1 >= 0.0 && n2 >= 0.0))
           continue;
-        x1_[k] = n1 / det;
-        x2_[k] = n2 / det;
-        const double red = x1_[k] * h_[k] + x2_[k] * h_[l];
+        x1[k] = n1 / det;
+        x2[k] = n2 / det;
+        const double red = x1[k] * hk[k] + x2[k] * hk[l];
         if (red > top)
         {
           top = red;
@@ -186,7 +208,7 @@ namespace reflexarm
       }
       for (int k = 0; k < K; ++k)
       {
-        const double red = t_[k] * h_[k];
+        const double red = tk[k] * hk[k];
         if (red > top)
         {
           top = red;
@@ -201,12 +223,12 @@ namespace reflexarm
       else if (choice <= K)
       {
         const int k = choice - 1;
-        f = x1_[k] * row3(D.row(k)) + x2_[k] * row3(D.row(k + 1 < K ? k + 1 : 0));
+        f = x1[k] * row3(D.row(k)) + x2[k] * row3(D.row(k + 1 < K ? k + 1 : 0));
       }
       else if (choice <= 2 * K)
       {
         const int k = choice - 1 - K;
-        f = t_[k] * row3(D.row(k));
+        f = tk[k] * row3(D.row(k));
       }
       L.forces.row(i) = f.transpose();
       // error |W (J_p^T f - r)|: row c of W J_p^T . f = u_c . f + (v_c x p) . f = u_c . f + v_c . (p x f)
@@ -229,59 +251,26 @@ namespace reflexarm
   }
 
   // ---------------------------------------------------------------- the choice's rank and a link without geometry
-  namespace
-  {
-    /// Eigenvalues of the symmetric tridiagonal (diag, sub) below x: the negative pivots of its LDL^T - x I
-    /// (Sturm count, backward stable).
-    template <typename Diag, typename Sub>
-    int eigenvaluesBelow(const Diag & diag, const Sub & sub, double x)
-    {
-      int count = 0;
-      double q = diag[0] - x;
-      for (Eigen::Index i = 0;; ++i)
-      {
-        if (q == 0.0)
-          q = -std::numeric_limits<double>::epsilon() * (std::abs(x) + std::numeric_limits<double>::min());
-        count += q < 0.0;
-        if (i + 1 >= diag.size())
-          return count;
-        q = diag[i + 1] - x - sub[i] * sub[i] / q;
-      }
-    }
-  } // namespace
 
   int ContactIsolator::linkRank(int link) noexcept
   {
     const Jac & J = links_[static_cast<size_t>(link)].jacobian;
     Eigen::Matrix<double, 6, 6> G;
     for (int i = 0; i < 6; ++i)
-      for (int j = 0; j < 6; ++j)
+      for (int j = i; j < 6; ++j)
       {
         double s = 0.0;
         for (int c = 0; c <= link; ++c)
           s += J(i, c) * J(j, c);
-        G(i, j) = s;
+        G(i, j) = G(j, i) = s;
       }
-    // the rank: eigenvalues of G (squared singular values of J[:, :link+1]) above kRankTolerance^2 x the largest.
-    // SelfAdjointEigenSolver::compute's first half (its scaling and its tridiagonal T), then Sturm counts on T: the
-    // largest eigenvalue of the PSD G lies in [trace / 6, trace], so if no eigenvalue lies between the thresholds
-    // of those two, the count at either is the rank; otherwise (an eigenvalue within a factor 6 of the threshold)
-    // compute's second half, the eigenvalues themselves, as before. Same rank, a third of the cost.
-    Eigen::Matrix<double, 6, 6> mat = G.triangularView<Eigen::Lower>();
-    const double scale = mat.cwiseAbs().maxCoeff();
-    if (!(scale > 0.0))
-      return 0;
-    mat.triangularView<Eigen::Lower>() /= scale;
-    Eigen::Matrix<double, 6, 1> diag;
-    Eigen::Matrix<double, 5, 1> sub, hcoeffs;
-    Eigen::internal::tridiagonalization_inplace(mat, diag, sub, hcoeffs, false);
-    const double trace = diag.sum(), tol2 = kRankTolerance * kRankTolerance;
-    if (!(trace > 0.0))
-      return 0;
-    const int below_lo = eigenvaluesBelow(diag, sub, tol2 * trace / 6.0 * (1.0 - 1e-9));
-    const int below_hi = eigenvaluesBelow(diag, sub, tol2 * trace * (1.0 + 1e-9));
-    if (below_lo == below_hi)
-      return 6 - below_lo;
+    // the rank: eigenvalues of G (squared singular values of J[:, :link+1]) above kRankTolerance^2 x the largest, by
+    // Sturm counts on G's tridiagonal form (psdRank); only when an eigenvalue lies within a factor 6 of the threshold,
+    // the eigenvalues themselves
+    const int decided = psdRank<6>(G, kRankTolerance * kRankTolerance);
+    if (decided >= 0)
+      return decided;
+    const double tol2 = kRankTolerance * kRankTolerance;
     link_eig_.compute(G, Eigen::EigenvaluesOnly);
     const auto & w = link_eig_.eigenvalues(); // ascending
     const double top = w[5];

@@ -14,7 +14,11 @@
 #include "pinocchio/algorithm/rnea.hpp"
 #include "pinocchio/multibody/sample-models.hpp"
 
+#include <Eigen/QR>
+
 #include "reflexarm/isolation.hpp"
+
+#include "../src/isolation_detail.hpp" // the rank helpers (private to the isolator)
 
 #include "alloc_counter.hpp"
 
@@ -342,6 +346,55 @@ namespace
     s[1].normals(0, 0) = 2.0;
     CHECK(throws(s, params(), "surface of joint 1: normals must be unit vectors"), "non-unit normal");
   }
+
+  /// psdRank<N> (the choice's link rank, the estimate's force rank): the Householder tridiagonal form keeps the
+  /// eigenvalues (against Eigen's solver); the rank of B B^T with B of rank r is r; an eigenvalue within the
+  /// factor-N bracket of the threshold is left undecided (-1) for the caller's eigenvalues.
+  template <int N>
+  void testPsdRank(std::mt19937 & rng)
+  {
+    using Mat = Eigen::Matrix<double, N, N>;
+    std::normal_distribution<double> normal;
+    const auto random = [&](int rows, int cols) {
+      Eigen::MatrixXd m(rows, cols);
+      for (int i = 0; i < rows; ++i)
+        for (int j = 0; j < cols; ++j)
+          m(i, j) = normal(rng);
+      return m;
+    };
+    const double tol2 = 1e-12; // kRankTolerance^2
+    for (int r = 0; r <= N; ++r)
+      for (int trial = 0; trial < 20; ++trial)
+      {
+        const Eigen::MatrixXd B = random(N, r);
+        const Mat G = B * B.transpose();
+        const int rank = reflexarm::isolation_detail::psdRank<N>(G, tol2);
+        CHECK(rank == r, "N %d: rank of B B^T with B of rank %d: %d", N, r, rank);
+        Mat a = G;
+        Eigen::Matrix<double, N, 1> diag;
+        Eigen::Matrix<double, N - 1, 1> sub;
+        reflexarm::isolation_detail::tridiagonalize<N>(a, diag, sub);
+        Mat T = Mat::Zero();
+        T.diagonal() = diag;
+        for (int i = 0; i + 1 < N; ++i)
+          T(i + 1, i) = T(i, i + 1) = sub[i];
+        const Eigen::Matrix<double, N, 1> want = Eigen::SelfAdjointEigenSolver<Mat>(G).eigenvalues();
+        const Eigen::Matrix<double, N, 1> got = Eigen::SelfAdjointEigenSolver<Mat>(T).eigenvalues();
+        const double err = (got - want).cwiseAbs().maxCoeff() / std::max(want.cwiseAbs().maxCoeff(), 1e-300);
+        CHECK(r == 0 || err < 1e-12, "N %d rank %d: tridiagonal eigenvalues off by %g relative", N, r, err);
+      }
+    // one eigenvalue at 1.5e-12 of the largest (1): between tol2 x trace / N and tol2 x trace (N - 1 = trace), undecided
+    const Eigen::HouseholderQR<Eigen::MatrixXd> qr(random(N, N));
+    const Mat Q = qr.householderQ();
+    Eigen::Matrix<double, N, 1> ev = Eigen::Matrix<double, N, 1>::Ones();
+    ev[0] = 1.5e-12;
+    const Mat G = Q * ev.asDiagonal() * Q.transpose();
+    CHECK(reflexarm::isolation_detail::psdRank<N>(G, tol2) == -1, "N %d: an eigenvalue at the threshold decided", N);
+    ev[0] = 1e-14; // well below: rank N - 1
+    const Mat G2 = Q * ev.asDiagonal() * Q.transpose();
+    CHECK(reflexarm::isolation_detail::psdRank<N>(G2, tol2) == N - 1, "N %d: a 1e-14 eigenvalue counted", N);
+    CHECK(reflexarm::isolation_detail::psdRank<N>(Mat::Zero(), tol2) == 0, "N %d: zero matrix", N);
+  }
 } // namespace
 
 int main()
@@ -355,6 +408,9 @@ int main()
   testSteppedEqualsOneShot();
   testCallerKinematics();
   testBadInput();
+  std::mt19937 rng(4);
+  testPsdRank<3>(rng);
+  testPsdRank<6>(rng);
   std::printf("%d passed, %d failed\n", g_passed, g_failed);
   return g_failed == 0 ? 0 : 1;
 }

@@ -212,6 +212,11 @@ namespace reflexarm
     void traceRange(int link, Eigen::Index begin, Eigen::Index end) noexcept;
     /// pass 2 over points [begin, end): the constrained fit, the errors, the best point so far
     void fitRange(int link, Eigen::Index begin, Eigen::Index end) noexcept;
+    /// fitRange with the pyramid's edge count KC fixed at compile time (0: K_ at run time)
+    template <int KC>
+    void fitRangeK(int link, Eigen::Index begin, Eigen::Index end) noexcept;
+    /// IsolationParams::cone_edges' default, the edge count fitRange has a compiled form for
+    static constexpr int kDefaultConeEdges = 8;
     /// finish()'s stages: the choice of the link and its rank (1), its estimate (2), into estimate_
     void chooseLink() noexcept;
     void estimateLink(int link, double tolerance, ContactEstimateData & out) noexcept;
