@@ -473,7 +473,7 @@ class Oracle:
         elif reaction == "retract" and self.awaiting:  # brake until isolated, then retract from the estimate
             ev["phase"] = "braking"
         elif reaction == "retract":
-            self.plan_retract(q, wrench, measured)
+            self.plan_retract(q, wrench, measured, self.retract_mass_matrix(q))
             ev["phase"] = "retracting"
         elif reaction == "compliant":
             ev["q_target"] = np.clip(q, self.safe_lo, self.safe_hi)
@@ -545,13 +545,12 @@ class Oracle:
         Mu = pin.crba(self.model, self.data, q)
         return np.triu(Mu) + np.triu(Mu, 1).T
 
-    def plan_retract(self, q, wrench, measured, M: np.ndarray | None = None) -> None:
-        """The retract's plan at q; M (a retract that waited for the isolation: chosen on the tick its estimate came
-        in) or, if None, this tick's retract_mass_matrix."""
+    def plan_retract(self, q, wrench, measured, M: np.ndarray) -> None:
+        """The retract's plan at q with M, the caller's retract_mass_matrix: of this tick, or for a retract that
+        waited for the isolation of the tick its estimate came in."""
         rs, ev = self.settings, self.event
         assert ev is not None
         d, Js, last = self.retract_direction(q, wrench, measured)
-        M = self.retract_mass_matrix(q) if M is None else M
         k = last + 1  # the admittance reflex of the joints up to the contact's link; the later ones stay put
         d = np.concatenate([np.linalg.solve(M[:k, :k], d[:k]), np.zeros(self.n - k)])
         if np.linalg.norm(d) > 0:
@@ -587,7 +586,7 @@ class Oracle:
             if self.reacted and ev["reaction"] == "retract":  # its M chosen now, the plan on the next tick
                 self.retract_due = self.retract_mass_matrix(q)
         elif self.retract_due is not None:  # the retract from the estimate, on this tick's q
-            self.plan_retract(q, np.zeros(6), False, M=self.retract_due)
+            self.plan_retract(q, np.zeros(6), False, self.retract_due)
             self.retract_due = None
             ev["phase"], self.t_phase, self.q_from = "retracting", t, q.copy()
         elif self.reacted:

@@ -190,19 +190,9 @@ namespace reflexarm
     out.point_spread = std::sqrt(spread2); // the largest distance (sqrt is monotonic)
     out.force_variation = max_rel / std::max(ref, kTiny);
     out.direction_variation_deg = std::acos(std::clamp(min_cos, -1.0, 1.0)) * (180.0 / M_PI);
-    // rank of J_p J_p^T at the best point (eigenvalues: squared singular values), by Sturm counts (psdRank); only when
-    // an eigenvalue lies within a factor 3 of the threshold, the eigenvalues themselves
-    const double tol2 = kRankTolerance * kRankTolerance;
-    int force_rank = psdRank<3>(A, tol2);
-    if (force_rank < 0)
-    {
-      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(A, Eigen::EigenvaluesOnly);
-      const auto & ev = eig.eigenvalues();
-      force_rank = 0;
-      if (ev[2] > 0.0)
-        for (int i = 0; i < 3; ++i)
-          force_rank += ev[i] > tol2 * ev[2];
-    }
+    // rank of J_p J_p^T at the best point (eigenvalues: squared singular values), by Sturm counts; only when an
+    // eigenvalue lies within a factor 3 of the threshold, the eigenvalues themselves (psdRankExact)
+    const int force_rank = psdRankExact<3>(A, kRankTolerance * kRankTolerance);
     out.force_rank = force_rank;
     if (force_rank < 3)
     {

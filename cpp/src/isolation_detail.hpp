@@ -8,6 +8,7 @@
 #include <limits>
 
 #include <Eigen/Core>
+#include <Eigen/Eigenvalues>
 
 namespace reflexarm
 {
@@ -118,6 +119,23 @@ namespace reflexarm
       const int below_lo = eigenvaluesBelow(diag, sub, tol2 * trace / N * (1.0 - 1e-9));
       const int below_hi = eigenvaluesBelow(diag, sub, tol2 * trace * (1.0 + 1e-9));
       return below_lo == below_hi ? N - below_lo : -1;
+    }
+
+    /// psdRank, decided: when psdRank leaves it undecided, from the eigenvalues (fixed size: no allocation).
+    template <int N>
+    int psdRankExact(const Eigen::Matrix<double, N, N> & g, double tol2) noexcept
+    {
+      const int rank = psdRank<N>(g, tol2);
+      if (rank >= 0)
+        return rank;
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, N, N>> eig(g, Eigen::EigenvaluesOnly);
+      const auto & w = eig.eigenvalues(); // ascending
+      if (!(w[N - 1] > 0.0))
+        return 0;
+      int count = 0;
+      for (int i = 0; i < N; ++i)
+        count += w[i] > tol2 * w[N - 1];
+      return count;
     }
   } // namespace isolation_detail
 } // namespace reflexarm

@@ -265,21 +265,9 @@ namespace reflexarm
         G(i, j) = G(j, i) = s;
       }
     // the rank: eigenvalues of G (squared singular values of J[:, :link+1]) above kRankTolerance^2 x the largest, by
-    // Sturm counts on G's tridiagonal form (psdRank); only when an eigenvalue lies within a factor 6 of the threshold,
-    // the eigenvalues themselves
-    const int decided = psdRank<6>(G, kRankTolerance * kRankTolerance);
-    if (decided >= 0)
-      return decided;
-    const double tol2 = kRankTolerance * kRankTolerance;
-    link_eig_.compute(G, Eigen::EigenvaluesOnly);
-    const auto & w = link_eig_.eigenvalues(); // ascending
-    const double top = w[5];
-    if (!(top > 0.0))
-      return 0;
-    int rank = 0;
-    for (int i = 0; i < 6; ++i)
-      rank += w[i] > tol2 * top;
-    return rank;
+    // Sturm counts on G's tridiagonal form; only when an eigenvalue lies within a factor 6 of the threshold, the
+    // eigenvalues themselves (psdRankExact)
+    return psdRankExact<6>(G, kRankTolerance * kRankTolerance);
   }
 
   double ContactIsolator::wrenchError(int link) noexcept

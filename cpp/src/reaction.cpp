@@ -111,6 +111,7 @@ namespace reflexarm
         e.phase = ReactionPhase::Braking;
       else
       {
+        factorRetractMass(s);
         planRetract(s);
         e.phase = ReactionPhase::Retracting;
       }
@@ -145,9 +146,9 @@ namespace reflexarm
   // retract_speed and the minimum-jerk path's peak joint speed (1.875 x its mean) below velocity_fraction x the
   // velocity limits.
   // The Jacobians are this tick's (data_c_: computeDynamics' computeCoriolisMatrix at s.q left the joint placements
-  // and world Jacobians in it, as computeJointJacobians would). M(q): factorRetractMass's, on this tick unless
-  // `factored` (a retract that waited for the isolation: on the tick its estimate came in, see followEvent).
-  void Controller::planRetract(const State & s, bool factored) noexcept
+  // and world Jacobians in it, as computeJointJacobians would). M(q): the factor in llt_r_ (factorRetractMass: by the
+  // caller, on this tick, or for a retract that waited for the isolation on the tick its estimate came in).
+  void Controller::planRetract(const State & s) noexcept
   {
     const ReactionParams & rp = params_.reaction_params;
     CollisionEvent & e = event_;
@@ -160,8 +161,6 @@ namespace reflexarm
     // against 4.3e-5 J at detection. The full M^-1 moved the later joints too, against their own inertia coupling:
     // on Atlas' forearm push the wrist joints by up to 0.5 rad, and the pushed stick's retract kept 70 % of its
     // energy at detection 0.5 s later; 0.015 % with M11.)
-    if (!factored)
-      factorRetractMass(s);
     if (llt_r_.info() == Eigen::Success)
     {
       // M's leading (last + 1) block: the joints after the contact's link stay put. M11 = U11^T U11 with U11 the
@@ -428,7 +427,7 @@ namespace reflexarm
     else if (retract_due_) // the retract from the estimate: its plan on this tick's q, M(q)'s factor of the tick before
     {
       retract_due_ = false;
-      planRetract(s, true);
+      planRetract(s);
       e.phase = ReactionPhase::Retracting;
       t_phase_ = t;
       q_from_ = s.q;

@@ -390,6 +390,8 @@ namespace
     ev[0] = 1.5e-12;
     const Mat G = Q * ev.asDiagonal() * Q.transpose();
     CHECK(reflexarm::isolation_detail::psdRank<N>(G, tol2) == -1, "N %d: an eigenvalue at the threshold decided", N);
+    const int exact = reflexarm::isolation_detail::psdRankExact<N>(G, tol2); // 1.5e-12 > tol2 x 1: counted
+    CHECK(exact == N, "N %d: psdRankExact at the threshold: %d", N, exact);
     ev[0] = 1e-14; // well below: rank N - 1
     const Mat G2 = Q * ev.asDiagonal() * Q.transpose();
     CHECK(reflexarm::isolation_detail::psdRank<N>(G2, tol2) == N - 1, "N %d: a 1e-14 eigenvalue counted", N);

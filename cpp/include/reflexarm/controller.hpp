@@ -192,7 +192,7 @@ namespace reflexarm
     void writeCommand(int n_sat, Command & cmd) const noexcept;
     // the collision pipeline after detection (reaction.cpp)
     void startReaction(double t, const State & s) noexcept;
-    void planRetract(const State & s, bool factored = false) noexcept;
+    void planRetract(const State & s) noexcept;
     void factorRetractMass(const State & s) noexcept;
     // Accepted ticks since M_'s crba, after commitTick: the damping's part 0 runs when the countdown is 0, and
     // commitTick then sets it to damping_update_period - 1. (Not in gravity compensation (13), where the countdown

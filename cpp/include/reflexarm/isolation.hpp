@@ -243,7 +243,6 @@ namespace reflexarm
     long pruned_ = 0;        ///< points of the isolation begun whose constrained fit the lower bound skipped
     Eigen::MatrixXd wrench_b_;
     Eigen::JacobiSVD<Eigen::MatrixXd> wrench_svd_;
-    Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> link_eig_;
     std::vector<LinkBuffers> links_;
     // the isolation under way (begin / step / finish)
     bool active_ = false, valid_ = false;
