@@ -81,6 +81,22 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the sensor noise and the model errors (default 0)")
     p.add_argument(
+        "--detection-study",
+        type=Path,
+        default=None,
+        metavar="JSON",
+        help="detect with the (k_o, zeta) pairs a 'reflexarm detection-study' tuned per arm (its "
+        "detection_study.json): each arm's detection observer (exact form) and per-joint levels, on the model errors "
+        "they were tuned on (default: the paper's k_o = 5 1/s, 11 Nm)",
+    )
+    p.add_argument(
+        "--detection-gain",
+        default="auto",
+        metavar="K_O|auto",
+        help="with --detection-study: the detection gain [1/s] of every arm, or auto: each arm's smallest gain "
+        "whose ramp lag is within 10 ms and whose held-out hour had no false alarm (default auto)",
+    )
+    p.add_argument(
         "--out",
         type=Path,
         default=Path("results/reaction-study"),
@@ -118,6 +134,32 @@ def _check(args: argparse.Namespace) -> tuple[list[str], list[str], list[str], f
     return arms, reactions, scenarios, pct
 
 
+def _detection(args: argparse.Namespace, arms: list[str]) -> dict[str, Any] | None:
+    """Each arm's tuned detection pair from ``--detection-study`` (printed), or None without it."""
+    if args.detection_study is None:
+        if str(args.detection_gain) != "auto":
+            raise ConfigError("--detection-gain needs --detection-study (the levels tuned at that gain)")
+        return None
+    from reflexarm.experiments.reaction_study import study_arm
+    from reflexarm.experiments.tuned_detection import load_tuned_detection
+
+    text = str(args.detection_gain).strip()
+    try:
+        gain = None if text == "auto" else float(text)
+    except ValueError:
+        raise ConfigError(f"--detection-gain must be a gain [1/s] or auto; got {text!r}") from None
+    joints = {a: study_arm(a).robot.joint_names for a in arms}  # (the UR-like arm written to a temporary folder)
+    tuned = load_tuned_detection(args.detection_study, arms, joints, gain)
+    for name, t in tuned.items():
+        levels = ", ".join(f"{v:.3g}" for v in t.levels)
+        print(
+            f"{name}: detection k_o = {t.gain:g} 1/s, zeta = ({levels}) Nm, model seed {t.model_seed} "
+            f"(held-out false alarms {t.alarms_per_hour} /h; from {t.source})",
+            file=sys.stderr,
+        )
+    return tuned
+
+
 def _floor_summary(rows: list[dict[str, Any]]) -> str:
     """How many runs miss the 1 % energy bar, and how many of those end at or below their rest floor."""
     from reflexarm.experiments.reaction_study import KE_RATIO_GOAL
@@ -140,13 +182,15 @@ def _reaction_study(args: argparse.Namespace) -> int:
     from reflexarm.sim import PAPER_NOISE, SensorNoise
 
     arms, reactions, scenarios, pct = _check(args)
+    detection = _detection(args, arms)
     noise = PAPER_NOISE if args.noise == "paper" else SensorNoise(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     noise_text = "the paper's sensor noise" if args.noise == "paper" else "no sensor noise"
     out = Path(args.out)
     total = len(arms) * len(reactions) * len(scenarios)
     print(
         f"reaction study: {len(arms)} arm(s) x {len(scenarios)} scenario(s) x {len(reactions)} reaction(s) = {total} "
-        f"runs; +-{pct:g} % model error, {noise_text}, seed {args.seed}",
+        f"runs; +-{pct:g} % model error, {noise_text}, seed {args.seed}"
+        + ("; detection tuned per arm (model errors of the arm's tuned model)" if detection else ""),
         file=sys.stderr,
     )
     t0 = time.perf_counter()
@@ -175,6 +219,7 @@ def _reaction_study(args: argparse.Namespace) -> int:
         seed=args.seed,
         folder=out / "arms",
         progress=progress,
+        detection=detection,
     )
     table = []
     for row in study.rows:

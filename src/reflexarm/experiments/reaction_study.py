@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import tempfile
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -37,6 +37,7 @@ from reflexarm.experiments.collision_events import (
     write_outcomes,
 )
 from reflexarm.experiments.rest_floor import RestFloor, floor_verdict, rest_floor
+from reflexarm.experiments.tuned_detection import TunedDetection
 from reflexarm.robots import RobotModel, load_robot
 from reflexarm.sim import PAPER_NOISE, SensorNoise, Trace
 
@@ -148,20 +149,26 @@ def _guard(trace: Trace) -> dict[str, Any]:
     return {"guard": verdict, "guard_still_moving": bool(event.get("still_moving"))}
 
 
-def _setting(scenario: str, reaction: str) -> CollisionSetting:
-    """The collision setting of a scenario's run: the demo's Coll.Det, or the link collision's."""
+def _setting(scenario: str, reaction: str, tuned: TunedDetection | None = None) -> CollisionSetting:
+    """The collision setting of a scenario's run: the demo's Coll.Det, or the link collision's; with ``tuned``, its
+    detection observer (exact form) and per-joint levels detect."""
     base = next(s for s in EE_SETTINGS if s.name == "Coll.Det") if scenario == "demo" else LINK_SETTING
+    if tuned is not None:
+        base = replace(
+            base, detection_observer_gain=tuned.gain, threshold=tuned.levels, observer_discretization="exact"
+        )
     return replace(base, reaction=reaction)
 
 
-def _run_one(arm: StudyArm, scenario: str, reaction: str, kwargs: dict[str, Any]) -> tuple[CollisionOutcome, Trace]:
+def _run_one(
+    arm: StudyArm, scenario: str, reaction: str, kwargs: dict[str, Any], tuned: TunedDetection | None = None
+) -> tuple[CollisionOutcome, Trace]:
+    setting = _setting(scenario, reaction, tuned)
     if scenario == "demo":
-        trace = run_ee_collision(
-            _setting(scenario, reaction), robot=arm.robot, plant_friction=arm.plant_friction, **kwargs
-        )
+        trace = run_ee_collision(setting, robot=arm.robot, plant_friction=arm.plant_friction, **kwargs)
     else:
         trace = run_link_collision(
-            setting=_setting(scenario, reaction),
+            setting=setting,
             robot=arm.robot,
             plant_friction=arm.plant_friction,
             stick="held" if scenario == "link_held" else "pushed",
@@ -171,13 +178,19 @@ def _run_one(arm: StudyArm, scenario: str, reaction: str, kwargs: dict[str, Any]
 
 
 def _floor(
-    arm: StudyArm, scenario: str, outcome: CollisionOutcome, trace: Trace, kwargs: dict[str, Any]
+    arm: StudyArm,
+    scenario: str,
+    outcome: CollisionOutcome,
+    trace: Trace,
+    kwargs: dict[str, Any],
+    tuned: TunedDetection | None = None,
 ) -> RestFloor | None:
     """The rest floor at the run's posture at detection (None without a detection)."""
     if outcome.detected_s is None:
         return None
     i_d = int(np.searchsorted(trace.t, outcome.detected_s - 1e-9))
-    return rest_floor(arm.robot, _setting(scenario, "none"), trace.q[i_d], plant_friction=arm.plant_friction, **kwargs)
+    setting = _setting(scenario, "none", tuned)
+    return rest_floor(arm.robot, setting, trace.q[i_d], plant_friction=arm.plant_friction, **kwargs)
 
 
 def run_reaction_study(
@@ -192,6 +205,7 @@ def run_reaction_study(
     folder: str | Path | None = None,
     progress: Callable[[dict[str, Any]], None] | None = None,
     rest_floors: bool = True,
+    detection: Mapping[str, TunedDetection] | None = None,
 ) -> ReactionStudy:
     """Run the demo contact and the link collision with each reaction on each arm (module docstring).
 
@@ -209,6 +223,10 @@ def run_reaction_study(
         rest_floors: also measure each (arm, scenario)'s kinetic energy floor at rest
             (:func:`~reflexarm.experiments.rest_floor.rest_floor`, at the posture at detection) and compare each
             run's energy 0.5 s after detection with it (row keys ``rest_floor_*_J``, ``ke_floor_verdict``).
+        detection: per arm name, a tuned detection pair (:func:`~reflexarm.experiments.tuned_detection.
+            load_tuned_detection`): that arm's runs detect with its detection observer and levels, on the model
+            errors they were tuned on (its ``model_seed``, when it has one, instead of ``model_seed``); arms not in
+            it detect as the paper (k_o = 5 1/s, 11 Nm).
 
     Raises:
         ConfigError: an unknown arm or scenario, or no reaction.
@@ -231,7 +249,12 @@ def run_reaction_study(
             "stiffness_Nm_per_rad": LINK_SETTING.stiffness,
         }
     )
+    tuned_of = dict(detection or {})
+    if tuned_of:
+        study.conditions["detection"] = {name: t.as_dict() for name, t in tuned_of.items()}
     for arm in resolved:
+        tuned = tuned_of.get(arm.name)
+        arm_kwargs = kwargs if tuned is None or tuned.model_seed is None else {**kwargs, "model_seed": tuned.model_seed}
         for scenario in scenarios:
             floor: RestFloor | None = None  # the same for every reaction: the runs agree up to detection
             for reaction in reactions:
@@ -243,16 +266,17 @@ def run_reaction_study(
                     "error": None,
                 }
                 try:
-                    outcome, trace = _run_one(arm, scenario, reaction, kwargs)
+                    outcome, trace = _run_one(arm, scenario, reaction, arm_kwargs, tuned)
                     row.update(outcome.as_dict())
                     row.update(_guard(trace))
                     if rest_floors and floor is None:
-                        floor = _floor(arm, scenario, outcome, trace, kwargs)
+                        floor = _floor(arm, scenario, outcome, trace, arm_kwargs, tuned)
                     if floor is not None:
                         row.update(floor.as_dict())
                         row["ke_floor_verdict"] = floor_verdict(row)
                 except ConfigError as e:  # e.g. a reaction this controller does not offer (yet)
                     row["error"] = str(e)
+                row["detection_gain_per_s"] = None if tuned is None else tuned.gain
                 study.rows.append(row)
                 if progress is not None:
                     progress(row)

@@ -113,11 +113,14 @@ class ReactionSettings:
             ceil(units / this) + 4 ticks after the beginning; an integer >= 1. The default, 32, takes 10, 43 and
             27 ticks on the 2 cm controller geometry of Atlas, Panda and iiwa14 (bench/bench_collision_tick.py), so
             that a retract waiting for the estimate ends within the guard's 0.5 s. Inside C++, each isolation tick
-            against the same tick of the controller without geometry (paired, warm caches; noise floor <= 1.04): at
-            32 the largest is a fit step, 1.64-1.69 x; at 4-16 (55-317 ticks on Panda) 1.32-1.46 x, the tick with
-            M(q)'s crba + Cholesky factor (1.30-1.40 x), the choice 1.22-1.27 x, the estimate 1.20-1.30 x, the begin
-            and the plan 1.15-1.19 x, a fit step of 4 units 1.21-1.23 x: no budget keeps every tick within issue
-            15's 1.2 x, so a smaller one buys latency for little.
+            against the same tick of the controller without geometry (paired, warm caches; noise floor <= 1.03;
+            ``python bench/bench_collision_tick.py --points-per-tick 4 8 16 32``): at 32 the largest is a fit step,
+            1.62-1.70 x; at 4 the largest is 1.18-1.21 x (a fit step, or the Panda's estimate), 1.14-1.30 x as run
+            (cold caches), with the estimate 55, 317 and 188 ms after it began; over 4-32 the choice 1.11-1.15 x,
+            the estimate 1.12-1.25 x, the estimate in (M(q)'s factor) 1.15-1.20 x, the plan 1.11-1.15 x. A budget
+            of 4 keeps every tick within issue 15's 1.2 x (warm, no margin), but the link collisions' retracts of the
+            reaction study then still move at the guard's 0.5 s on Atlas, Panda and iiwa14 (kinetic energy 2.2-260 x
+            its value at detection; at 32: 0.015-3 %), so the default stays 32.
     """
 
     brake_time: float = 0.05
