@@ -178,3 +178,18 @@ def test_a_seeded_free_motion_is_another_log_of_the_same_motion():
     # the same region: every posture of the seeded log lies within the fixed cycle's box widened by the jitter
     lo, hi = fixed.min(axis=0) - FREE_MOTION_JITTER_RAD - 1e-9, fixed.max(axis=0) + FREE_MOTION_JITTER_RAD + 1e-9
     assert np.all((a >= lo) & (a <= hi))
+
+
+def test_the_printed_table_has_the_detecting_joint_s_lag_beside_the_any_joint_lag(capsys):
+    # Atlas' demo at 100 1/s: the first true crossing was a 1 ms spike on another joint than the detecting one, so
+    # the lag from any joint (122 ms) and on the detecting joint (10 ms) differ; both are printed
+    from reflexarm._cli.detection import _print
+
+    pair = {"detection_observer_gain": 100.0, "collision_Nm": [23.8, 0.28], "ramp_lag_max_s": 0.0096,
+            "measured_ramp_lag_max_s": 0.0228, "heldout": {"alarms_per_hour": 0.0}}  # fmt: skip
+    demo = {"lag_s": 0.122, "lag_detecting_joint_s": 0.010, "input_lag_s": 0.010, "delay_s": 0.126}
+    arm = {"plant_friction": "file", "pairs": {"pairs": [pair]}, "contacts": {"100.0": {"demo": demo, "link": {}}}}
+    _print("atlas_v5_left_arm", arm)
+    header, row = capsys.readouterr().out.strip().splitlines()[-2:]
+    assert header.split()[6:10] == ["demo", "lag", "joint", "own"]
+    assert row.split()[5:9] == ["122.0", "10.0", "10.0", "126.0"]

@@ -227,6 +227,7 @@ class DetectionStudy:
                 for scen, c in a.get("contacts", {}).get(str(k), {}).items():
                     row[f"{scen}_lag_s"], row[f"{scen}_delay_s"] = c.get("lag_s"), c.get("delay_s")
                     row[f"{scen}_input_lag_s"] = c.get("input_lag_s")
+                    row[f"{scen}_lag_detecting_joint_s"] = c.get("lag_detecting_joint_s")
                 pul = a.get("pulses", {}).get("caught", {}).get(str(k))
                 if pul is not None:
                     row["pulses_caught_share"], row["pulses_eligible"] = pul["share_eligible"], pul["eligible"]

@@ -136,17 +136,23 @@ class ReactionStudy:
 
 
 def _guard(trace: Trace) -> dict[str, Any]:
-    """The guard's verdict from the controller's event record (``trace.meta["collision_event"]``)."""
+    """The guard's verdict and the detector's re-detections from the controller's event record
+    (``trace.meta["collision_event"]``)."""
     event = trace.meta.get("collision_event")
     if not isinstance(event, dict):
-        return {"guard": "no detection", "guard_still_moving": None}
+        return {"guard": "no detection", "guard_still_moving": None, "redetections": None}
     if event.get("text"):
         verdict = str(event["text"])
     elif event.get("guard_checked"):
         verdict = "at rest"
     else:
         verdict = "not checked (run ended first)"
-    return {"guard": verdict, "guard_still_moving": bool(event.get("still_moving"))}
+    # the detector's own count of re-contacts: crossings again after the residual fell below half of every level
+    return {
+        "guard": verdict,
+        "guard_still_moving": bool(event.get("still_moving")),
+        "redetections": event.get("recrossings"),
+    }
 
 
 def _setting(scenario: str, reaction: str, tuned: TunedDetection | None = None) -> CollisionSetting:
