@@ -9,14 +9,17 @@ import numpy as np
 import pytest
 
 from reflexarm.control import Controller
+from reflexarm.errors import ConfigError
 from reflexarm.experiments.collision import EE_START, CollisionSetting
 from reflexarm.experiments.detection_study import (
     PULSE_GRACE_S,
     contact_lag,
     free_motion_residuals,
     input_lag,
+    lag_spread,
     observer_input,
     run_detection_study,
+    study_arm_detection,
 )
 from reflexarm.experiments.reaction_study import study_arm
 from reflexarm.signals import Measurement, Reference
@@ -193,3 +196,33 @@ def test_the_printed_table_has_the_detecting_joint_s_lag_beside_the_any_joint_la
     header, row = capsys.readouterr().out.strip().splitlines()[-2:]
     assert header.split()[6:10] == ["demo", "lag", "joint", "own"]
     assert row.split()[5:9] == ["122.0", "10.0", "10.0", "126.0"]
+
+
+def test_the_lag_spread_over_noise_seeds_counts_each_kind_of_run():
+    runs = [
+        {"detected_s": 1.0, "lag_detecting_joint_s": 0.004},
+        {"detected_s": 1.0, "lag_detecting_joint_s": 0.010},  # at the target: within it
+        {"detected_s": 1.0, "lag_detecting_joint_s": 0.056},
+        {"detected_s": 1.0, "lag_detecting_joint_s": None},  # detected, the detecting joints' true torque never over
+        {"detected_s": None},  # not detected
+    ]
+    s = lag_spread(runs)
+    assert s["lags_s"] == [0.004, 0.010, 0.056, None, None] and s["seeds"] == 5
+    assert s["median_s"] == pytest.approx(0.010) and s["max_s"] == pytest.approx(0.056)
+    assert (s["within_target"], s["detected_without_crossing"], s["undetected"]) == (2, 1, 1)
+    assert lag_spread([{"detected_s": None}])["median_s"] is None
+
+
+def test_a_study_runs_its_contacts_over_the_noise_seeds_and_refuses_none(tmp_path):
+    study = run_detection_study(["iiwa14_frictionless"], (200.0,), tune_s=20.0, tune_models=1, heldout_s=10.0,
+                                pulses=0, rate_per_hour=30.0, chunk_s=20.0, contact_seeds=2)  # fmt: skip
+    arm = study.arms["iiwa14_frictionless"]
+    spread = arm["contact_seeds"]["200.0"]
+    assert set(spread) == {"demo", "link"} and spread["demo"]["seeds"] == 2
+    # the first seed's run is the one in "contacts"
+    assert spread["demo"]["lags_s"][0] == arm["contacts"]["200.0"]["demo"].get("lag_detecting_joint_s")
+    (row,) = study.rows()
+    assert row["demo_seeds"] == 2 and row["demo_within_target"] == spread["demo"]["within_target"]
+    for bad in (0, 1.5, True):
+        with pytest.raises(ConfigError, match="contact_seeds must be an integer >= 1"):
+            study_arm_detection(study_arm("iiwa14_frictionless"), (200.0,), contact_seeds=bad)
