@@ -61,6 +61,7 @@ def test_a_study_file_gives_each_arm_its_pair_and_model(tmp_path):
     assert tuned.alarms_per_hour == 0.0 and tuned.as_dict()["levels_Nm"] == [30.0] * 7
     at5 = load_tuned_detection(path, ["panda"], {"panda": PANDA_JOINTS}, gain=5.0)["panda"]
     assert (at5.gain, at5.levels[0]) == (5.0, 11.0)
+    assert load_tuned_detection(tmp_path, ["panda"], {"panda": PANDA_JOINTS})["panda"].gain == 200.0  # its folder
     across = _study(tmp_path, [_pair(200, 30.0, 0.005)], seed=None)  # tuned across models: any model seed
     assert load_tuned_detection(across, ["panda"], {"panda": PANDA_JOINTS})["panda"].model_seed is None
 

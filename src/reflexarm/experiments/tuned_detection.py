@@ -111,7 +111,7 @@ def load_tuned_detection(
     """Each arm's :class:`TunedDetection` from the ``detection_study.json`` at ``path``.
 
     Args:
-        path: the JSON written by ``reflexarm detection-study``.
+        path: the JSON written by ``reflexarm detection-study``, or the folder it is in.
         arms: the arms wanted (each must be in the file).
         robots_joints: per arm, the joint names of the robot the levels will run on (checked against the file's).
         gain: the detection gain [1/s] for every arm; None: each arm's pair by the module's rule.
@@ -124,6 +124,8 @@ def load_tuned_detection(
     if gain is not None and (not math.isfinite(gain) or gain <= 0.0):
         raise ConfigError(f"--detection-gain must be a positive gain [1/s]; got {gain:g}")
     p = Path(path)
+    if p.is_dir() and (p / "detection_study.json").is_file():  # the study's output folder
+        p = p / "detection_study.json"
     if not p.is_file():
         raise ConfigError(f"{where}: no such file")
     try:
