@@ -294,12 +294,15 @@ def test_isolation_in_steps_equals_one_shot_bitwise(arms, name):
         significant = np.flatnonzero(np.abs(r) > significance)
         tail = counts[significant[-1] :] if significant.size else counts[:0]
         work = int(np.sum(np.where(tail > 0, -(-tail // TRACE_POINTS) + tail, 1)))
+        pruned = set()
         for budget in BUDGETS:
             spread = iso.isolate_in_steps(q, r, budget)
             assert (spread.pop("work"), spread.pop("steps")) == (work, -(-work // budget)), f"{name} contact {i}"
+            pruned.add(spread.pop("pruned"))  # the points go through in the same order whatever the budget
             bad = [k for k, v in spread.items() if _bits(v) != one[k]]
             assert not bad and set(spread) == set(one), f"{name} contact {i}, budget {budget}: {bad} differ"
             steps_seen.add(-(-work // budget))
+        assert len(pruned) == 1 and 0 <= pruned.pop() <= int(tail.sum()), f"{name} contact {i}"
     assert max(steps_seen) > 100  # the comparison covered isolations spread over many steps
     with pytest.raises(ValueError, match="point_budget must be >= 1; got 0"):
         iso.isolate_in_steps(q, r, 0)

@@ -100,11 +100,13 @@ void bindIsolation(nb::module_ & m)
         nb::dict d = estimateDict(s.out);
         d["work"] = work;
         d["steps"] = steps;
+        d["pruned"] = s.iso.prunedPoints();
         return d;
       },
       "q"_a.noconvert(), "residual"_a.noconvert(), "point_budget"_a,
       "The same isolation spread over calls as the real-time tick does it (begin, step(point_budget) until done, "
       "finish): isolate()'s dict (bit for bit the same values) plus work (units: ceil(m / 16) + m per "
       "candidate link with m points, pass 1 tracing 16 points a unit and pass 2 fitting one; 1 per candidate link "
-      "without geometry) and steps (ceil(work / point_budget)).");
+      "without geometry), steps (ceil(work / point_budget)) and pruned (pass-2 points whose constrained fit the lower "
+      "bound skipped).");
 }
