@@ -199,6 +199,39 @@ def _floor(
     return rest_floor(arm.robot, setting, trace.q[i_d], plant_friction=arm.plant_friction, **kwargs)
 
 
+def _study_row(
+    arm: StudyArm,
+    scenario: str,
+    reaction: str,
+    kwargs: dict[str, Any],
+    tuned: TunedDetection | None,
+    floor: RestFloor | None,
+    rest_floors: bool,
+) -> tuple[dict[str, Any], RestFloor | None]:
+    """One run's row (its outcome, the guard, the rest floor) and the scenario's rest floor (measured on the first
+    run with a detection, when ``rest_floors`` and not given)."""
+    row: dict[str, Any] = {
+        "arm": arm.name,
+        "scenario": scenario,
+        "reaction": reaction,
+        "plant_friction": arm.plant_friction,
+        "error": None,
+    }
+    try:
+        outcome, trace = _run_one(arm, scenario, reaction, kwargs, tuned)
+        row.update(outcome.as_dict())
+        row.update(_guard(trace))
+        if rest_floors and floor is None:
+            floor = _floor(arm, scenario, outcome, trace, kwargs, tuned)
+        if floor is not None:
+            row.update(floor.as_dict())
+            row["ke_floor_verdict"] = floor_verdict(row)
+    except ConfigError as e:  # e.g. a reaction this controller does not offer (yet)
+        row["error"] = str(e)
+    row["detection_gain_per_s"] = None if tuned is None else tuned.gain
+    return row, floor
+
+
 def run_reaction_study(
     arms: Sequence[str | StudyArm] = STUDY_ARMS,
     reactions: Sequence[str] = STUDY_REACTIONS,
@@ -264,25 +297,7 @@ def run_reaction_study(
         for scenario in scenarios:
             floor: RestFloor | None = None  # the same for every reaction: the runs agree up to detection
             for reaction in reactions:
-                row: dict[str, Any] = {
-                    "arm": arm.name,
-                    "scenario": scenario,
-                    "reaction": reaction,
-                    "plant_friction": arm.plant_friction,
-                    "error": None,
-                }
-                try:
-                    outcome, trace = _run_one(arm, scenario, reaction, arm_kwargs, tuned)
-                    row.update(outcome.as_dict())
-                    row.update(_guard(trace))
-                    if rest_floors and floor is None:
-                        floor = _floor(arm, scenario, outcome, trace, arm_kwargs, tuned)
-                    if floor is not None:
-                        row.update(floor.as_dict())
-                        row["ke_floor_verdict"] = floor_verdict(row)
-                except ConfigError as e:  # e.g. a reaction this controller does not offer (yet)
-                    row["error"] = str(e)
-                row["detection_gain_per_s"] = None if tuned is None else tuned.gain
+                row, floor = _study_row(arm, scenario, reaction, arm_kwargs, tuned, floor, rest_floors)
                 study.rows.append(row)
                 if progress is not None:
                     progress(row)
