@@ -169,11 +169,11 @@ def test_bad_thresholds_and_gains_name_the_value(tmp_path, atlas):
         read_threshold("-3", atlas)
     with pytest.raises(ConfigError, match=r"--threshold expects a level \[Nm\], a comma list of 7 levels or a "):
         read_threshold("eleven", atlas)
-    with pytest.raises(ConfigError, match=r"--threshold: no such file '.*nope\.json'"):
+    with pytest.raises(ConfigError, match=r"--threshold '.*nope\.json': no such file"):
         read_threshold(str(tmp_path / "nope.json"), atlas)
     bad = tmp_path / "bad.json"
     bad.write_text("{not json")
-    with pytest.raises(ConfigError, match=r"--threshold: '.*bad\.json' is not a JSON file"):
+    with pytest.raises(ConfigError, match=r"--threshold '.*bad\.json' is not a JSON file"):
         read_threshold(str(bad), atlas)
     bad.write_text(json.dumps({"contact_Nm": [1] * 7}))
     with pytest.raises(ConfigError, match=r"has no 'collision_Nm' list of numbers \(write it with 'reflexarm tune"):

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+from typing import Any
+
 import numpy as np
 import numpy.typing as npt
 
@@ -60,3 +64,17 @@ def as_positive_scalar(value: object, name: str) -> float:
     if not np.isfinite(x) or x <= 0.0:
         raise ConfigError(f"{name} must be a positive number; got {value!r}")
     return x
+
+
+def read_json_file(path: Path, what: str) -> Any:
+    """The JSON document in the file ``path``; ``what`` names it in the error (e.g. ``"--threshold 'x.json'"``).
+
+    Raises:
+        ConfigError: no such file, or not a readable JSON text.
+    """
+    if not path.is_file():
+        raise ConfigError(f"{what}: no such file")
+    try:
+        return json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise ConfigError(f"{what} is not a JSON file: {e}") from e

@@ -319,14 +319,9 @@ def _pair_at(doc: object, gain: float | None) -> dict[str, object] | None:
 def _read_threshold_file(
     path: Path, robot: RobotModel, gain: float | None = None
 ) -> tuple[tuple[float, ...], str, float | None]:
-    import json
+    from reflexarm._validation import read_json_file
 
-    if not path.is_file():
-        raise ConfigError(f"--threshold: no such file {str(path)!r}")
-    try:
-        doc = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise ConfigError(f"--threshold: {str(path)!r} is not a JSON file: {e}") from e
+    doc = read_json_file(path, f"--threshold {str(path)!r}")
     pair = _pair_at(doc, gain)
     if pair is not None:
         doc = {**doc, "collision_Nm": pair.get("collision_Nm"), "observer": {"detection_observer_gain": gain}}

@@ -13,13 +13,13 @@ false alarms.
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from reflexarm._validation import read_json_file
 from reflexarm.errors import ConfigError
 
 __all__ = ["TunedDetection", "choose_pair", "load_tuned_detection"]
@@ -126,12 +126,7 @@ def load_tuned_detection(
     p = Path(path)
     if p.is_dir() and (p / "detection_study.json").is_file():  # the study's output folder
         p = p / "detection_study.json"
-    if not p.is_file():
-        raise ConfigError(f"{where}: no such file")
-    try:
-        doc = json.loads(p.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise ConfigError(f"{where} is not a JSON file: {e}") from e
+    doc = read_json_file(p, where)
     studied = doc.get("arms") if isinstance(doc, dict) else None
     if not isinstance(studied, dict):
         raise ConfigError(f"{where} is not a detection study (no 'arms'; write one with 'reflexarm detection-study')")
