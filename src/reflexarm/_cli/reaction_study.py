@@ -87,8 +87,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="JSON",
         help="detect with the (k_o, zeta) pairs a 'reflexarm detection-study' tuned per arm (its "
         "detection_study.json or the folder it wrote): each arm's detection observer (exact form) and per-joint "
-        "levels, on the model errors "
-        "they were tuned on (default: the paper's k_o = 5 1/s, 11 Nm)",
+        "levels, on the model errors they were tuned on (default: the paper's k_o = 5 1/s, 11 Nm)",
     )
     p.add_argument(
         "--detection-gain",

@@ -309,8 +309,9 @@ def plot_tradeoff(study: DetectionStudy, path: str | Path) -> Path:
 def lag_spread(runs: Sequence[dict[str, Any]], key: str = "lag_detecting_joint_s") -> dict[str, Any]:
     """Over the runs of one scenario and pair with several noise seeds (rows of :func:`contact_lag`): the lags
     ``key`` [s] per seed (None: not detected, or the detecting joints' true torque never exceeded its level), the
-    median and the largest over the seeds with a lag, how many are within :data:`TARGET_LAG_S`, how many were detected
-    without a true crossing on the detecting joints, and how many not at all."""
+    median and the largest over the seeds with a lag, how many are within :data:`TARGET_LAG_S` (a negative lag,
+    detected before the true torque crossed, counts as within), how many were detected without a true crossing on the
+    detecting joints, and how many not at all."""
     lags = [r.get(key) for r in runs]
     have = np.array([v for v in lags if v is not None], dtype=float)
     return {
