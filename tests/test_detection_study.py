@@ -149,7 +149,7 @@ def test_chunked_free_motion_residuals_refilter_per_chunk():
 
 def test_a_tiny_study_runs_and_writes_its_files(tmp_path):
     study = run_detection_study(["iiwa14_frictionless"], (50.0, 200.0), tune_s=40.0, tune_models=2, heldout_s=10.0,
-                                pulses=3, rate_per_hour=30.0, chunk_s=20.0)  # fmt: skip
+                                pulses=3, rate_per_hour=30.0, chunk_s=20.0, contact_seeds=1)  # fmt: skip
     arm = study.arms["iiwa14_frictionless"]
     assert [p["detection_observer_gain"] for p in arm["pairs"]["pairs"]] == [50.0, 200.0]
     assert set(arm["contacts"]["200.0"]) == {"demo", "link"}
@@ -200,13 +200,15 @@ def test_the_printed_table_has_the_detecting_joint_s_lag_beside_the_any_joint_la
 
 def test_the_lag_spread_over_noise_seeds_counts_each_kind_of_run():
     runs = [
-        {"detected_s": 1.0, "lag_detecting_joint_s": 0.004},
-        {"detected_s": 1.0, "lag_detecting_joint_s": 0.010},  # at the target: within it
-        {"detected_s": 1.0, "lag_detecting_joint_s": 0.056},
-        {"detected_s": 1.0, "lag_detecting_joint_s": None},  # detected, the detecting joints' true torque never over
-        {"detected_s": None},  # not detected
+        {"detected_s": 1.0, "lag_detecting_joint_s": 0.004, "delay_s": 0.012},
+        {"detected_s": 1.0, "lag_detecting_joint_s": 0.010, "delay_s": 0.020},  # at the target: within it
+        {"detected_s": 1.0, "lag_detecting_joint_s": 0.056, "delay_s": 0.300},
+        {"detected_s": 1.0, "lag_detecting_joint_s": None, "delay_s": 0.100},  # the detecting joints never over
+        {"detected_s": None, "delay_s": None},  # not detected
     ]
     s = lag_spread(runs)
+    assert s["delays_s"][-1] is None and s["delay_median_s"] == pytest.approx(0.060)  # of the 4 detected runs
+    assert s["delay_max_s"] == pytest.approx(0.300)
     assert s["lags_s"] == [0.004, 0.010, 0.056, None, None] and s["seeds"] == 5
     assert s["median_s"] == pytest.approx(0.010) and s["max_s"] == pytest.approx(0.056)
     assert (s["within_target"], s["detected_without_crossing"], s["undetected"]) == (2, 1, 1)
@@ -226,3 +228,27 @@ def test_a_study_runs_its_contacts_over_the_noise_seeds_and_refuses_none(tmp_pat
     for bad in (0, 1.5, True):
         with pytest.raises(ConfigError, match="contact_seeds must be an integer >= 1"):
             study_arm_detection(study_arm("iiwa14_frictionless"), (200.0,), contact_seeds=bad)
+
+
+def test_the_figure_draws_the_delays_over_the_seeds_beside_the_lags(tmp_path):
+    from matplotlib.image import imread
+
+    from reflexarm.experiments.detection_plots import plot_tradeoff
+    from reflexarm.experiments.detection_study import DetectionStudy
+
+    def spread(lag: float, delay: float) -> dict:
+        return lag_spread([{"detected_s": 1.0, "lag_detecting_joint_s": lag, "delay_s": delay}] * 3)
+
+    pairs = [{"detection_observer_gain": k, "collision_Nm": [5.0], "ramp_lag_max_s": 1.0 / k,
+              "measured_ramp_lag_max_s": 1.2 / k, "measured_step_lag_median_s": None, "measured_step_lag_max_s": None,
+              "measured_ramp_lag_median_s": None, "step_lag_s": None, "heldout": {"alarms_per_hour": 0.0}}
+             for k in (5.0, 100.0)]  # fmt: skip
+    demo = {"lag_s": 0.02, "input_lag_s": 0.01, "delay_s": 0.02}
+    arm = {"pairs": {"pairs": pairs}, "contacts": {"5.0": {"demo": demo}, "100.0": {"demo": demo}},
+           "contact_seeds": {"5.0": {"demo": spread(0.02, 0.02)}, "100.0": {"demo": spread(0.008, 0.15)}}}  # fmt: skip
+    study = DetectionStudy(arms={"panda": arm})
+    row = next(r for r in study.rows() if r["gain_per_s"] == 100.0)
+    assert (row["demo_delay_median_s"], row["demo_joint_lag_max_s"]) == (0.15, 0.008)
+    path = plot_tradeoff(study, tmp_path / "f.png")
+    assert imread(path).shape[1] > 1.4 * imread(plot_tradeoff(DetectionStudy(arms={"panda": {**arm,
+        "contact_seeds": {}}}), tmp_path / "g.png")).shape[1]  # a third panel: the delays  # fmt: skip

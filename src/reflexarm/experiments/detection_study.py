@@ -238,6 +238,7 @@ class DetectionStudy:
                 for scen, sp in a.get("contact_seeds", {}).get(str(k), {}).items():  # over the noise seeds
                     row[f"{scen}_joint_lag_median_s"], row[f"{scen}_joint_lag_max_s"] = sp["median_s"], sp["max_s"]
                     row[f"{scen}_within_target"], row[f"{scen}_seeds"] = sp["within_target"], sp["seeds"]
+                    row[f"{scen}_delay_median_s"], row[f"{scen}_delay_max_s"] = sp["delay_median_s"], sp["delay_max_s"]
                 pul = a.get("pulses", {}).get("caught", {}).get(str(k))
                 if pul is not None:
                     row["pulses_caught_share"], row["pulses_eligible"] = pul["share_eligible"], pul["eligible"]
@@ -253,57 +254,10 @@ class DetectionStudy:
         paths = {"json": out / f"{name}.json", "csv": out / f"{name}.csv", "figure": out / f"{name}.png"}
         paths["json"].write_text(json.dumps({"conditions": self.conditions, "arms": self.arms}, indent=2))
         pd.DataFrame(self.rows()).to_csv(paths["csv"], index=False, float_format="%.6g")
+        from reflexarm.experiments.detection_plots import plot_tradeoff
+
         plot_tradeoff(self, paths["figure"])
         return paths
-
-
-def _ms(value: float | None) -> float:
-    return np.nan if value is None else 1e3 * value
-
-
-def plot_tradeoff(study: DetectionStudy, path: str | Path) -> Path:
-    """Lag against false alarms per hour over the gains, one line per arm (and the contacts' lags)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.8))
-    rows = study.rows()
-    for name in study.arms:
-        r = [x for x in rows if x["arm"] == name]
-        fa = [max(x["false_alarms_per_hour"] or 0.0, 0.3) for x in r]  # 0 drawn at 0.3/h (log axis)
-        lag = [1e3 * (x["measured_ramp_lag_max_s"] or np.nan) for x in r]
-        (line,) = axes[0].plot(lag, fa, "o-", label=name)
-        for x, a, b in zip(r, lag, fa, strict=True):
-            axes[0].annotate(f"{x['gain_per_s']:g}", (a, b), fontsize=7, textcoords="offset points", xytext=(3, 3))
-        for scen, marker in (("demo", "s"), ("link", "^")):
-            gains = [x["gain_per_s"] for x in r]
-            if any(f"{scen}_joint_lag_median_s" in x for x in r):  # over the noise seeds: median, a bar to the max
-                med = [_ms(x.get(f"{scen}_joint_lag_median_s")) for x in r]
-                top = [_ms(x.get(f"{scen}_joint_lag_max_s")) for x in r]
-                axes[1].errorbar(gains, med, yerr=[np.zeros(len(r)), np.subtract(top, med)], fmt=marker, ls="-",
-                                 color=line.get_color(), capsize=2, label=f"{name} {scen}")  # fmt: skip
-            else:
-                vals = [_ms(x.get(f"{scen}_lag_s")) for x in r]
-                axes[1].plot(gains, vals, marker, ls="-", color=line.get_color(), label=f"{name} {scen}")
-            own = [1e3 * x[f"{scen}_input_lag_s"] if x.get(f"{scen}_input_lag_s") is not None else np.nan for x in r]
-            axes[1].plot([x["gain_per_s"] for x in r], own, marker, ls=":", mfc="none", color=line.get_color())
-    axes[0].axvline(1e3 * TARGET_LAG_S, color="k", ls="--", lw=0.8)
-    axes[0].set(xlabel="detector lag, max over synthetic ramps [ms]", ylabel="false alarms per hour (0 drawn at 0.3)",
-                yscale="log", title="lag / false-alarm trade-off over k_o (labels: k_o [1/s])")  # fmt: skip
-    axes[1].axhline(1e3 * TARGET_LAG_S, color="k", ls="--", lw=0.8)
-    axes[1].set_yscale("symlog", linthresh=10.0)  # lags of a few ms beside detections seconds early or late
-    title = ("demo / link: lag after the true |tau_ext_j| exceeds zeta_j (filled: detecting joints,\n"
-             "median over the noise seeds, bar to the max) or the observer's input does (open)")
-    axes[1].set(xscale="log", xlabel="detection k_o [1/s]", ylabel="lag [ms]")
-    axes[1].set_title(title, fontsize=9)
-    axes[0].legend(fontsize=7)
-    axes[1].legend(fontsize=6, ncol=2)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return Path(path)
 
 
 def lag_spread(runs: Sequence[dict[str, Any]], key: str = "lag_detecting_joint_s") -> dict[str, Any]:
@@ -311,10 +265,16 @@ def lag_spread(runs: Sequence[dict[str, Any]], key: str = "lag_detecting_joint_s
     ``key`` [s] per seed (None: not detected, or the detecting joints' true torque never exceeded its level), the
     median and the largest over the seeds with a lag, how many are within :data:`TARGET_LAG_S` (a negative lag,
     detected before the true torque crossed, counts as within), how many were detected without a true crossing on the
-    detecting joints, and how many not at all."""
+    detecting joints, and how many not at all; beside them the contact-to-detection delays (``delay_s``) per seed and
+    their median and largest over the detected runs."""
     lags = [r.get(key) for r in runs]
     have = np.array([v for v in lags if v is not None], dtype=float)
+    delays = [r.get("delay_s") for r in runs]
+    found = np.array([v for v in delays if v is not None], dtype=float)
     return {
+        "delays_s": delays,
+        "delay_median_s": float(np.median(found)) if found.size else None,
+        "delay_max_s": float(found.max()) if found.size else None,
         "lags_s": lags,
         "seeds": len(runs),
         "median_s": float(np.median(have)) if have.size else None,
