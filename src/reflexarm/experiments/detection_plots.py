@@ -4,14 +4,20 @@ their contact-to-detection delays (:mod:`reflexarm.experiments.detection_study`)
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
-from reflexarm.experiments.detection_study import TARGET_LAG_S
+from reflexarm.detect.defaults import DETECTION_LAG_TARGET_S as TARGET_LAG_S
 
-if TYPE_CHECKING:
-    from reflexarm.experiments.detection_study import DetectionStudy
+
+class _Study(Protocol):
+    """What the figure reads of a :class:`~reflexarm.experiments.detection_study.DetectionStudy` (not imported:
+    the study imports this module to write its figure)."""
+
+    arms: dict[str, dict[str, Any]]
+
+    def rows(self) -> list[dict[str, Any]]: ...
 
 __all__ = ["plot_tradeoff"]
 
@@ -31,7 +37,7 @@ def _median_and_max(ax: Any, rows: list[dict[str, Any]], key: str, marker: str, 
                 capsize=2, label=label)  # fmt: skip
 
 
-def plot_tradeoff(study: DetectionStudy, path: str | Path) -> Path:
+def plot_tradeoff(study: _Study, path: str | Path) -> Path:
     """Lag against false alarms per hour over the gains, one line per arm; the contacts' lags over the gains; and
     (with contact runs over noise seeds) their contact-to-detection delays over the gains."""
     import matplotlib

@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from reflexarm.control import Controller
+from reflexarm.detect.defaults import DETECTION_LAG_TARGET_S
 from reflexarm.errors import ConfigError
 from reflexarm.experiments.collision import CollisionSetting, controller_model, free_motion_trajectory
 from reflexarm.experiments.reaction_study import STUDY_ARMS, StudyArm, study_arm
@@ -59,7 +60,7 @@ __all__ = [
 ]
 
 #: Target of issue 15: detection at most this long after the true external torque exceeds the level [s].
-TARGET_LAG_S = 0.010
+TARGET_LAG_S = DETECTION_LAG_TARGET_S
 #: A pulse counts as caught when a residual crosses its level up to this long after the pulse ends [s].
 PULSE_GRACE_S = 0.010
 #: Noise seeds of each pair's contact runs (B, B + 1, ...).

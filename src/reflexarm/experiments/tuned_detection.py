@@ -20,13 +20,11 @@ from pathlib import Path
 from typing import Any
 
 from reflexarm._validation import read_json_file
+from reflexarm.detect.defaults import DETECTION_LAG_TARGET_S as TARGET_LAG_S
 from reflexarm.errors import ConfigError
 
 __all__ = ["TunedDetection", "choose_pair", "load_tuned_detection"]
 
-#: Issue 15's detector lag target [s] (the same as ``detection_study.TARGET_LAG_S``, not imported: reading a
-#: file should not load the simulation).
-TARGET_LAG_S = 0.010
 
 
 @dataclass(frozen=True)
