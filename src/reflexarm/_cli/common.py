@@ -307,13 +307,11 @@ def read_threshold(
 
 def _pair_at(doc: object, gain: float | None) -> dict[str, object] | None:
     """The ``detection_pairs`` entry of a thresholds file tuned at ``gain`` [1/s], if any."""
+    from reflexarm.experiments.tuned_detection import pair_at_gain
+
     if gain is None or not isinstance(doc, dict) or not isinstance(doc.get("detection_pairs"), dict):
         return None
-    for pair in doc["detection_pairs"].get("pairs", []):
-        k = pair.get("detection_observer_gain") if isinstance(pair, dict) else None
-        if isinstance(k, (int, float)) and math.isclose(float(k), gain, rel_tol=1e-9):
-            return pair  # type: ignore[no-any-return]
-    return None
+    return pair_at_gain(doc["detection_pairs"].get("pairs"), gain)
 
 
 def _read_threshold_file(

@@ -23,7 +23,7 @@ from reflexarm._validation import read_json_file
 from reflexarm.detect.defaults import DETECTION_LAG_TARGET_S as TARGET_LAG_S
 from reflexarm.errors import ConfigError
 
-__all__ = ["TunedDetection", "choose_pair", "load_tuned_detection"]
+__all__ = ["TunedDetection", "choose_pair", "load_tuned_detection", "pair_at_gain"]
 
 
 
@@ -62,6 +62,16 @@ def _alarms(pair: dict[str, Any]) -> float | None:
     return _number(held.get("alarms_per_hour")) if isinstance(held, dict) else None
 
 
+def pair_at_gain(pairs: object, gain: float) -> dict[str, Any] | None:
+    """The entry of ``pairs`` (the ``"pairs"`` list of a ``DetectionPairs.as_dict()``: a detection study's per arm,
+    a thresholds.json's ``detection_pairs``) tuned at ``gain`` [1/s], if any."""
+    for pair in pairs if isinstance(pairs, list) else []:
+        k = _number(pair.get("detection_observer_gain")) if isinstance(pair, dict) else None
+        if k is not None and math.isclose(k, gain, rel_tol=1e-9):
+            return pair
+    return None
+
+
 def choose_pair(pairs: Sequence[dict[str, Any]], gain: float | None, arm: str, where: str) -> dict[str, Any]:
     """The pair of ``pairs`` (a detection study's ``pairs.pairs`` of one arm) at ``gain`` [1/s], or by the rule of
     the module's docstring when ``gain`` is None.
@@ -71,9 +81,9 @@ def choose_pair(pairs: Sequence[dict[str, Any]], gain: float | None, arm: str, w
     """
     gains = [_number(p.get("detection_observer_gain")) for p in pairs]
     if gain is not None:
-        for p, k in zip(pairs, gains, strict=True):
-            if k is not None and math.isclose(k, gain, rel_tol=1e-9):
-                return p
+        found = pair_at_gain(list(pairs), gain)
+        if found is not None:
+            return found
         have = ", ".join(f"{k:g}" for k in gains if k is not None) or "none"
         raise ConfigError(f"{where}: arm {arm!r} has no pair tuned at k_o = {gain:g} 1/s (gains: {have})")
     clean = [
