@@ -123,6 +123,9 @@ class Oracle:
     damping_ratio: float = 0.7
     observer_gain: float = 5.0
     detection_observer_gain: float | None = None
+    #: the detection observer subtracts the friction model with this velocity band whatever kappa_f (None: it
+    #: follows kappa_f with the model's band)
+    detection_friction_band: float | None = None
     threshold: float | None = 11.0
     reaction: str = "gravity"
     contact_reaction: str | None = None
@@ -320,7 +323,11 @@ class Oracle:
             self.started = True
         else:
             beta = tau_m - (g - C.T @ dq) - (self.kappa_f * tau_f - J.T @ wrench)  # tau_m - gamma - alpha, (4)-(6)
-            self.observe(p, beta, h)
+            beta_det = beta
+            if self.detection_friction_band is not None:
+                tau_f_det = fr.coulomb * np.clip(dq / self.detection_friction_band, -1, 1) + fr.viscous * dq
+                beta_det = tau_m - (g - C.T @ dq) - (tau_f_det - J.T @ wrench)
+            self.observe(p, (beta, beta_det), h)
         if not all(np.all(np.isfinite(o)) for o in self.obs):
             self.invalid = True
             return self.reject((OBSERVER_INVALID, 0, -1, 0.0, 0.0, 0.0))
@@ -346,11 +353,11 @@ class Oracle:
         return {"code": 0, "tau": bounded, "residual": self.r_det().copy(), "collision": self.detected,
                 "collided": over, "saturated": saturated, "mode": self.mode, "fault": None}  # fmt: skip
 
-    def observe(self, p: np.ndarray, beta: np.ndarray, h: float) -> None:
-        """Both observers over the period h: Euler of (4), or the exact form of the first-order filter
-        dr/dt = K_o (tau_ext - r) whose input over the period is the mean tau_ext = (p_k - p_{k-1}) / h - beta."""
+    def observe(self, p: np.ndarray, betas: tuple[np.ndarray, np.ndarray], h: float) -> None:
+        """Both observers over the period h (each its beta): Euler of (4), or the exact form of the first-order
+        filter dr/dt = K_o (tau_ext - r) whose input over the period is the mean (p_k - p_{k-1}) / h - beta."""
         gains = (self.observer_gain, self.detection_observer_gain)
-        for o, k_o in zip(self.obs, gains, strict=True):
+        for o, k_o, beta in zip(self.obs, gains, betas, strict=True):
             if k_o is None:
                 continue
             if self.discretization == "exact":
@@ -632,6 +639,8 @@ def core_controller(core: Any, robot: RobotModel, o: Oracle, dt: float = DT, **c
     p.observer_gain = np.array([o.observer_gain])
     det = o.detection_observer_gain
     p.detection_observer_gain = np.zeros(0) if det is None else np.array([det])
+    if o.detection_friction_band is not None:
+        p.detection_kappa_f, p.detection_friction_velocity_band = 1, o.detection_friction_band
     p.threshold = np.zeros(0) if o.threshold is None else np.array([o.threshold])
     p.reaction, p.contact_reaction = o.reaction, o.contact_reaction
     p.observer_discretization = o.discretization

@@ -208,6 +208,7 @@ def test_link_collision_runs_with_the_given_detection_and_reports_the_event(tmp_
         "observer_gain_per_s": 10.0,
         "detection_observer_gain_per_s": 40.0,
         "observer_discretization": "exact",  # the default with a detection observer
+        "detection_friction_band_rad_s": None,
         "reaction": "compliant",
     }
     tr = Trace.load(next(out.glob("link_collision_*.npz")))

@@ -30,6 +30,7 @@ from reflexarm.control import Controller
 from reflexarm.control import contract as _k
 from reflexarm.control.collision.event import CollisionEvent
 from reflexarm.control.collision.react import ReactionSettings
+from reflexarm.errors import ConfigError
 from reflexarm.signals import Command, Measurement, Reference
 
 # Tolerance 1e-9 [Nm, Nms; event record also rad, s, J]: the same Pinocchio functions on both sides; summation order
@@ -55,6 +56,8 @@ def controller_like(robot, o: Oracle) -> Controller:
         damping_ratio=o.damping_ratio,
         observer_gain=o.observer_gain,
         detection_observer_gain=o.detection_observer_gain,
+        detection_kappa_f=int(o.detection_friction_band is not None),
+        detection_friction_velocity_band=o.detection_friction_band,
         threshold=o.threshold,
         reaction=o.reaction,
         contact_reaction=o.contact_reaction,
@@ -155,6 +158,35 @@ def test_exact_observer_of_controller_equals_oracle(atlas, kappa_f, kappa_eps, k
                detection_observer_gain=800.0, discretization="exact")  # fmt: skip
     codes = run_both(atlas, o, controller_like(atlas, o))
     assert sorted(set(codes)) == [_k.TIME_NOT_INCREASING, _k.OUT_OF_BOUNDS, _k.NON_FINITE, 0]
+
+
+@pytest.mark.parametrize("kappa_f", [0, 1])
+@pytest.mark.parametrize("kappa_ext", [0, 1])
+@pytest.mark.parametrize("discretization", ["euler", "exact"])
+def test_detection_observer_s_own_friction_equals_oracle(atlas, kappa_f, kappa_ext, discretization):
+    """detection_kappa_f = 1 with a band of 0.1 rad/s (5x the model's): the detection observer subtracts its own
+    friction model, the compensating one follows kappa_f; the oracle with the model's band instead (the band not
+    passed on) must differ, or the comparison would not see the band."""
+    o = Oracle(atlas, kappa_f=kappa_f, kappa_ext=kappa_ext, threshold=None, reaction="none",
+               detection_observer_gain=200.0, discretization=discretization, detection_friction_band=0.1)  # fmt: skip
+    assert atlas.friction.velocity_band != 0.1 and np.any(atlas.friction.coulomb > 0)
+    codes = run_both(atlas, o, controller_like(atlas, o))
+    assert sorted(set(codes)) == [_k.TIME_NOT_INCREASING, _k.OUT_OF_BOUNDS, _k.NON_FINITE, 0]
+    broken = Oracle(atlas, kappa_f=kappa_f, kappa_ext=kappa_ext, threshold=None, reaction="none",
+                    detection_observer_gain=200.0, discretization=discretization,
+                    detection_friction_band=atlas.friction.velocity_band)  # fmt: skip
+    with pytest.raises(AssertionError):
+        run_both(atlas, broken, controller_like(atlas, o))
+
+
+def test_detection_kappa_f_is_refused_without_a_detection_observer_or_with_a_bad_band(atlas):
+    with pytest.raises(ConfigError, match="detection_kappa_f = 1 needs a detection observer"):
+        Controller(atlas, detection_kappa_f=1)
+    with pytest.raises(ConfigError, match="detection_kappa_f"):
+        Controller(atlas, detection_observer_gain=100.0, detection_kappa_f=2)
+    for band in (0.0, -0.1, float("nan")):
+        with pytest.raises(ConfigError, match="detection_friction_velocity_band"):
+            Controller(atlas, detection_observer_gain=100.0, detection_kappa_f=1, detection_friction_velocity_band=band)
 
 
 @pytest.mark.parametrize("reaction", REACTION_PARAMS)

@@ -465,3 +465,21 @@ def test_reaction_params_defaults_equal_reaction_settings():
     for bad in (0, 2.5, True):
         with pytest.raises(ConfigError, match=f"isolation_points_per_tick must be an integer >= 1; got {bad!r}"):
             ReactionSettings(isolation_points_per_tick=bad)
+
+
+def test_the_core_refuses_detection_friction_without_a_detection_observer_or_with_a_bad_band(atlas):
+    """The C++ user's ControllerParams are checked by the core itself (the Python Controller checks first; the core's
+    ConfigError reaches Python as ValueError)."""
+    o = Oracle(atlas, threshold=None, reaction="none", detection_observer_gain=100.0, detection_friction_band=0.1)
+    core_controller(core, atlas, o)  # accepted
+    for changes, message in (
+        ({"detection_observer_gain": None}, "detection_kappa_f = 1 needs a detection observer"),
+        ({"detection_friction_band": -0.1}, "detection_friction_velocity_band must be a non-negative number"),
+        ({"detection_friction_band": float("nan")}, "detection_friction_velocity_band must be a non-negative"),
+    ):
+        bad = Oracle(atlas, threshold=None, reaction="none", **{**_DET_FRICTION, **changes})
+        with pytest.raises(ValueError, match=message):
+            core_controller(core, atlas, bad)
+
+
+_DET_FRICTION = {"detection_observer_gain": 100.0, "detection_friction_band": 0.1}

@@ -204,6 +204,8 @@ NB_MODULE(_core, m)
     .def_rw("damping_ratio", &P::damping_ratio)
     .def_rw("observer_gain", &P::observer_gain)
     .def_rw("detection_observer_gain", &P::detection_observer_gain)
+    .def_rw("detection_kappa_f", &P::detection_kappa_f)
+    .def_rw("detection_friction_velocity_band", &P::detection_friction_velocity_band)
     .def_rw("threshold", &P::threshold)
     .def_prop_rw(
       "reaction", [](const P & p) { return std::string(reflexarm::reactionName(p.reaction)); },

@@ -66,6 +66,9 @@ namespace reflexarm
     use_det_ = use_det;
     has_detector_ = has_detector;
     inv_band_ = 1.0 / q.friction_velocity_band;
+    det_friction_ = use_det && q.detection_kappa_f == 1;
+    inv_band_det_ = 1.0 / (q.detection_friction_velocity_band > 0.0 ? q.detection_friction_velocity_band
+                                                                      : q.friction_velocity_band);
     limit_ = q.residual_limit;
     period_lo_ = q.period_band_low * q.dt;
     period_hi_ = q.period_band_high * q.dt;

@@ -1,7 +1,9 @@
 // reflexarm::Controller: the momentum observers (4)-(6) and the residual's detection (12). Two observers share the
 // dynamics terms of the tick: the compensation's (gains K_o, its residual feeds (9)-(11) in the law) and, when the
-// detector has gains of its own, the detection observer (K_o,det). Each is stepped by explicit Euler over the
-// integrated period or by the exact (zero-order-hold) discretization, stable at any gain.
+// detector has gains of its own, the detection observer (K_o,det). The detection observer subtracts the law's
+// friction (kappa_f) or, with detection_kappa_f, its own (the model's, in a velocity band of its own). Each is
+// stepped by explicit Euler over the integrated period or by the exact (zero-order-hold) discretization, stable at
+// any gain.
 #include <cmath>
 
 #include "reflexarm/controller.hpp"
@@ -23,7 +25,6 @@ namespace reflexarm
       return;
     }
     const Eigen::MatrixXd & C = data_c_.C;
-    const double kappa_f = static_cast<double>(kappa_f_);
     const bool exact = params_.observer_discretization == ObserverDiscretization::Exact;
     const bool nominal = h == params_.dt; // the decay at the nominal period is computed once in configure()
     for (int i = 0; i < n_; ++i)
@@ -31,30 +32,44 @@ namespace reflexarm
       double ct_dq = 0.0; // C^T dq of gamma (5)
       for (int j = 0; j < n_; ++j)
         ct_dq += C(j, i) * s.dq[j];
-      double alpha = kappa_f * frictionTorque(i, s.dq[i]); // (6)
+      double jt_f = 0.0;
       if (kappa_ext_)
-      {
-        double jt_f = 0.0;
         for (int k = 0; k < 6; ++k)
           jt_f += J_(k, i) * s.wrench[k];
-        alpha -= jt_f;
-      }
-      const double base = s.tau_m[i] - (g_[i] - ct_dq) - alpha;
-      if (exact)
-      {
-        stepExact(obs_, i, ko_[i], nominal ? decay_[i] : std::exp(-ko_[i] * h), base, h);
-        if (use_det_)
-          stepExact(obs_det_, i, ko_det_[i], nominal ? decay_det_[i] : std::exp(-ko_det_[i] * h), base, h);
-        continue;
-      }
-      // momentum observer (4), explicit Euler over the integrated period
+      stepObserverJoint(i, s.dq[i], s.tau_m[i] - (g_[i] - ct_dq), jt_f, h, exact, nominal);
+    }
+  }
+
+  void Controller::stepObserverJoint(int i, double dq, double head, double jt, double h, bool exact,
+                                     bool nominal) noexcept
+  {
+    double alpha = static_cast<double>(kappa_f_) * frictionTorque(i, dq); // (6)
+    if (kappa_ext_)
+      alpha -= jt;
+    const double base = head - alpha;
+    if (exact)
+      stepExact(obs_, i, ko_[i], nominal ? decay_[i] : std::exp(-ko_[i] * h), base, h);
+    else
+    { // momentum observer (4), explicit Euler over the integrated period
       obs_.integral[i] += h * (base + obs_.residual[i]);
       obs_.residual[i] = ko_[i] * (p_[i] - obs_.p0[i] - obs_.integral[i]);
-      if (use_det_)
-      {
-        obs_det_.integral[i] += h * (base + obs_det_.residual[i]);
-        obs_det_.residual[i] = ko_det_[i] * (p_[i] - obs_det_.p0[i] - obs_det_.integral[i]);
-      }
+    }
+    if (!use_det_)
+      return;
+    double base_det = base;
+    if (det_friction_) // detection_kappa_f: the detection observer's own friction model
+    {
+      double alpha_det = frictionTorque(i, dq, inv_band_det_);
+      if (kappa_ext_)
+        alpha_det -= jt;
+      base_det = head - alpha_det;
+    }
+    if (exact)
+      stepExact(obs_det_, i, ko_det_[i], nominal ? decay_det_[i] : std::exp(-ko_det_[i] * h), base_det, h);
+    else
+    {
+      obs_det_.integral[i] += h * (base_det + obs_det_.residual[i]);
+      obs_det_.residual[i] = ko_det_[i] * (p_[i] - obs_det_.p0[i] - obs_det_.integral[i]);
     }
   }
 

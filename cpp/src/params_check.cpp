@@ -107,6 +107,13 @@ namespace reflexarm
       if (has_detector)
         q.threshold = asVector(p.threshold, n, "threshold", Sign::Positive);
       q.kappa_f = checkSwitch(p.kappa_f, "kappa_f");
+      q.detection_kappa_f = checkSwitch(p.detection_kappa_f, "detection_kappa_f");
+      if (q.detection_kappa_f && !use_det)
+        throw ConfigError("detection_kappa_f = 1 needs a detection observer (detection_observer_gain)");
+      if (!std::isfinite(p.detection_friction_velocity_band) || p.detection_friction_velocity_band < 0.0)
+        throw ConfigError("detection_friction_velocity_band must be a non-negative number of rad/s (0: "
+                          "friction_velocity_band); got "
+                          + std::to_string(p.detection_friction_velocity_band));
       q.kappa_eps = checkSwitch(p.kappa_eps, "kappa_eps");
       q.kappa_ext = checkSwitch(p.kappa_ext, "kappa_ext");
       checkPositive(p.residual_limit, "residual_limit");

@@ -59,30 +59,10 @@ namespace reflexarm
         c.started_ = true;
         return;
       }
-      const double kappa_f = static_cast<double>(c.kappa_f_);
       const bool exact = c.params_.observer_discretization == ObserverDiscretization::Exact;
       const bool nominal = h == c.params_.dt;
       for (int i = 0; i < c.n_; ++i)
-      {
-        double alpha = kappa_f * c.frictionTorque(i, s.dq[i]); // (6)
-        if (c.kappa_ext_)
-          alpha -= jt[i];
-        const double base = s.tau_m[i] - (c.g_[i] - ct[i]) - alpha;
-        if (exact)
-        {
-          c.stepExact(c.obs_, i, c.ko_[i], nominal ? c.decay_[i] : std::exp(-c.ko_[i] * h), base, h);
-          if (c.use_det_)
-            c.stepExact(c.obs_det_, i, c.ko_det_[i], nominal ? c.decay_det_[i] : std::exp(-c.ko_det_[i] * h), base, h);
-          continue;
-        }
-        c.obs_.integral[i] += h * (base + c.obs_.residual[i]);
-        c.obs_.residual[i] = c.ko_[i] * (c.p_[i] - c.obs_.p0[i] - c.obs_.integral[i]);
-        if (c.use_det_)
-        {
-          c.obs_det_.integral[i] += h * (base + c.obs_det_.residual[i]);
-          c.obs_det_.residual[i] = c.ko_det_[i] * (c.p_[i] - c.obs_det_.p0[i] - c.obs_det_.integral[i]);
-        }
-      }
+        c.stepObserverJoint(i, s.dq[i], s.tau_m[i] - (c.g_[i] - ct[i]), jt[i], h, exact, nominal);
     }
 
     /// One row (terms: its 4 n doubles). Returns the fault code; sets `detected` on a detection (nothing written).

@@ -177,6 +177,9 @@ namespace reflexarm
     // the momentum observers and the detection (observer.cpp)
     void updateObservers(const State & s, double h) noexcept;
     void stepExact(ObserverState & o, int i, double k, double decay, double base, double h) noexcept;
+    /// Joint i of both observers over the period h: head = tau_m - (g - C^T dq), jt = (J^T F)_i (used with
+    /// kappa_ext); the friction of (6) per observer (kappa_f; the detection observer's own with detection_kappa_f).
+    void stepObserverJoint(int i, double dq, double head, double jt, double h, bool exact, bool nominal) noexcept;
     bool observersFinite() const noexcept;
     int detect() noexcept;
     // the control law and the torque limits (control_law.cpp)
@@ -222,9 +225,10 @@ namespace reflexarm
     double kineticEnergy() const noexcept;
     void filterVelocity(const State & s) noexcept;
     /// tau_f of joint i: coulomb * clip(dq / velocity_band, -1, 1) + viscous * dq
-    double frictionTorque(int i, double dq) const noexcept
+    double frictionTorque(int i, double dq) const noexcept { return frictionTorque(i, dq, inv_band_); }
+    double frictionTorque(int i, double dq, double inv_band) const noexcept
     {
-      double sg = dq * inv_band_;
+      double sg = dq * inv_band;
       if (sg > 1.0)
         sg = 1.0;
       else if (sg < -1.0)
@@ -258,6 +262,8 @@ namespace reflexarm
     bool has_isolator_ = false;
     double t_phase_ = 0.0, retract_time_ = 0.0, hold_damping_scale_ = 1.0;
     double inv_band_ = 0.0, limit_ = 0.0, period_lo_ = 0.0, period_hi_ = 0.0;
+    double inv_band_det_ = 0.0; // the detection observer's friction band (detection_kappa_f)
+    bool det_friction_ = false; // detection_kappa_f: the detection observer subtracts friction whatever kappa_f
     double g_norm_ = 0.0, g_tol_ = 0.0, force_max_ = 0.0, moment_max_ = 0.0;
     bool use_det_ = false, has_detector_ = false;
     // buffers

@@ -108,6 +108,13 @@ namespace reflexarm
     Eigen::VectorXd observer_gain = Eigen::VectorXd::Constant(1, 5.0); ///< K_o [1/s], > 0
     /// K_o of a second observer used for detection only; empty: one observer does both.
     Eigen::VectorXd detection_observer_gain;
+    /// The friction model in the detection observer's (6) (0/1), whatever kappa_f the law and the compensating
+    /// observer run; needs detection_observer_gain. With 0 (the paper's) a sliding joint's residual carries its
+    /// friction.
+    int detection_kappa_f = 0;
+    /// Velocity band [rad/s] of the detection observer's friction model (wider than the velocity noise, so
+    /// that noise does not flip its Coulomb term); 0: friction_velocity_band.
+    double detection_friction_velocity_band = 0.0;
     /// zeta [Nm] per joint for detection (12), > 0; empty: detection off.
     Eigen::VectorXd threshold = Eigen::VectorXd::Constant(1, 11.0);
     Reaction reaction = Reaction::Gravity;          ///< reaction to an unmeasured (link) collision

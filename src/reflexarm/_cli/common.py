@@ -215,6 +215,14 @@ def add_detection_options(
         "with --detection-observer-gain, else euler)",
     )
     g.add_argument(
+        "--detection-friction-band",
+        type=float,
+        default=None,
+        metavar="RAD_S",
+        help="the detection observer subtracts the friction model in this velocity band [rad/s] (detection_kappa_f"
+        " = 1; needs --detection-observer-gain) (default: a thresholds.json's, tuned with it; else off)",
+    )
+    g.add_argument(
         "--reaction",
         choices=REACTION_CHOICES,
         default=reaction,
@@ -234,6 +242,7 @@ class DetectionChoice:
     source: str
     tuned_gain: float | None = None  # the detecting k_o a thresholds.json was tuned for
     observer_discretization: str = "euler"
+    detection_friction_band: float | None = None  # the detection observer's own friction band [rad/s]
 
     def label(self) -> str:
         """One line for the console."""
@@ -246,6 +255,8 @@ class DetectionChoice:
             gains += f", detection k_o = {self.detection_observer_gain:g} 1/s"
         if self.observer_discretization != "euler":
             gains += f" ({self.observer_discretization} observers)"
+        if self.detection_friction_band is not None:
+            gains += f", its friction in a {self.detection_friction_band:g} rad/s band"
         src = "" if self.source == "command line" else f" (from {self.source})"
         return f"zeta = {zeta}{src}{gains}, reaction {self.reaction}"
 
@@ -257,6 +268,7 @@ class DetectionChoice:
             "observer_gain_per_s": self.observer_gain,
             "detection_observer_gain_per_s": self.detection_observer_gain,
             "observer_discretization": self.observer_discretization,
+            "detection_friction_band_rad_s": self.detection_friction_band,
             "reaction": self.reaction,
         }
 
@@ -357,7 +369,16 @@ def detection_choice(args: argparse.Namespace, robot: RobotModel) -> DetectionCh
     discretization = getattr(args, "observer_discretization", None)
     if discretization is None:
         discretization = "exact" if args.detection_observer_gain is not None else "euler"
+    band = getattr(args, "detection_friction_band", None)
+    if band is None and source != "command line":  # levels tuned with the detection observer's own friction
+        band = tuned_friction_band(args.threshold)
+    if band is not None and (not math.isfinite(band) or band <= 0.0):
+        raise ConfigError(f"--detection-friction-band must be a positive velocity band [rad/s]; got {band:g}")
+    if band is not None and args.detection_observer_gain is None:
+        raise ConfigError("--detection-friction-band (or a thresholds.json tuned with one) needs "
+                          "--detection-observer-gain: the friction goes into the detection observer")  # fmt: skip
     return DetectionChoice(
+        detection_friction_band=band,
         observer_discretization=discretization,
         threshold=zeta,
         observer_gain=_gain(args.observer_gain, "--observer-gain"),
@@ -366,6 +387,16 @@ def detection_choice(args: argparse.Namespace, robot: RobotModel) -> DetectionCh
         source=source,
         tuned_gain=tuned,
     )
+
+
+def tuned_friction_band(value: str) -> float | None:
+    """The detection friction band a thresholds.json's levels were tuned with (its observer settings), if any."""
+    from reflexarm._validation import read_json_file
+
+    doc = read_json_file(Path(str(value).strip()), f"--threshold {value!r}")
+    observer = doc.get("observer") if isinstance(doc, dict) else None
+    band = observer.get("detection_friction_band") if isinstance(observer, dict) else None
+    return float(band) if isinstance(band, (int, float)) and not isinstance(band, bool) else None
 
 
 def tuned_gain_note(choice: DetectionChoice, default_gain: float) -> str | None:

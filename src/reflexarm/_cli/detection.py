@@ -38,6 +38,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--contact-seeds", type=int, default=10,
                    help="noise seeds of each pair's demo contact and link collision (default 10)")  # fmt: skip
     p.add_argument("--rate", type=float, default=0.1, help="false alarms per hour the levels are tuned for (0.1)")
+    p.add_argument("--detection-friction-band", type=float, default=None, metavar="RAD_S",
+                   help="the detection observer subtracts the friction model in this velocity band (detection_kappa_f"
+                   " = 1), levels tuned on that residual; e.g. 0.1, wider than the velocity noise (default: off, the "
+                   "paper's kappa_f = 0)")  # fmt: skip
     p.add_argument("--merge", nargs="+", default=None, metavar="JSON",
                    help="merge detection_study.json files (arms run in parallel) into --out")  # fmt: skip
     p.add_argument("--out", type=Path, default=Path("results/detection-study"), help="output folder")
@@ -48,7 +52,9 @@ def _print(name: str, arm: dict[str, Any]) -> None:
     def ms(v: Any) -> str:
         return "    -" if v is None else f"{1e3 * v:5.1f}"
 
-    print(f"\n{name} (plant friction {arm['plant_friction']})")
+    band = arm.get("detection_friction_band")
+    own = "" if band is None else f", the detection observer's friction in a {band:g} rad/s band"
+    print(f"\n{name} (plant friction {arm['plant_friction']}{own})")
     print(f"{'k_o':>5} {'zeta max':>8} {'ramp':>5} {'meas':>5} {'FA/h':>6} {'demo lag':>8} {'joint':>5} {'own':>5} "
           f"{'delay':>6} {'link lag':>8} {'joint':>5} {'own':>5} {'delay':>6} {'pulses':>7}")  # fmt: skip
     for p in arm["pairs"]["pairs"]:
@@ -91,7 +97,7 @@ def _detection_study(args: argparse.Namespace) -> int:
             args.arm or _ARMS, [float(v) for v in args.gains.split(",")], progress=_print,
             tune_s=60.0 * args.tune_minutes, tune_models=args.tune_models, heldout_s=60.0 * args.heldout_minutes,
             pulses=args.pulses, rate_per_hour=args.rate, model_seeds=args.model_seeds,
-            contact_seeds=args.contact_seeds,
+            contact_seeds=args.contact_seeds, detection_friction_band=args.detection_friction_band,
         )  # fmt: skip
     if args.merge:
         for name, arm in study.arms.items():

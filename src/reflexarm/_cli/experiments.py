@@ -279,6 +279,7 @@ def _mode_table(args: argparse.Namespace) -> int:
             threshold=detection.threshold,
             detection_observer_gain=detection.detection_observer_gain,
             reaction=detection.reaction,
+            detection_friction_band=detection.detection_friction_band,
         )
     write_json(
         out / "mode_table.json",

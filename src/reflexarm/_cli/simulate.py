@@ -194,6 +194,7 @@ def _detecting(setting: Any, detection: DetectionChoice) -> Any:
         detection_observer_gain=detection.detection_observer_gain,
         reaction=detection.reaction,
         observer_discretization=detection.observer_discretization,
+        detection_friction_band=detection.detection_friction_band,
     )
 
 

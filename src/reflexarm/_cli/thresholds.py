@@ -50,6 +50,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--detection-observer-gain, else euler)",
     )  # fmt: skip
     g.add_argument("--kappa-f", type=int, choices=_SWITCH, default=0, help="friction term in the observer (default 0)")
+    g.add_argument(
+        "--detection-friction-band", type=float, default=None, metavar="RAD_S",
+        help="the detection observer subtracts the friction model in this velocity band [rad/s] whatever --kappa-f "
+        "(Controller(detection_kappa_f=1); needs --detection-observer-gain or --detection-gains) (default: off)",
+    )  # fmt: skip
     g.add_argument("--kappa-ext", type=int, choices=_SWITCH, default=0, help="EFC: wrist wrench in the observer")
     g.add_argument("--kappa-eps", type=int, choices=_SWITCH, default=0, help="disturbance compensation (recorded only)")
     t = p.add_argument_group("levels")
@@ -155,6 +160,7 @@ def _tune(args: argparse.Namespace) -> int:
         kappa_ext=args.kappa_ext,
         kappa_eps=args.kappa_eps,
         observer_discretization=discretization,
+        detection_friction_band=args.detection_friction_band,
     )
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ThresholdWarning)

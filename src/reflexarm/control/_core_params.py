@@ -24,6 +24,9 @@ def core_params(ctrl: Any, core: ModuleType) -> Any:
     p.observer_gain = ctrl.observer.observer_gain.copy()
     det = ctrl.detection_observer
     p.detection_observer_gain = np.zeros(0) if det is None else det.observer_gain.copy()
+    p.detection_kappa_f = ctrl.detection_kappa_f
+    band = ctrl.detection_friction_velocity_band
+    p.detection_friction_velocity_band = 0.0 if band is None else band
     p.threshold = np.zeros(0) if ctrl.detector is None else ctrl.detector.threshold.copy()
     p.reaction = ctrl.reaction
     p.contact_reaction = ctrl.contact_reaction

@@ -118,6 +118,12 @@ class Controller:
         detection_observer_gain: if given, a second, usually faster observer with this gain runs in
             parallel and is the one used for detection (the paper's proposal at the end of Sec. III-A);
             the first observer is then used for compensation only.
+        detection_kappa_f: 1: the detection observer subtracts the friction model in (6) whatever ``kappa_f``
+            (the law and the compensating observer keep theirs); 0 (default, the paper's): it follows
+            ``kappa_f``. Needs ``detection_observer_gain``. A joint that slides into a contact then shows the
+            contact, not the contact less its friction.
+        detection_friction_velocity_band: that friction model's velocity band [rad/s] (``None``: the
+            model's); wider than the velocity noise keeps noise from flipping its Coulomb term.
         threshold: zeta [Nm] per joint for collision detection (12); ``None`` disables detection.
         reaction: what a detected collision the wrist sensor does not measure does: ``"gravity"`` (13),
             ``"brake"``, ``"retract"``, ``"compliant"`` or ``"none"`` (see
@@ -166,6 +172,8 @@ class Controller:
         damping_ratio: npt.ArrayLike = 0.7,
         observer_gain: npt.ArrayLike = 5.0,
         detection_observer_gain: npt.ArrayLike | None = None,
+        detection_kappa_f: int = 0,
+        detection_friction_velocity_band: float | None = None,
         threshold: npt.ArrayLike | None = 11.0,
         reaction: str = "gravity",
         contact_reaction: str | None = None,
@@ -205,6 +213,14 @@ class Controller:
             None
             if detection_observer_gain is None
             else MomentumObserver(n, detection_observer_gain, self.dt, _euler=euler)
+        )
+        self.detection_kappa_f = as_switch(detection_kappa_f, "detection_kappa_f")
+        if self.detection_kappa_f and self.detection_observer is None:
+            raise ConfigError("detection_kappa_f = 1 needs a detection observer (detection_observer_gain)")
+        self.detection_friction_velocity_band = (
+            None
+            if detection_friction_velocity_band is None
+            else as_positive_scalar(detection_friction_velocity_band, "detection_friction_velocity_band")
         )
         self.detector = None if threshold is None else CollisionDetector(n, threshold)
         self.reaction, self.contact_reaction, self.reaction_settings = check_reactions(

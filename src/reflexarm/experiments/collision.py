@@ -112,7 +112,9 @@ class CollisionSetting:
     level or one per joint (None: detection off), the reaction (a name of ``Controller(reaction=...)``:
     "gravity" = (13), "compliant", "none", ...) and, optionally, the gain of a second observer that detects
     (``detection_observer_gain`` [1/s], None: the first observer detects), and the observers' discretization
-    (``"euler"``, the paper's, or ``"exact"``, stable at any gain)."""
+    (``"euler"``, the paper's, or ``"exact"``, stable at any gain); ``detection_friction_band`` [rad/s]: the
+    detection observer subtracts the friction model in this velocity band (``Controller(detection_kappa_f=1)``;
+    None: it follows kappa_f)."""
 
     name: str
     stiffness: float
@@ -122,6 +124,7 @@ class CollisionSetting:
     damping_ratio: float = 0.7
     detection_observer_gain: float | None = None
     observer_discretization: str = "euler"
+    detection_friction_band: float | None = None
 
     def controller(self, robot: RobotModel) -> Controller:
         """This setting's controller on the model ``robot`` (the controller's model, not the plant's)."""
@@ -134,6 +137,8 @@ class CollisionSetting:
             threshold=self.threshold,
             reaction=self.reaction,
             observer_discretization=self.observer_discretization,
+            detection_kappa_f=int(self.detection_friction_band is not None),
+            detection_friction_velocity_band=self.detection_friction_band,
         )
 
 

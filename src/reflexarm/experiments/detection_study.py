@@ -36,7 +36,6 @@ from typing import Any
 
 import numpy as np
 
-from reflexarm.control import Controller
 from reflexarm.detect.defaults import DETECTION_LAG_TARGET_S
 from reflexarm.errors import ConfigError
 from reflexarm.experiments.collision import CollisionSetting, controller_model, free_motion_trajectory
@@ -99,22 +98,22 @@ def free_motion_residuals(
     scene: Any = None,
     keep: Callable[[Trace], None] | None = None,
     motion_seed: int | None = None,
+    detection_friction_band: float | None = None,
 ) -> list[ResidualReplay]:
     """Free motion of ``arm`` for ``duration`` [s] (model errors +-10 % of ``model_seed``, noise ``seed``),
     compiled, the detection observer at ``gain`` (exact), in chunks of ``chunk_s``: one replay per chunk
     (the controller's online residual; :func:`~reflexarm.tuning.refilter` gives other gains). ``keep`` sees
     each chunk's trace (e.g. the true external torque of a ``scene``); ``motion_seed`` varies the motion
-    (:func:`~reflexarm.experiments.collision.free_motion_trajectory`; None: the fixed cycle)."""
+    (:func:`~reflexarm.experiments.collision.free_motion_trajectory`; None: the fixed cycle);
+    ``detection_friction_band``: the detection observer's own friction model (``CollisionSetting``)."""
     from reflexarm.sim.compiled_loop import run_fast
 
     model, _ = controller_model(arm.robot, 0.1, model_seed, None)
     traj = free_motion_trajectory(duration, motion, arm.robot, seed=motion_seed)
     plant = _plant(arm, seed, scene)
     plant.reset(traj.sample(0.0).q_d)
-    ctrl = Controller(
-        model, stiffness=300.0, observer_gain=5.0, detection_observer_gain=gain, observer_discretization="exact",
-        threshold=None, reaction="none",
-    )  # fmt: skip
+    ctrl = DetectionSetting("free motion", stiffness=300.0, detection_observer_gain=gain, threshold=None,
+                            reaction="none", detection_friction_band=detection_friction_band).controller(model)
     out, done = [], 0.0
     while done < duration - 1e-9:
         span = min(chunk_s, duration - done)
@@ -287,15 +286,17 @@ def lag_spread(runs: Sequence[dict[str, Any]], key: str = "lag_detecting_joint_s
     }
 
 
-def _contact_runs(arm: StudyArm, gain: float, levels: np.ndarray, seed: int, model_seed: int) -> dict[str, Any]:
+def _contact_runs(
+    arm: StudyArm, gain: float, levels: np.ndarray, seed: int, model_seed: int, band: float | None = None
+) -> dict[str, Any]:
     """The demo contact and the link collision with the pair (gain, levels), noise seed ``seed`` (B) on the
-    model of ``model_seed``; lag and delay each."""
+    model of ``model_seed`` (``band``: the detection observer's friction band, None: none); lag and delay each."""
     from reflexarm.experiments.collision import run_ee_collision, run_link_collision
     from reflexarm.experiments.collision_events import collision_outcome
 
     setting = DetectionSetting(
         "Coll.Det", stiffness=300.0, observer_gain=5.0, detection_observer_gain=gain,
-        threshold=tuple(float(v) for v in levels), reaction="gravity",
+        threshold=tuple(float(v) for v in levels), reaction="gravity", detection_friction_band=band,
     )  # fmt: skip
     model, _ = controller_model(arm.robot, 0.1, model_seed, None)
     kw: dict[str, Any] = {"robot": arm.robot, "model_error": 0.1, "model_seed": model_seed, "seed": seed,
@@ -334,7 +335,8 @@ def _pulse_scene(arm: StudyArm, count: int, rng: np.random.Generator) -> tuple[l
 
 
 def _pulses(
-    arm: StudyArm, pairs: Any, model_error: np.ndarray, count: int, seed: int, model_seed: int
+    arm: StudyArm, pairs: Any, model_error: np.ndarray, count: int, seed: int, model_seed: int,
+    band: float | None = None,
 ) -> dict[str, Any]:
     """Short impacts during free motion: the share caught by each pair, among pulses whose true joint torque
     peaks above 3x the model error of some joint ("eligible") and among all."""
@@ -342,7 +344,8 @@ def _pulses(
     traces: list[Trace] = []
     gains = [p.gain for p in pairs.pairs]
     (rep,) = free_motion_residuals(arm, 2.0 + 1.5 * count + 1.0, gain=max(gains), model_seed=model_seed, seed=seed,
-                                   chunk_s=1e9, scene=scenes, keep=traces.append, motion_seed=seed)  # fmt: skip
+                                   chunk_s=1e9, scene=scenes, keep=traces.append, motion_seed=seed,
+                                   detection_friction_band=band)  # fmt: skip
     t, tau_ext = traces[0].t, traces[0].tau_ext
     caught: dict[str, dict[str, Any]] = {}
     for p in pairs.pairs:
@@ -375,13 +378,17 @@ def study_arm_detection(
     motion: str = "loaded",
     model_seeds: str = "same",
     contact_seeds: int = DEFAULT_CONTACT_SEEDS,
+    detection_friction_band: float | None = None,
 ) -> dict[str, Any]:
     """One arm of the study (module docstring): pairs, false alarms, noise growth, contacts, pulses.
 
     ``model_seeds``: "same" (default) gives every run the model of one seed (:data:`ARM_MODEL_SEED`): one
     arm with its model errors, tuned on its own logs (other motion and noise seeds) as a user tunes on the
     robot; "disjoint" gives the tuning, held-out and contact runs models of their own seeds (the levels must
-    then cover another arm's model errors too). ``contact_seeds``: noise seeds of the contact runs (>= 1)."""
+    then cover another arm's model errors too). ``contact_seeds``: noise seeds of the contact runs (>= 1).
+    ``detection_friction_band`` [rad/s]: every run's detection observer subtracts the friction model in this
+    velocity band (``Controller(detection_kappa_f=1)``), the levels are tuned on that residual; None: the
+    paper's (kappa_f = 0)."""
     import warnings
 
     from reflexarm.tuning import ThresholdWarning, propose_detection_pairs
@@ -396,7 +403,8 @@ def study_arm_detection(
         return ARM_MODEL_SEED if same else seed
 
     ref = max(gains)
-    fm = {"gain": ref, "motion": motion, "chunk_s": chunk_s}
+    band = detection_friction_band
+    fm = {"gain": ref, "motion": motion, "chunk_s": chunk_s, "detection_friction_band": band}
     tune = [r for i in range(tune_models) for r in free_motion_residuals(
         arm, tune_s, model_seed=model_of(SEEDS["A"] + i), seed=SEEDS["A"] + i, motion_seed=SEEDS["A"] + i,
         **fm)]  # type: ignore[arg-type]  # fmt: skip
@@ -405,20 +413,22 @@ def study_arm_detection(
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ThresholdWarning)
         pairs = propose_detection_pairs(tune, arm.robot, gains, heldout=held, rate_per_hour=rate_per_hour,
-                                        allow_extrapolation=True, settings=ObserverSettings())  # fmt: skip
+                                        allow_extrapolation=True,
+                                        settings=ObserverSettings(detection_friction_band=band))  # fmt: skip
     slow = [refilter(r, min(gains)) for r in tune]
     model_error = np.max([np.abs(r.residual[int(5 / min(gains) / r.dt) :]).max(axis=0) for r in slow], axis=0)
     out: dict[str, Any] = {"plant_friction": arm.plant_friction, "joints": arm.robot.joint_names,
                            "pairs": pairs.as_dict(), "noise_growth": noise_growth(held[:1], gains),
                            "warnings": sorted({str(w.message) for w in caught})[:20]}  # fmt: skip
     out["model_seeds"] = {"mode": model_seeds, "arm_model_seed": ARM_MODEL_SEED if same else None}
+    out["detection_friction_band"] = band
     out["contacts"], out["contact_seeds"] = {}, {}
     for p in pairs.pairs:  # the first seed's runs in "contacts"; over the seeds, the lags' spread
-        runs = [_contact_runs(arm, p.gain, p.collision, SEEDS["B"] + i, model_of(SEEDS["B"] + i))
+        runs = [_contact_runs(arm, p.gain, p.collision, SEEDS["B"] + i, model_of(SEEDS["B"] + i), band)
                 for i in range(contact_seeds)]  # fmt: skip
         out["contacts"][str(p.gain)] = runs[0]
         out["contact_seeds"][str(p.gain)] = {scen: lag_spread([r[scen] for r in runs]) for scen in runs[0]}
-    out["pulses"] = (_pulses(arm, pairs, model_error, pulses, SEEDS["B"] + 1, model_of(SEEDS["B"] + 1))
+    out["pulses"] = (_pulses(arm, pairs, model_error, pulses, SEEDS["B"] + 1, model_of(SEEDS["B"] + 1), band)
                      if pulses else {})  # fmt: skip
     return out
 

@@ -66,6 +66,7 @@ def _supervised_controller(
     threshold: float | tuple[float, ...],
     detection_observer_gain: float | None,
     reaction: str,
+    detection_friction_band: float | None = None,
 ) -> Controller:
     """The controller of the supervised link push: :func:`make_controller`'s, with detection (threshold per
     joint or one, a second detecting observer if ``detection_observer_gain``)."""
@@ -75,6 +76,8 @@ def _supervised_controller(
         damping_ratio=setup.damping_ratio,
         observer_gain=setup.observer_gain,
         detection_observer_gain=detection_observer_gain,
+        detection_kappa_f=int(detection_friction_band is not None),
+        detection_friction_velocity_band=detection_friction_band,
         threshold=threshold,
         reaction=reaction,
         kappa_f=setup.kappa_f,
@@ -93,6 +96,7 @@ def mode_table(
     threshold: float | tuple[float, ...] = 11.0,
     detection_observer_gain: float | None = None,
     reaction: str = "compliant",
+    detection_friction_band: float | None = None,
 ) -> tuple[list[dict[str, Any]], dict[str, Trace]]:
     """Fig. 3 measured: for each mode, accuracy under model errors, end-effector and link compliance.
 
@@ -140,7 +144,9 @@ def mode_table(
         # link compliance, without and with the supervisor's automatic switch
         link_ratio: dict[bool, float] = {}
         for supervised in (False, True):
-            reaction_args = (threshold, detection_observer_gain, reaction) if supervised else None
+            reaction_args = (
+                (threshold, detection_observer_gain, reaction, detection_friction_band) if supervised else None
+            )
             link_ratio[supervised], tr_l = _link_compliance(
                 setup, name, robot, link, q0, (model_seed, noise_seed), reaction_args, progress
             )
@@ -171,11 +177,12 @@ def _link_compliance(
     link: str,
     q0: np.ndarray,
     seeds: tuple[int, int],
-    supervision: tuple[float | tuple[float, ...], float | None, str] | None,
+    supervision: tuple[float | tuple[float, ...], float | None, str, float | None] | None,
     progress: bool,
 ) -> tuple[float, Trace]:
     """The link push held in ``q0`` in mode ``name``: (measured / prescribed displacement of the link, trace);
-    ``supervision`` (threshold, detection observer gain, reaction) runs it under the ModeSupervisor."""
+    ``supervision`` (threshold, detection observer gain, reaction, its friction band) runs it under the
+    ModeSupervisor."""
     mode = CONTROL_MODES[name]
     model_seed, noise_seed = seeds
     push = LinkForce(body=link, magnitude=setup.force, t_on=setup.t_on, t_off=setup.t_off)

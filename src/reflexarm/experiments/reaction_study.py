@@ -161,7 +161,11 @@ def _setting(scenario: str, reaction: str, tuned: TunedDetection | None = None) 
     base = next(s for s in EE_SETTINGS if s.name == "Coll.Det") if scenario == "demo" else LINK_SETTING
     if tuned is not None:
         base = replace(
-            base, detection_observer_gain=tuned.gain, threshold=tuned.levels, observer_discretization="exact"
+            base,
+            detection_observer_gain=tuned.gain,
+            threshold=tuned.levels,
+            observer_discretization="exact",
+            detection_friction_band=tuned.friction_band,
         )
     return replace(base, reaction=reaction)
 

@@ -31,7 +31,8 @@ __all__ = ["TunedDetection", "choose_pair", "load_tuned_detection", "pair_at_gai
 class TunedDetection:
     """One arm's detection pair: the detection observer's gain [1/s], its per-joint levels [Nm] (model order),
     the model seed the levels were tuned on (None: tuned across models, any seed), where it came from, and what the
-    study measured for it (held-out false alarms per hour, the analytic ramp lag [s])."""
+    study measured for it (held-out false alarms per hour, the analytic ramp lag [s]); ``friction_band``: the
+    detection observer's own friction band [rad/s] the levels were tuned with (None: the paper's kappa_f = 0)."""
 
     arm: str
     gain: float
@@ -40,6 +41,7 @@ class TunedDetection:
     source: str
     alarms_per_hour: float | None
     ramp_lag_s: float | None
+    friction_band: float | None = None
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready (the study's conditions)."""
@@ -50,6 +52,7 @@ class TunedDetection:
             "source": self.source,
             "heldout_alarms_per_hour": self.alarms_per_hour,
             "ramp_lag_max_s": self.ramp_lag_s,
+            "detection_friction_band_rad_s": self.friction_band,
         }
 
 
@@ -151,6 +154,10 @@ def load_tuned_detection(
         if not isinstance(pairs, list) or not all(isinstance(x, dict) for x in pairs):
             raise ConfigError(f"{where}: arm {arm!r} has no tuned pairs")
         pair = choose_pair(pairs, gain, arm, where)
+        band = a.get("detection_friction_band")
+        if band is not None and (_number(band) is None or not math.isfinite(band) or band <= 0.0):
+            raise ConfigError(f"{where}: arm {arm!r}'s detection_friction_band must be a positive band [rad/s] or "
+                              f"null; got {band!r}")  # fmt: skip
         seeds = a.get("model_seeds")
         seed = seeds.get("arm_model_seed") if isinstance(seeds, dict) else None
         out[arm] = TunedDetection(
@@ -161,5 +168,6 @@ def load_tuned_detection(
             source=str(p),
             alarms_per_hour=_alarms(pair),
             ramp_lag_s=_number(pair.get("ramp_lag_max_s")),
+            friction_band=_number(band),
         )
     return out

@@ -36,7 +36,7 @@ def build_controller(config: MonitorConfig, model: RobotModel) -> Controller:
     """The controller of ``config`` on ``model`` (thresholds as ``--threshold`` reads them), warmed up: a few ticks
     at rest, then :meth:`Controller.reset` (after which it runs as a fresh one, bitwise), so that the first real
     tick carries no first-use cost."""
-    from reflexarm._cli.common import read_threshold
+    from reflexarm._cli.common import read_threshold, tuned_friction_band
 
     detecting = config.detection_observer_gain or None
     gain = detecting or config.observer_gain
@@ -47,11 +47,16 @@ def build_controller(config: MonitorConfig, model: RobotModel) -> Controller:
             f"{gain:g} 1/s (set observer_gain or detection_observer_gain to match)",
             stacklevel=2,
         )
+    band = config.detection_friction_band or None
+    if band is None and source != "command line":  # levels tuned with the detecting observer's own friction
+        band = tuned_friction_band(config.threshold)
     controller = Controller(
         model,
         stiffness=config.stiffness,
         observer_gain=config.observer_gain,
         detection_observer_gain=detecting,
+        detection_kappa_f=int(band is not None),
+        detection_friction_velocity_band=band,
         threshold=zeta,
         reaction=config.reaction,
         observer_discretization=config.observer_discretization,

@@ -60,6 +60,8 @@ class ObserverSettings:
             not the residual.
         observer_discretization: "euler" (explicit Euler of (4), k_o dt < 1) or "exact" (the first-order
             filter's zero-order-hold form, stable at any gain), as ``Controller(observer_discretization=)``.
+        detection_friction_band: the detection observer subtracts the friction model in this velocity band
+            [rad/s] (``Controller(detection_kappa_f=1)``); None: it follows kappa_f (the paper's).
     """
 
     observer_gain: float = 5.0
@@ -68,6 +70,7 @@ class ObserverSettings:
     kappa_ext: int = 0
     kappa_eps: int = 0
     observer_discretization: str = "euler"
+    detection_friction_band: float | None = None
 
     @property
     def detection_gain(self) -> float:
@@ -148,6 +151,8 @@ def replay_residual(log: RobotLog, robot: RobotModel, settings: ObserverSettings
         kappa_ext=s.kappa_ext,
         kappa_eps=s.kappa_eps,
         observer_discretization=s.observer_discretization,
+        detection_kappa_f=int(s.detection_friction_band is not None),
+        detection_friction_velocity_band=s.detection_friction_band,
         dt=dt,
         torque_limit=None,
         # the damping matrix shapes the command only, never the residual: computed once instead of every 10

@@ -1,0 +1,140 @@
+"""The detection observer's own friction model (``Controller(detection_kappa_f=1,
+detection_friction_velocity_band=)``; issue 15's faster detection): what it subtracts, where the band and the
+tuned levels travel (tuning settings, a detection study's file, the collision commands), and the refusals.
+
+The tick's arithmetic is compared with the oracle in ``test_controller_oracle.py`` and ``test_cpp_core.py``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from reflexarm import load_robot
+from reflexarm.control import Controller, replay
+from reflexarm.errors import ConfigError
+from reflexarm.experiments.tuned_detection import load_tuned_detection
+
+PANDA = load_robot("panda")
+
+
+def _sliding_log(robot, joint: int, velocity: float, seconds: float = 0.5, dt: float = 1e-3):
+    """Joint ``joint`` slides at a constant ``velocity`` from home, every other joint still; the measured torque is
+    the rigid body's inverse dynamics plus the model's own friction: no external torque at all."""
+    t = np.arange(0.0, seconds, dt)
+    q = np.tile(robot.home, (t.size, 1))
+    q[:, joint] += velocity * t
+    dq = np.zeros_like(q)
+    dq[:, joint] = velocity
+    fr = robot.friction
+    tau_f = fr.coulomb * np.clip(dq / fr.velocity_band, -1, 1) + fr.viscous * dq
+    zero, data = np.zeros(robot.n), robot.pin_model.createData()
+    tau = np.array([pin.rnea(robot.pin_model, data, qk, vk, zero) for qk, vk in zip(q, dq, strict=True)]) + tau_f
+    return t, q, dq, tau, tau_f[-1]
+
+
+@pytest.mark.parametrize("velocity", [0.3, -0.5])
+def test_a_sliding_joint_shows_its_friction_in_the_paper_s_residual_and_none_with_its_own_model(velocity):
+    """No external torque: the paper's detection residual (kappa_f = 0) carries the sliding joint's friction
+    torque (its sign: the observer sees the friction as a torque against the motion); with detection_kappa_f = 1 it
+    is gone, while the compensating observer (kappa_f = 0) still carries it."""
+    joint = 3
+    t, q, dq, tau, tau_f = _sliding_log(PANDA, joint, velocity)
+    assert abs(tau_f[joint]) > 0.5  # the Panda's joint 4: 0.64 Nm Coulomb, else the test proves little
+    kw = {"detection_observer_gain": 200.0, "observer_discretization": "exact", "threshold": None, "reaction": "none"}
+    paper = replay(Controller(PANDA, **kw), t, q, dq, tau)
+    ctrl = Controller(PANDA, detection_kappa_f=1, **kw)
+    own = replay(ctrl, t, q, dq, tau)
+    # 0.3 s = 60 time constants of the 200 1/s observer: the filter has settled; what is left is the discretisation
+    # of dp/dt along the slide (p changes with M(q(t))): below 1e-3 Nm here
+    settled = t > 0.3
+    np.testing.assert_allclose(paper.residual[settled, joint], -tau_f[joint], atol=1e-3)
+    assert np.abs(own.residual[settled]).max() < 1e-3
+    # the 5 1/s compensating observer keeps kappa_f = 0: the first-order step response to -tau_f, 0.499 s after its
+    # first tick
+    step = -tau_f[joint] * (1.0 - np.exp(-5.0 * (t[-1] - t[0])))
+    assert abs(ctrl.observer.residual[joint] - step) < 1e-3
+
+
+def test_the_band_decides_how_much_of_a_slow_slide_s_coulomb_friction_is_subtracted():
+    """Below its band the model's Coulomb term is linear in dq: at 0.05 rad/s a 0.1 rad/s band subtracts half of
+    it, the model's 0.02 rad/s band all of it."""
+    joint = 3
+    t, q, dq, tau, tau_f = _sliding_log(PANDA, joint, 0.05)
+    coulomb = PANDA.friction.coulomb[joint]
+    kw = {"detection_observer_gain": 200.0, "observer_discretization": "exact", "threshold": None, "reaction": "none"}
+    wide = replay(Controller(PANDA, detection_kappa_f=1, detection_friction_velocity_band=0.1, **kw), t, q, dq, tau)
+    model = replay(Controller(PANDA, detection_kappa_f=1, **kw), t, q, dq, tau)
+    np.testing.assert_allclose(wide.residual[-1, joint], -0.5 * coulomb, atol=1e-3)
+    assert abs(model.residual[-1, joint]) < 1e-3
+
+
+def test_a_detection_study_s_band_reaches_the_tuned_pair_and_a_bad_one_is_refused(tmp_path):
+    def study(band: object) -> str:
+        path = tmp_path / "detection_study.json"
+        pair = {"detection_observer_gain": 100.0, "collision_Nm": [9.0] * 7, "ramp_lag_max_s": 0.0096,
+                "heldout": {"alarms": 0, "alarms_per_hour": 0.0, "duration_s": 3600.0}}  # fmt: skip
+        arm = {"joints": list(PANDA.joint_names), "pairs": {"pairs": [pair]}, "detection_friction_band": band,
+               "model_seeds": {"mode": "same", "arm_model_seed": 7}}  # fmt: skip
+        path.write_text(json.dumps({"conditions": {}, "arms": {"panda": arm}}))
+        return str(path)
+
+    joints = {"panda": PANDA.joint_names}
+    tuned = load_tuned_detection(study(0.1), ["panda"], joints)["panda"]
+    assert tuned.friction_band == 0.1 and tuned.as_dict()["detection_friction_band_rad_s"] == 0.1
+    assert load_tuned_detection(study(None), ["panda"], joints)["panda"].friction_band is None
+    from reflexarm.experiments.reaction_study import _setting
+
+    ctrl = _setting("demo", "brake", tuned).controller(PANDA)
+    assert ctrl.detection_kappa_f == 1 and ctrl.detection_friction_velocity_band == 0.1
+    for bad in (-0.1, 0.0, "wide", True):
+        with pytest.raises(ConfigError, match="detection_friction_band must be a positive band"):
+            load_tuned_detection(study(bad), ["panda"], joints)
+
+
+def _choice(tmp_path, threshold: str, band: float | None, gain: float | None = 100.0):
+    from reflexarm._cli.common import detection_choice
+
+    args = argparse.Namespace(threshold=threshold, observer_gain=5.0, detection_observer_gain=gain,
+                              observer_discretization=None, reaction="brake", detection_friction_band=band)  # fmt: skip
+    return detection_choice(args, PANDA)
+
+
+def test_the_collision_commands_take_the_band_from_the_command_line_or_the_tuned_file(tmp_path):
+    assert _choice(tmp_path, "11", 0.1).detection_friction_band == 0.1
+    assert _choice(tmp_path, "11", None).detection_friction_band is None
+    tuned = tmp_path / "thresholds.json"  # tune-thresholds' layout: levels and the observer settings they are for
+    observer = {"detection_observer_gain": 100.0, "detection_friction_band": 0.1}
+    tuned.write_text(json.dumps({"collision_Nm": [9.0] * 7, "observer": observer}))
+    choice = _choice(tmp_path, str(tuned), None)
+    assert choice.detection_friction_band == 0.1 and "its friction in a 0.1 rad/s band" in choice.label()
+    assert choice.describe()["detection_friction_band_rad_s"] == 0.1
+    assert _choice(tmp_path, str(tuned), 0.2).detection_friction_band == 0.2  # the command line wins
+    with pytest.raises(ConfigError, match="needs --detection-observer-gain"):
+        _choice(tmp_path, str(tuned), None, gain=None)
+    for bad in (-0.1, 0.0, float("nan")):
+        with pytest.raises(ConfigError, match="--detection-friction-band must be a positive velocity band"):
+            _choice(tmp_path, "11", bad)
+
+
+def test_the_ros_node_s_controller_takes_the_band_from_its_parameter_or_the_tuned_file(tmp_path):
+    from reflexarm.ros.config import MonitorConfig
+    from reflexarm.ros.controller_setup import build_controller
+
+    def built(**values: object) -> Controller:
+        return build_controller(MonitorConfig.from_values("monitor", {"robot": "panda", **values}), PANDA)
+
+    assert built(detection_observer_gain=100.0).detection_kappa_f == 0
+    ctrl = built(detection_observer_gain=100.0, detection_friction_band=0.1)
+    assert (ctrl.detection_kappa_f, ctrl.detection_friction_velocity_band) == (1, 0.1)
+    tuned = tmp_path / "thresholds.json"
+    observer = {"detection_observer_gain": 100.0, "detection_friction_band": 0.2}
+    tuned.write_text(json.dumps({"collision_Nm": [9.0] * 7, "observer": observer}))
+    assert built(detection_observer_gain=100.0, threshold=str(tuned)).detection_friction_velocity_band == 0.2
+    with pytest.raises(ConfigError, match="detection_friction_band and rearm_after must be >= 0"):
+        built(detection_observer_gain=100.0, detection_friction_band=-0.1)
+    with pytest.raises(ConfigError, match="needs a detection observer"):
+        built(detection_friction_band=0.1)
