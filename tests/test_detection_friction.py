@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -138,3 +139,37 @@ def test_the_ros_node_s_controller_takes_the_band_from_its_parameter_or_the_tune
         built(detection_observer_gain=100.0, detection_friction_band=-0.1)
     with pytest.raises(ConfigError, match="needs a detection observer"):
         built(detection_friction_band=0.1)
+
+
+PANDA_LOG = Path(__file__).resolve().parents[1].parent / "shared" / "reference" / "panda_gaz2019"
+
+
+@pytest.mark.skipif(not PANDA_LOG.is_dir(), reason=f"real Panda log not available at {PANDA_LOG}")
+def test_on_a_real_panda_s_log_the_model_s_friction_takes_most_of_the_wrists_residual():
+    """Gaz et al.'s Panda excitation log (21 s, a real robot), replayed with a 100 1/s detection observer on the
+    built-in Panda model: with the model's friction subtracted (0.1 rad/s band) the residual's RMS on the wrist
+    joints 5 and 7 falls by 46 % and 71 % (measured: 0.37 -> 0.20 and 0.28 -> 0.08 Nm); asserted: by a third at
+    least. The large joints 1-4 (model-error dominated) change by under 5 %."""
+    from reflexarm.logs.robot_log import LogRepairWarning, RobotLog
+
+    raw = [np.loadtxt(PANDA_LOG / f"exciting_traj_{k}.txt") for k in ("time", "positions", "velocity", "torques")]
+    with pytest.warns(LogRepairWarning):  # the host's repeated rows dropped, its stamps kept
+        log = RobotLog.from_arrays(raw[0], *(x.reshape(-1, 7) for x in raw[1:]), source="panda_gaz2019")
+    rms = {}
+    for band in (None, 0.1):
+        ctrl = Controller(PANDA, detection_observer_gain=100.0, observer_discretization="exact", threshold=None,
+                          reaction="none", torque_limit=None, detection_kappa_f=int(band is not None),
+                          detection_friction_velocity_band=band)  # fmt: skip
+        r = replay(ctrl, log.t, log.q, log.dq, log.measured_torque).residual[2000:]  # after the start-up
+        rms[band] = np.sqrt(np.mean(r**2, axis=0))
+    assert np.all(rms[0.1][[4, 6]] < (2.0 / 3.0) * rms[None][[4, 6]]), (rms[None], rms[0.1])
+    assert np.all(np.abs(rms[0.1][:4] / rms[None][:4] - 1.0) < 0.05), (rms[None], rms[0.1])
+
+
+def test_tune_thresholds_refuses_the_band_without_a_detection_observer(tmp_path, capsys):
+    from reflexarm.cli import main
+
+    log = tmp_path / "log.csv"
+    log.write_text("t,q_1\n0,0\n")  # never read: the refusal comes first
+    assert main(["tune-thresholds", str(log), "--robot", "panda", "--detection-friction-band", "0.1"]) != 0
+    assert "--detection-friction-band needs --detection-observer-gain" in capsys.readouterr().err

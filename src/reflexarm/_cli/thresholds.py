@@ -135,8 +135,14 @@ def _load(args: argparse.Namespace, path: str, robot: Any) -> Any:
 
 
 def _tune(args: argparse.Namespace) -> int:
+    from reflexarm.errors import ConfigError
     from reflexarm.tuning import ObserverSettings, ThresholdWarning, tune_thresholds
 
+    if args.detection_friction_band is not None and args.detection_observer_gain is None:
+        raise ConfigError(
+            "--detection-friction-band needs --detection-observer-gain: the friction goes into the detection "
+            "observer, whose levels the file holds (--detection-gains then tunes its pairs with it too)"
+        )
     if args.recorded_residual:  # the residual is the run's: its model, not --model (kinematics for J^T F only)
         args.robot = args.robot or DEFAULT_ROBOT
         robot = model = load_robot_from_args(args)
