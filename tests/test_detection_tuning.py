@@ -142,3 +142,26 @@ def test_a_file_of_pairs_drives_the_controller_at_its_gain(atlas, pairs, tmp_pat
     assert first >= k0
     assert j in flags[first][1]
     assert first - k0 <= math.ceil(math.log(1.5) * 1.0 / tuned / DT) + 2  # T ln(3/2) plus two ticks
+
+
+def test_the_detection_observer_s_own_friction_refilters_and_is_named_in_the_pairs(atlas):
+    """With the detection observer's own friction model (0.1 rad/s band), one replay refiltered to another gain still
+    equals the Controller at that gain (the friction is in the input u, which does not depend on the gain); the
+    pairs tuned with it say so in their JSON and in the printed table."""
+    from reflexarm.tuning._report import format_pairs
+
+    log = _still_log(atlas, 2.0, seed=1)
+    def at(gain: float, band: float | None = 0.1):
+        settings = ObserverSettings(detection_observer_gain=gain, observer_discretization="exact",
+                                    detection_friction_band=band)  # fmt: skip
+        return replay_residual(log, atlas, settings)
+
+    fast, slow, without = at(400.0), at(40.0), at(40.0, None)
+    np.testing.assert_allclose(refilter(fast, 40.0).residual, slow.residual, atol=1e-9)
+    assert np.abs(slow.residual - without.residual).max() > 0.1  # the band changed the residual: the test sees it
+    logs = [_still_log(atlas, 20.0, seed=s) for s in (11, 12)]
+    pairs = propose_detection_pairs(logs, atlas, (100.0,), rate_per_hour=600.0, contact_rate_per_hour=6000.0,
+                                    allow_extrapolation=True, lag_draws=5,
+                                    settings=ObserverSettings(detection_friction_band=0.1))  # fmt: skip
+    assert pairs.as_dict()["detection_friction_band"] == 0.1
+    assert "its friction model in a 0.1 rad/s band" in format_pairs(pairs)

@@ -82,8 +82,10 @@ def format_pairs(pairs: DetectionPairs) -> str:
     def ms(v: object) -> str:
         return "  -" if v is None else f"{1e3 * float(v):5.1f}"  # type: ignore[arg-type]
 
+    band = pairs.detection_friction_band
+    own = "" if band is None else f", its friction model in a {band:g} rad/s band"
     head = (
-        f"(k_o, zeta) pairs (exact observer): levels at {pairs.rate_per_hour:g} false alarms/h; lag from the true "
+        f"(k_o, zeta) pairs (exact observer{own}): levels at {pairs.rate_per_hour:g} false alarms/h; lag from the true "
         f"torque exceeding zeta_j to detection, ramp {pairs.ramp_slope:g} Nm/s and step {pairs.step_size:g} x "
         "zeta (analytic; measured on held-out logs: median/max)\n"
     )

@@ -113,6 +113,8 @@ class DetectionPairs:
     step_size: float
     sources: list[str]
     heldout_sources: list[str]
+    #: the detection observer's own friction band [rad/s] the residuals had (ObserverSettings), None: none
+    detection_friction_band: float | None = None
 
     def pair(self, gain: float) -> GainPair:
         """The pair tuned at ``gain`` [1/s] (ConfigError naming the gains if there is none)."""
@@ -138,6 +140,7 @@ class DetectionPairs:
                 "on logs of other seeds than the tuning logs",
             },
             "rate_per_hour": self.rate_per_hour,
+            "detection_friction_band": self.detection_friction_band,
             "ramp_slope_Nm_per_s": self.ramp_slope,
             "step_size_times_zeta": self.step_size,
             "logs": self.sources,
@@ -252,4 +255,5 @@ def propose_detection_pairs(
     return DetectionPairs(
         pairs, float(rate_per_hour), float(ramp_slope), float(step_size),
         [getattr(x, "source", str(x)) for x in tune_items], [getattr(x, "source", str(x)) for x in held_items],
+        base.detection_friction_band,
     )  # fmt: skip
