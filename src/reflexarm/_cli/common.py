@@ -5,13 +5,14 @@ from __future__ import annotations
 import argparse
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from reflexarm.errors import ConfigError
 
 if TYPE_CHECKING:
+    from reflexarm.control.collision.react import ReactionSettings
     from reflexarm.robots import RobotModel
 
 
@@ -228,6 +229,54 @@ def add_detection_options(
         default=reaction,
         help=f"what a detected collision does (default {reaction})",
     )
+    add_reaction_setting_option(g)
+
+
+def add_reaction_setting_option(g: argparse._ActionsContainer) -> None:
+    """``--reaction-setting KEY=VALUE[,KEY=VALUE...]`` (repeatable): fields of ReactionSettings."""
+    g.add_argument(
+        "--reaction-setting",
+        action="append",
+        default=None,
+        metavar="KEY=VALUE",
+        help="a reaction setting other than its default, e.g. retract_distance=0.1,max_retract_time=0.4 (repeat or "
+        "comma-separate; keys: the fields of reflexarm.control.ReactionSettings: brake_time, retract_distance, "
+        "retract_speed, max_retract_time, velocity_fraction, compliant_stiffness_factor, rest_time, ...)",
+    )
+
+
+def changed_settings(settings: ReactionSettings | None) -> str:
+    """", with KEY=VALUE, ..." for the fields of ``settings`` that differ from their defaults ("" for none)."""
+    if settings is None:
+        return ""
+    default = type(settings)()
+    changed = [f"{k}={v:g}" for k, v in asdict(settings).items() if v != getattr(default, k)]
+    return f" ({', '.join(changed)})" if changed else ""
+
+
+def reaction_settings_of(items: Sequence[str] | None) -> ReactionSettings | None:
+    """The ReactionSettings of ``--reaction-setting`` (None when not given); its own checks name a bad value.
+
+    Raises:
+        ConfigError: not KEY=VALUE, an unknown key (the keys are listed), a value that is not a number.
+    """
+    from dataclasses import fields
+
+    from reflexarm.control.collision.react import ReactionSettings
+
+    if not items:
+        return None
+    keys = [f.name for f in fields(ReactionSettings)]
+    values: dict[str, float | int] = {}
+    for part in (p.strip() for item in items for p in item.split(",")):
+        key, sep, text = (x.strip() for x in part.partition("="))
+        if not sep or key not in keys:
+            raise ConfigError(f"--reaction-setting expects KEY=VALUE, KEY one of: {', '.join(keys)}; got {part!r}")
+        try:
+            values[key] = int(text) if key == "isolation_points_per_tick" else float(text)
+        except ValueError:
+            raise ConfigError(f"--reaction-setting {key} must be a number; got {text!r}") from None
+    return ReactionSettings(**values)  # type: ignore[arg-type]
 
 
 @dataclass(frozen=True)
@@ -243,6 +292,7 @@ class DetectionChoice:
     tuned_gain: float | None = None  # the detecting k_o a thresholds.json was tuned for
     observer_discretization: str = "euler"
     detection_friction_band: float | None = None  # the detection observer's own friction band [rad/s]
+    reaction_settings: ReactionSettings | None = None  # --reaction-setting (None: the defaults)
 
     def label(self) -> str:
         """One line for the console."""
@@ -258,7 +308,7 @@ class DetectionChoice:
         if self.detection_friction_band is not None:
             gains += f", its friction in a {self.detection_friction_band:g} rad/s band"
         src = "" if self.source == "command line" else f" (from {self.source})"
-        return f"zeta = {zeta}{src}{gains}, reaction {self.reaction}"
+        return f"zeta = {zeta}{src}{gains}, reaction {self.reaction}{changed_settings(self.reaction_settings)}"
 
     def describe(self) -> dict[str, object]:
         """JSON-able description for summaries."""
@@ -270,6 +320,7 @@ class DetectionChoice:
             "observer_discretization": self.observer_discretization,
             "detection_friction_band_rad_s": self.detection_friction_band,
             "reaction": self.reaction,
+            "reaction_settings": None if self.reaction_settings is None else asdict(self.reaction_settings),
         }
 
 
@@ -378,6 +429,7 @@ def detection_choice(args: argparse.Namespace, robot: RobotModel) -> DetectionCh
         raise ConfigError("--detection-friction-band (or a thresholds.json tuned with one) needs "
                           "--detection-observer-gain: the friction goes into the detection observer")  # fmt: skip
     return DetectionChoice(
+        reaction_settings=reaction_settings_of(getattr(args, "reaction_setting", None)),
         detection_friction_band=band,
         observer_discretization=discretization,
         threshold=zeta,

@@ -280,6 +280,7 @@ def _mode_table(args: argparse.Namespace) -> int:
             detection_observer_gain=detection.detection_observer_gain,
             reaction=detection.reaction,
             detection_friction_band=detection.detection_friction_band,
+            reaction_settings=detection.reaction_settings,
         )
     write_json(
         out / "mode_table.json",

@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from reflexarm._cli.common import add_reaction_setting_option
 from reflexarm.errors import ConfigError
 
 #: The printed table: (key of :func:`~reflexarm.experiments.reaction_study.reaction_measures` or of the row,
@@ -96,6 +97,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="with --detection-study: the detection gain [1/s] of every arm, or auto: each arm's smallest gain "
         "whose ramp lag is within 10 ms and whose held-out hour had no false alarm (default auto)",
     )
+    add_reaction_setting_option(p)
     p.add_argument(
         "--out",
         type=Path,
@@ -177,12 +179,13 @@ def _floor_summary(rows: list[dict[str, Any]]) -> str:
 
 
 def _reaction_study(args: argparse.Namespace) -> int:
-    from reflexarm._cli.common import format_table
+    from reflexarm._cli.common import changed_settings, format_table, reaction_settings_of
     from reflexarm.experiments.reaction_study import plot_reaction_study, reaction_measures, run_reaction_study
     from reflexarm.sim import PAPER_NOISE, SensorNoise
 
     arms, reactions, scenarios, pct = _check(args)
     detection = _detection(args, arms)
+    reaction_settings = reaction_settings_of(args.reaction_setting)
     noise = PAPER_NOISE if args.noise == "paper" else SensorNoise(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     noise_text = "the paper's sensor noise" if args.noise == "paper" else "no sensor noise"
     out = Path(args.out)
@@ -190,7 +193,8 @@ def _reaction_study(args: argparse.Namespace) -> int:
     print(
         f"reaction study: {len(arms)} arm(s) x {len(scenarios)} scenario(s) x {len(reactions)} reaction(s) = {total} "
         f"runs; +-{pct:g} % model error, {noise_text}, seed {args.seed}"
-        + ("; detection tuned per arm (model errors of the arm's tuned model)" if detection else ""),
+        + ("; detection tuned per arm (model errors of the arm's tuned model)" if detection else "")
+        + (f"; reaction settings{changed_settings(reaction_settings)}" if reaction_settings else ""),
         file=sys.stderr,
     )
     t0 = time.perf_counter()
@@ -220,6 +224,7 @@ def _reaction_study(args: argparse.Namespace) -> int:
         folder=out / "arms",
         progress=progress,
         detection=detection,
+        reaction_settings=reaction_settings,
     )
     table = []
     for row in study.rows:

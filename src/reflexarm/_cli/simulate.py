@@ -13,6 +13,7 @@ from reflexarm._cli.common import (
     add_common,
     add_detection_options,
     add_model_options,
+    changed_settings,
     detection_choice,
     format_table,
     model_choice,
@@ -195,6 +196,7 @@ def _detecting(setting: Any, detection: DetectionChoice) -> Any:
         reaction=detection.reaction,
         observer_discretization=detection.observer_discretization,
         detection_friction_band=detection.detection_friction_band,
+        reaction_settings=detection.reaction_settings,
     )
 
 
@@ -206,9 +208,11 @@ def _setting_line(setting: Any) -> str:
     gains = f"k_o = {setting.observer_gain:g} 1/s"
     if setting.detection_observer_gain is not None:
         gains += f", detection k_o = {setting.detection_observer_gain:g} 1/s"
+    if setting.detection_friction_band is not None:
+        gains += f", its friction in a {setting.detection_friction_band:g} rad/s band"
     return (
         f"[{setting.name}] k = {setting.stiffness:g} Nm/rad, detection zeta = {zeta_text} Nm, {gains}, "
-        f"reaction {setting.reaction}"
+        f"reaction {setting.reaction}{changed_settings(setting.reaction_settings)}"
     )
 
 

@@ -17,6 +17,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from reflexarm.control import Controller
+from reflexarm.control.collision.react import ReactionSettings
 from reflexarm.errors import ConfigError
 from reflexarm.experiments.any_arm import (
     ee_swing_plan,
@@ -114,7 +115,8 @@ class CollisionSetting:
     (``detection_observer_gain`` [1/s], None: the first observer detects), and the observers' discretization
     (``"euler"``, the paper's, or ``"exact"``, stable at any gain); ``detection_friction_band`` [rad/s]: the
     detection observer subtracts the friction model in this velocity band (``Controller(detection_kappa_f=1)``;
-    None: it follows kappa_f)."""
+    None: it follows kappa_f); ``reaction_settings``: the reactions' (brake time, retract distance, ...; None: their
+    defaults)."""
 
     name: str
     stiffness: float
@@ -125,6 +127,7 @@ class CollisionSetting:
     detection_observer_gain: float | None = None
     observer_discretization: str = "euler"
     detection_friction_band: float | None = None
+    reaction_settings: ReactionSettings | None = None
 
     def controller(self, robot: RobotModel) -> Controller:
         """This setting's controller on the model ``robot`` (the controller's model, not the plant's)."""
@@ -139,6 +142,7 @@ class CollisionSetting:
             observer_discretization=self.observer_discretization,
             detection_kappa_f=int(self.detection_friction_band is not None),
             detection_friction_velocity_band=self.detection_friction_band,
+            reaction_settings=self.reaction_settings,
         )
 
 

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from reflexarm.control import CONTROL_MODES, Controller, ModeSupervisor
+from reflexarm.control import CONTROL_MODES, Controller, ModeSupervisor, ReactionSettings
 from reflexarm.experiments.any_arm import RANGE_MARGIN, is_paper_arm
 from reflexarm.experiments.compensation import (
     CompensationSetup,
@@ -67,6 +67,7 @@ def _supervised_controller(
     detection_observer_gain: float | None,
     reaction: str,
     detection_friction_band: float | None = None,
+    reaction_settings: ReactionSettings | None = None,
 ) -> Controller:
     """The controller of the supervised link push: :func:`make_controller`'s, with detection (threshold per
     joint or one, a second detecting observer if ``detection_observer_gain``)."""
@@ -80,6 +81,7 @@ def _supervised_controller(
         detection_friction_velocity_band=detection_friction_band,
         threshold=threshold,
         reaction=reaction,
+        reaction_settings=reaction_settings,
         kappa_f=setup.kappa_f,
         kappa_eps=kappa_eps,
         kappa_ext=kappa_ext,
@@ -97,6 +99,7 @@ def mode_table(
     detection_observer_gain: float | None = None,
     reaction: str = "compliant",
     detection_friction_band: float | None = None,
+    reaction_settings: ReactionSettings | None = None,
 ) -> tuple[list[dict[str, Any]], dict[str, Trace]]:
     """Fig. 3 measured: for each mode, accuracy under model errors, end-effector and link compliance.
 
@@ -145,7 +148,9 @@ def mode_table(
         link_ratio: dict[bool, float] = {}
         for supervised in (False, True):
             reaction_args = (
-                (threshold, detection_observer_gain, reaction, detection_friction_band) if supervised else None
+                (threshold, detection_observer_gain, reaction, detection_friction_band, reaction_settings)
+                if supervised
+                else None
             )
             link_ratio[supervised], tr_l = _link_compliance(
                 setup, name, robot, link, q0, (model_seed, noise_seed), reaction_args, progress
@@ -177,12 +182,12 @@ def _link_compliance(
     link: str,
     q0: np.ndarray,
     seeds: tuple[int, int],
-    supervision: tuple[float | tuple[float, ...], float | None, str, float | None] | None,
+    supervision: tuple[float | tuple[float, ...], float | None, str, float | None, ReactionSettings | None] | None,
     progress: bool,
 ) -> tuple[float, Trace]:
     """The link push held in ``q0`` in mode ``name``: (measured / prescribed displacement of the link, trace);
-    ``supervision`` (threshold, detection observer gain, reaction, its friction band) runs it under the
-    ModeSupervisor."""
+    ``supervision`` (threshold, detection observer gain, reaction, its friction band, the reaction settings) runs it
+    under the ModeSupervisor."""
     mode = CONTROL_MODES[name]
     model_seed, noise_seed = seeds
     push = LinkForce(body=link, magnitude=setup.force, t_on=setup.t_on, t_off=setup.t_off)

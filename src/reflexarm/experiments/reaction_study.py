@@ -16,12 +16,13 @@ from __future__ import annotations
 import tempfile
 import warnings
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from reflexarm.control.collision.react import ReactionSettings
 from reflexarm.errors import ConfigError
 from reflexarm.experiments.collision import (
     EE_SETTINGS,
@@ -155,9 +156,11 @@ def _guard(trace: Trace) -> dict[str, Any]:
     }
 
 
-def _setting(scenario: str, reaction: str, tuned: TunedDetection | None = None) -> CollisionSetting:
+def _setting(
+    scenario: str, reaction: str, tuned: TunedDetection | None = None, settings: ReactionSettings | None = None
+) -> CollisionSetting:
     """The collision setting of a scenario's run: the demo's Coll.Det, or the link collision's; with ``tuned``, its
-    detection observer (exact form) and per-joint levels detect."""
+    detection observer (exact form) and per-joint levels detect; ``settings``: the reactions' (None: defaults)."""
     base = next(s for s in EE_SETTINGS if s.name == "Coll.Det") if scenario == "demo" else LINK_SETTING
     if tuned is not None:
         base = replace(
@@ -167,13 +170,18 @@ def _setting(scenario: str, reaction: str, tuned: TunedDetection | None = None) 
             observer_discretization="exact",
             detection_friction_band=tuned.friction_band,
         )
-    return replace(base, reaction=reaction)
+    return replace(base, reaction=reaction, reaction_settings=settings)
 
 
 def _run_one(
-    arm: StudyArm, scenario: str, reaction: str, kwargs: dict[str, Any], tuned: TunedDetection | None = None
+    arm: StudyArm,
+    scenario: str,
+    reaction: str,
+    kwargs: dict[str, Any],
+    tuned: TunedDetection | None = None,
+    settings: ReactionSettings | None = None,
 ) -> tuple[CollisionOutcome, Trace]:
-    setting = _setting(scenario, reaction, tuned)
+    setting = _setting(scenario, reaction, tuned, settings)
     if scenario == "demo":
         trace = run_ee_collision(setting, robot=arm.robot, plant_friction=arm.plant_friction, **kwargs)
     else:
@@ -194,12 +202,13 @@ def _floor(
     trace: Trace,
     kwargs: dict[str, Any],
     tuned: TunedDetection | None = None,
+    settings: ReactionSettings | None = None,
 ) -> RestFloor | None:
     """The rest floor at the run's posture at detection (None without a detection)."""
     if outcome.detected_s is None:
         return None
     i_d = int(np.searchsorted(trace.t, outcome.detected_s - 1e-9))
-    setting = _setting(scenario, "none", tuned)
+    setting = _setting(scenario, "none", tuned, settings)
     return rest_floor(arm.robot, setting, trace.q[i_d], plant_friction=arm.plant_friction, **kwargs)
 
 
@@ -211,6 +220,7 @@ def _study_row(
     tuned: TunedDetection | None,
     floor: RestFloor | None,
     rest_floors: bool,
+    settings: ReactionSettings | None = None,
 ) -> tuple[dict[str, Any], RestFloor | None]:
     """One run's row (its outcome, the guard, the rest floor) and the scenario's rest floor (measured on the first
     run with a detection, when ``rest_floors`` and not given)."""
@@ -222,11 +232,11 @@ def _study_row(
         "error": None,
     }
     try:
-        outcome, trace = _run_one(arm, scenario, reaction, kwargs, tuned)
+        outcome, trace = _run_one(arm, scenario, reaction, kwargs, tuned, settings)
         row.update(outcome.as_dict())
         row.update(_guard(trace))
         if rest_floors and floor is None:
-            floor = _floor(arm, scenario, outcome, trace, kwargs, tuned)
+            floor = _floor(arm, scenario, outcome, trace, kwargs, tuned, settings)
         if floor is not None:
             row.update(floor.as_dict())
             row["ke_floor_verdict"] = floor_verdict(row)
@@ -249,6 +259,7 @@ def run_reaction_study(
     progress: Callable[[dict[str, Any]], None] | None = None,
     rest_floors: bool = True,
     detection: Mapping[str, TunedDetection] | None = None,
+    reaction_settings: ReactionSettings | None = None,
 ) -> ReactionStudy:
     """Run the demo contact and the link collision with each reaction on each arm (module docstring).
 
@@ -270,6 +281,7 @@ def run_reaction_study(
             load_tuned_detection`): that arm's runs detect with its detection observer and levels, on the model
             errors they were tuned on (its ``model_seed``, when it has one, instead of ``model_seed``); arms not in
             it detect as the paper (k_o = 5 1/s, 11 Nm).
+        reaction_settings: the reactions' settings (brake time, retract distance, ...; None: their defaults).
 
     Raises:
         ConfigError: an unknown arm or scenario, or no reaction.
@@ -292,6 +304,8 @@ def run_reaction_study(
             "stiffness_Nm_per_rad": LINK_SETTING.stiffness,
         }
     )
+    if reaction_settings is not None:
+        study.conditions["reaction_settings"] = asdict(reaction_settings)
     tuned_of = dict(detection or {})
     if tuned_of:
         study.conditions["detection"] = {name: t.as_dict() for name, t in tuned_of.items()}
@@ -301,7 +315,9 @@ def run_reaction_study(
         for scenario in scenarios:
             floor: RestFloor | None = None  # the same for every reaction: the runs agree up to detection
             for reaction in reactions:
-                row, floor = _study_row(arm, scenario, reaction, arm_kwargs, tuned, floor, rest_floors)
+                row, floor = _study_row(
+                    arm, scenario, reaction, arm_kwargs, tuned, floor, rest_floors, reaction_settings
+                )
                 study.rows.append(row)
                 if progress is not None:
                     progress(row)
