@@ -184,6 +184,8 @@ def test_detection_kappa_f_is_refused_without_a_detection_observer_or_with_a_bad
         Controller(atlas, detection_kappa_f=1)
     with pytest.raises(ConfigError, match="detection_kappa_f"):
         Controller(atlas, detection_observer_gain=100.0, detection_kappa_f=2)
+    with pytest.raises(ConfigError, match="give detection_kappa_f=1 with it"):
+        Controller(atlas, detection_observer_gain=100.0, detection_friction_velocity_band=0.1)
     for band in (0.0, -0.1, float("nan")):
         with pytest.raises(ConfigError, match="detection_friction_velocity_band"):
             Controller(atlas, detection_observer_gain=100.0, detection_kappa_f=1, detection_friction_velocity_band=band)

@@ -173,3 +173,26 @@ def test_tune_thresholds_refuses_the_band_without_a_detection_observer(tmp_path,
     log.write_text("t,q_1\n0,0\n")  # never read: the refusal comes first
     assert main(["tune-thresholds", str(log), "--robot", "panda", "--detection-friction-band", "0.1"]) != 0
     assert "--detection-friction-band needs --detection-observer-gain" in capsys.readouterr().err
+
+
+def test_detect_replays_a_log_with_the_band_its_levels_were_tuned_with(tmp_path, capsys):
+    """tune-thresholds with the band writes it into thresholds.json; detect then replays with it (printed), unless
+    the command line gives another; a bad band is refused."""
+    from impact_logs import impact_log
+    from reflexarm.cli import main
+    from reflexarm.logs import save_log
+
+    iiwa = load_robot("iiwa14")
+    free = save_log(impact_log(iiwa, rate_hz=1000.0, duration_s=60, seed=11).log, tmp_path / "free.parquet")
+    args = (f"tune-thresholds {free} --robot iiwa14 --detection-observer-gain 100 --detection-friction-band 0.1 "
+            f"--rate 10 --contact-rate 600 --allow-extrapolation --no-figure --out {tmp_path / 'thr'}")  # fmt: skip
+    assert main(args.split()) == 0
+    thr = tmp_path / "thr" / "thresholds.json"
+    assert json.loads(thr.read_text())["observer"]["detection_friction_band"] == 0.1
+    common = ["detect", str(free), "--robot", "iiwa14", "--threshold", str(thr), "--no-figure"]
+    assert main([*common, "--out", str(tmp_path / "d1")]) == 0
+    assert "k_o = 100 1/s, exact (k_o dt = 0.1), its friction model in a 0.1 rad/s band" in capsys.readouterr().out
+    assert main([*common, "--detection-friction-band", "0.2", "--out", str(tmp_path / "d2")]) == 0
+    assert "its friction model in a 0.2 rad/s band" in capsys.readouterr().out
+    assert main([*common, "--detection-friction-band", "-1", "--out", str(tmp_path / "d3")]) != 0
+    assert "--detection-friction-band must be a positive velocity band" in capsys.readouterr().err

@@ -53,6 +53,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="k_o of the compensation observer [1/s] (default: the file's, else 5)")  # fmt: skip
     g.add_argument("--kappa-f", type=int, choices=_SWITCH, default=None, help="friction term in the observer")
     g.add_argument("--kappa-ext", type=int, choices=_SWITCH, default=None, help="EFC: wrist wrench in the observer")
+    g.add_argument(
+        "--detection-friction-band", type=float, default=None, metavar="RAD_S",
+        help="the detecting observer subtracts the friction model in this velocity band [rad/s] (default: the "
+        "thresholds file's, tuned with it; else off)",
+    )  # fmt: skip
     p.add_argument("--no-isolation", action="store_true", help="skip the isolation of each event (link, force)")
     p.add_argument("--out", type=Path, default=Path("results/detect"), help="output folder (default results/detect)")
     p.add_argument("--no-figure", action="store_true", help="skip the figures")
@@ -118,20 +123,25 @@ def _settings(args: argparse.Namespace, doc: dict[str, Any]) -> Any:
     if tuned is not None and not math.isclose(float(tuned), float(k_det), rel_tol=1e-9):
         print(f"warning: the levels were tuned for a detecting k_o = {tuned:g} 1/s; detecting with {k_det:g} 1/s "
               "(leave out --detection-observer-gain to use the tuned one)", file=sys.stderr)  # fmt: skip
+    band = pick(args.detection_friction_band, "detection_friction_band", None)
+    if band is not None and not (isinstance(band, (int, float)) and math.isfinite(band) and band > 0):
+        raise ConfigError(f"--detection-friction-band must be a positive velocity band [rad/s]; got {band!r}")
     return ObserverSettings(
         observer_gain=float(k_comp),
         detection_observer_gain=float(k_det),
         kappa_f=int(pick(args.kappa_f, "kappa_f", 0)),
         kappa_ext=int(pick(args.kappa_ext, "kappa_ext", 0)),
         observer_discretization="exact",
+        detection_friction_band=None if band is None else float(band),
     )
 
 
 def _print_log(d: Any, replay_how: str) -> None:
-    k_o = d.settings.detection_gain
+    k_o, band = d.settings.detection_gain, d.settings.detection_friction_band
+    own = "" if band is None else f", its friction model in a {band:g} rad/s band"
     print(f"\n{d.source}: {d.t.size} samples, {d.duration:.1f} s at {d.rate_hz:.4g} Hz: delay resolution "
-          f"{1e3 * d.dt:.3g} ms (one period); detection observer k_o = {k_o:g} 1/s, exact (k_o dt = {k_o * d.dt:.3g}); "
-          f"replay: {replay_how}")  # fmt: skip
+          f"{1e3 * d.dt:.3g} ms (one period); detection observer k_o = {k_o:g} 1/s, exact (k_o dt = {k_o * d.dt:.3g})"
+          f"{own}; replay: {replay_how}")  # fmt: skip
     for g in d.glitches:
         print(f"  glitch repaired: joint {g.joint + 1} {g.kind} at t = {g.t:.3f} s "
               f"({g.logged:.4g} -> {g.repaired:.4g})")  # fmt: skip

@@ -217,6 +217,9 @@ class Controller:
         self.detection_kappa_f = as_switch(detection_kappa_f, "detection_kappa_f")
         if self.detection_kappa_f and self.detection_observer is None:
             raise ConfigError("detection_kappa_f = 1 needs a detection observer (detection_observer_gain)")
+        if detection_friction_velocity_band is not None and not self.detection_kappa_f:
+            raise ConfigError("detection_friction_velocity_band is the band of detection_kappa_f = 1's friction model;"
+                              " give detection_kappa_f=1 with it")  # fmt: skip
         self.detection_friction_velocity_band = (
             None
             if detection_friction_velocity_band is None
