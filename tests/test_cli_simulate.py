@@ -210,6 +210,7 @@ def test_link_collision_runs_with_the_given_detection_and_reports_the_event(tmp_
         "observer_discretization": "exact",  # the default with a detection observer
         "detection_friction_band_rad_s": None,
         "reaction": "compliant",
+        "reaction_settings": None,  # the defaults
     }
     tr = Trace.load(next(out.glob("link_collision_*.npz")))
     setting = tr.meta["setting"]

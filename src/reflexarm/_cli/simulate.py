@@ -8,12 +8,12 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from reflexarm._cli.collision_settings import setting_line, with_detection
 from reflexarm._cli.common import (
     DetectionChoice,
     add_common,
     add_detection_options,
     add_model_options,
-    changed_settings,
     detection_choice,
     format_table,
     model_choice,
@@ -182,40 +182,6 @@ def _add_velocity_tracking(ssub: argparse._SubParsersAction) -> None:
     vt.set_defaults(func=_velocity)
 
 
-def _detecting(setting: Any, detection: DetectionChoice) -> Any:
-    """``setting`` with the command line's detection settings, if it detects at all."""
-    from dataclasses import replace
-
-    if setting.threshold is None:
-        return setting
-    return replace(
-        setting,
-        threshold=detection.threshold,
-        observer_gain=setting.observer_gain if detection.observer_gain is None else detection.observer_gain,
-        detection_observer_gain=detection.detection_observer_gain,
-        reaction=detection.reaction,
-        observer_discretization=detection.observer_discretization,
-        detection_friction_band=detection.detection_friction_band,
-        reaction_settings=detection.reaction_settings,
-    )
-
-
-def _setting_line(setting: Any) -> str:
-    if setting.threshold is None:
-        return f"[{setting.name}] k = {setting.stiffness:g} Nm/rad, detection off"
-    zeta = setting.threshold
-    zeta_text = ", ".join(f"{v:.3g}" for v in zeta) if isinstance(zeta, tuple) else f"{zeta:g}"
-    gains = f"k_o = {setting.observer_gain:g} 1/s"
-    if setting.detection_observer_gain is not None:
-        gains += f", detection k_o = {setting.detection_observer_gain:g} 1/s"
-    if setting.detection_friction_band is not None:
-        gains += f", its friction in a {setting.detection_friction_band:g} rad/s band"
-    return (
-        f"[{setting.name}] k = {setting.stiffness:g} Nm/rad, detection zeta = {zeta_text} Nm, {gains}, "
-        f"reaction {setting.reaction}{changed_settings(setting.reaction_settings)}"
-    )
-
-
 def _event_row(row: dict[str, Any], trace: Any, robot: Any) -> dict[str, Any]:
     """``row`` with the run's collision event (:func:`~reflexarm.experiments.collision_events.collision_outcome`)
     under "event" and the printed event columns."""
@@ -258,9 +224,9 @@ def _demo(args: argparse.Namespace) -> int:
     _print_detection(detection, args.plant_friction)
     traces, rows = [], []
     scene = SceneCapture(args, out, "ee_collision")
-    settings = [_detecting(s, detection) for s in EE_SETTINGS]
+    settings = [with_detection(s, detection) for s in EE_SETTINGS]
     for setting in settings:
-        print(_setting_line(setting), file=sys.stderr)
+        print(setting_line(setting), file=sys.stderr)
         with scene:
             tr = run_ee_collision(
                 setting,
@@ -356,8 +322,8 @@ def _link(args: argparse.Namespace) -> int:
     print(f"controller model: {choice.label()}; sensor noise: the paper's", file=sys.stderr)
     print(model_error_line(robot, model), file=sys.stderr)
     _print_detection(detection, args.plant_friction)
-    setting = _detecting(LINK_SETTING, detection)
-    print(_setting_line(setting), file=sys.stderr)
+    setting = with_detection(LINK_SETTING, detection)
+    print(setting_line(setting), file=sys.stderr)
     out = out_dir(args)
     with SceneCapture(args, out, "link_collision") as scene:
         tr = run_link_collision(

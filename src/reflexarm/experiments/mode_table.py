@@ -128,6 +128,7 @@ def mode_table(
     traces: dict[str, Trace] = {}
     rows: list[dict[str, Any]] = []
     acc: dict[str, float] = {}
+    supervision = (threshold, detection_observer_gain, reaction, detection_friction_band, reaction_settings)
     for name, mode in CONTROL_MODES.items():
         # accuracy: free motion
         plant, _ = build_plant(setup, [], noise_scale=setup.noise_scale, seed=noise_seed)
@@ -147,13 +148,8 @@ def mode_table(
         # link compliance, without and with the supervisor's automatic switch
         link_ratio: dict[bool, float] = {}
         for supervised in (False, True):
-            reaction_args = (
-                (threshold, detection_observer_gain, reaction, detection_friction_band, reaction_settings)
-                if supervised
-                else None
-            )
             link_ratio[supervised], tr_l = _link_compliance(
-                setup, name, robot, link, q0, (model_seed, noise_seed), reaction_args, progress
+                setup, name, robot, link, q0, (model_seed, noise_seed), supervision if supervised else None, progress
             )
             traces[f"{name}/link_force{'/supervised' if supervised else ''}"] = tr_l
         rows.append(
