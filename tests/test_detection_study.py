@@ -80,6 +80,11 @@ def test_contact_lag_counts_from_the_first_true_crossing():
     assert row["detecting_joints"] == [2]
     none = contact_lag(_Trace(tau, np.zeros(N, dtype=bool), collided), np.full(n, 10.0))  # type: ignore[arg-type]
     assert none["lag_s"] is None and none["detected_s"] is None
+    # detected at tick 20, before any true crossing: a crossing after detection (the reaction's run) does not count
+    early = contact_lag(_Trace(tau, np.arange(N) >= 20, collided), np.full(n, 10.0))  # type: ignore[arg-type]
+    assert early["detected_s"] == pytest.approx(20 * DT) and early["true_crossing_s"] is None
+    assert early["lag_s"] is None and early["lag_detecting_joint_s"] is None
+    assert lag_spread([early])["detected_without_crossing"] == 1
 
 
 class _Log:

@@ -147,10 +147,13 @@ def noise_growth(replays: Sequence[ResidualReplay], gains: Sequence[float]) -> d
 def _crossing_lags(trace: Trace, over: np.ndarray) -> dict[str, Any]:
     """For ``over`` (N, n), where a signal exceeds its joint's level: the first crossing on any joint, the
     detection lag after it (None without a detection or a crossing), the detecting joints (1-based) and the
-    lag after the first crossing among them (both None without a detection)."""
+    lag after the first crossing among them (both None without a detection). With a detection only crossings up
+    to its tick count: what follows is the reaction's run (e.g. a second strike after (13)), not the detector's."""
     t = trace.t
-    first = [int(np.argmax(over[:, j])) if over[:, j].any() else None for j in range(over.shape[1])]
     i_d = int(np.argmax(trace.collision)) if trace.collision.any() else None
+    if i_d is not None:
+        over = over[: i_d + 1]
+    first = [int(np.argmax(over[:, j])) if over[:, j].any() else None for j in range(over.shape[1])]
     crossings = [t[i] for i in first if i is not None]
     out: dict[str, Any] = {"detected_s": None if i_d is None else float(t[i_d])}
     out["crossing_s"] = float(min(crossings)) if crossings else None
@@ -164,9 +167,9 @@ def _crossing_lags(trace: Trace, over: np.ndarray) -> dict[str, Any]:
 
 
 def contact_lag(trace: Trace, levels: np.ndarray) -> dict[str, Any]:
-    """Detection lag of a run: t_detect - the first time the true |tau_ext_j| exceeds zeta_j on any joint [s]
-    (None without detection or without a true crossing; negative: detected before), and on the joints
-    that crossed at detection (the detecting joints)."""
+    """Detection lag of a run: t_detect - the first time, up to detection, that the true |tau_ext_j| exceeds
+    zeta_j on any joint [s] (None without detection or without a true crossing up to it: detected before the true
+    torque reached the level), and on the joints that crossed at detection (the detecting joints)."""
     c = _crossing_lags(trace, np.abs(trace.tau_ext) > levels)
     row: dict[str, Any] = {"detected_s": c["detected_s"], "true_crossing_s": c["crossing_s"], "lag_s": c["lag_s"]}
     if c["detected_s"] is not None:
