@@ -22,7 +22,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "logs (seeds A: other motions and noise of the same arm), count false alarms in --heldout-minutes of free "
         "motion (seeds C), run the demo contact and the link collision with each pair and short force pulses on the "
         "links (seeds B); lag = detection - the "
-        "first time the true |tau_ext_j| exceeds zeta_j; own = detection - the first time after contact that the "
+        "first time (up to detection) the true |tau_ext_j| exceeds zeta_j; own = detection - the first time after "
+        "contact that the "
         "observer's input (tau_ext + the model's error torque, its filter taken out) exceeds zeta_j. Writes JSON, CSV "
         "and the lag / false-alarm figure.",
     )
