@@ -23,7 +23,7 @@ def test_key_value_pairs_become_reaction_settings_and_bad_ones_are_named():
         (["retract_distance"], "expects KEY=VALUE, KEY one of: brake_time, brake_duration"),
         (["retract_dist=0.1"], "got 'retract_dist=0.1'"),
         (["brake_time=fast"], "--reaction-setting brake_time must be a number; got 'fast'"),
-        (["isolation_points_per_tick=2.5"], "--reaction-setting isolation_points_per_tick must be a number"),
+        (["isolation_points_per_tick=2.5"], "--reaction-setting isolation_points_per_tick must be an integer"),
         (["brake_time=-1"], "ReactionSettings.brake_time must be a positive number"),
         (["max_retract_time=nan"], "ReactionSettings.max_retract_time must be a positive number"),
     ):

@@ -272,10 +272,12 @@ def reaction_settings_of(items: Sequence[str] | None) -> ReactionSettings | None
         key, sep, text = (x.strip() for x in part.partition("="))
         if not sep or key not in keys:
             raise ConfigError(f"--reaction-setting expects KEY=VALUE, KEY one of: {', '.join(keys)}; got {part!r}")
+        integer = key == "isolation_points_per_tick"
         try:
-            values[key] = int(text) if key == "isolation_points_per_tick" else float(text)
+            values[key] = int(text) if integer else float(text)
         except ValueError:
-            raise ConfigError(f"--reaction-setting {key} must be a number; got {text!r}") from None
+            kind = "an integer" if integer else "a number"
+            raise ConfigError(f"--reaction-setting {key} must be {kind}; got {text!r}") from None
     return ReactionSettings(**values)  # type: ignore[arg-type]
 
 
