@@ -425,8 +425,7 @@ def detection_choice(args: argparse.Namespace, robot: RobotModel) -> DetectionCh
     band = getattr(args, "detection_friction_band", None)
     if band is None and source != "command line":  # levels tuned with the detection observer's own friction
         band = tuned_friction_band(args.threshold)
-    if band is not None and (not math.isfinite(band) or band <= 0.0):
-        raise ConfigError(f"--detection-friction-band must be a positive velocity band [rad/s]; got {band:g}")
+    band = detection_band(band)
     if band is not None and args.detection_observer_gain is None:
         raise ConfigError("--detection-friction-band (or a thresholds.json tuned with one) needs "
                           "--detection-observer-gain: the friction goes into the detection observer")  # fmt: skip
@@ -441,6 +440,15 @@ def detection_choice(args: argparse.Namespace, robot: RobotModel) -> DetectionCh
         source=source,
         tuned_gain=tuned,
     )
+
+
+def detection_band(value: object) -> float | None:
+    """``--detection-friction-band`` (or a file's) checked: None, or a positive finite velocity band [rad/s]."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+        raise ConfigError(f"--detection-friction-band must be a positive velocity band [rad/s]; got {value!r}")
+    return float(value)
 
 
 def tuned_friction_band(value: str) -> float | None:

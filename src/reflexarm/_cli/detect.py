@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from reflexarm._cli.common import add_model_options, format_table, model_choice
+from reflexarm._cli.common import add_model_options, detection_band, format_table, model_choice
 from reflexarm._cli.log_options import add_log_options, load_log_from_args
 from reflexarm._cli.robot_options import DEFAULT_ROBOT, add_robot_options
 from reflexarm.errors import ConfigError
@@ -123,16 +123,14 @@ def _settings(args: argparse.Namespace, doc: dict[str, Any]) -> Any:
     if tuned is not None and not math.isclose(float(tuned), float(k_det), rel_tol=1e-9):
         print(f"warning: the levels were tuned for a detecting k_o = {tuned:g} 1/s; detecting with {k_det:g} 1/s "
               "(leave out --detection-observer-gain to use the tuned one)", file=sys.stderr)  # fmt: skip
-    band = pick(args.detection_friction_band, "detection_friction_band", None)
-    if band is not None and not (isinstance(band, (int, float)) and math.isfinite(band) and band > 0):
-        raise ConfigError(f"--detection-friction-band must be a positive velocity band [rad/s]; got {band!r}")
+    band = detection_band(pick(args.detection_friction_band, "detection_friction_band", None))
     return ObserverSettings(
         observer_gain=float(k_comp),
         detection_observer_gain=float(k_det),
         kappa_f=int(pick(args.kappa_f, "kappa_f", 0)),
         kappa_ext=int(pick(args.kappa_ext, "kappa_ext", 0)),
         observer_discretization="exact",
-        detection_friction_band=None if band is None else float(band),
+        detection_friction_band=band,
     )
 
 

@@ -1,6 +1,7 @@
 """The real-time part: impedance control (2), momentum observer (4)-(6), collision detection (12),
 reaction (13) and the composed :class:`Controller`. Never imports :mod:`reflexarm.sim`."""
 
+from reflexarm.control._setup import detection_friction
 from reflexarm.control.collision import CollisionDetector, CollisionEvent, ReactionSettings
 from reflexarm.control.contract import FAULT_CODES, InputBounds, TimingStats
 from reflexarm.control.controller import MODES, OBSERVER_DISCRETIZATIONS, REACTIONS, Controller
@@ -33,5 +34,6 @@ __all__ = [
     "MomentumObserver",
     "TimingStats",
     "modal_damping",
+    "detection_friction",
     "replay",
 ]

@@ -8,6 +8,7 @@ import math
 import warnings
 from collections.abc import Sequence
 from types import ModuleType
+from typing import TypedDict
 
 import numpy as np
 import numpy.typing as npt
@@ -78,3 +79,16 @@ def load_core() -> ModuleType:
             f"reflexarm's C++ core (module reflexarm._core) cannot be imported ({e}); expected it built and "
             "installed by `make install` (needs cmake >= 3.18 and a C++17 compiler)"
         ) from e
+
+
+class DetectionFriction(TypedDict):
+    """:class:`~reflexarm.control.Controller` keywords of the detection observer's friction model."""
+
+    detection_kappa_f: int
+    detection_friction_velocity_band: float | None
+
+
+def detection_friction(band: float | None) -> DetectionFriction:
+    """The :class:`~reflexarm.control.Controller` keywords of the detection observer's own friction model in the
+    velocity band ``band`` [rad/s] (``detection_kappa_f=1``), or of none (``band`` None: it follows kappa_f)."""
+    return {"detection_kappa_f": int(band is not None), "detection_friction_velocity_band": band}

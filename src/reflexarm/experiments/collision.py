@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from reflexarm.control import Controller
+from reflexarm.control import Controller, detection_friction
 from reflexarm.control.collision.react import ReactionSettings
 from reflexarm.errors import ConfigError
 from reflexarm.experiments.any_arm import (
@@ -140,8 +140,7 @@ class CollisionSetting:
             threshold=self.threshold,
             reaction=self.reaction,
             observer_discretization=self.observer_discretization,
-            detection_kappa_f=int(self.detection_friction_band is not None),
-            detection_friction_velocity_band=self.detection_friction_band,
+            **detection_friction(self.detection_friction_band),
             reaction_settings=self.reaction_settings,
         )
 

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from reflexarm.control import CONTROL_MODES, Controller, ModeSupervisor, ReactionSettings
+from reflexarm.control import CONTROL_MODES, Controller, ModeSupervisor, ReactionSettings, detection_friction
 from reflexarm.experiments.any_arm import RANGE_MARGIN, is_paper_arm
 from reflexarm.experiments.compensation import (
     CompensationSetup,
@@ -77,8 +77,7 @@ def _supervised_controller(
         damping_ratio=setup.damping_ratio,
         observer_gain=setup.observer_gain,
         detection_observer_gain=detection_observer_gain,
-        detection_kappa_f=int(detection_friction_band is not None),
-        detection_friction_velocity_band=detection_friction_band,
+        **detection_friction(detection_friction_band),
         threshold=threshold,
         reaction=reaction,
         reaction_settings=reaction_settings,

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from reflexarm.control import Controller
+from reflexarm.control import Controller, detection_friction
 from reflexarm.robots.robot_model import RobotModel
 from reflexarm.ros.config import MonitorConfig
 from reflexarm.signals import Measurement, Reference
@@ -55,8 +55,7 @@ def build_controller(config: MonitorConfig, model: RobotModel) -> Controller:
         stiffness=config.stiffness,
         observer_gain=config.observer_gain,
         detection_observer_gain=detecting,
-        detection_kappa_f=int(band is not None),
-        detection_friction_velocity_band=band,
+        **detection_friction(band),
         threshold=zeta,
         reaction=config.reaction,
         observer_discretization=config.observer_discretization,

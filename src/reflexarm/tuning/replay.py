@@ -133,7 +133,7 @@ def replay_residual(log: RobotLog, robot: RobotModel, settings: ObserverSettings
         ConfigError: the log has another joint count than ``robot``; EFC asked without a wrench in the log;
             the log's period makes the discrete observer unstable (k_o dt >= 1/2).
     """
-    from reflexarm.control import Controller
+    from reflexarm.control import Controller, detection_friction
 
     s = settings or ObserverSettings()
     if log.n != robot.n:
@@ -151,8 +151,7 @@ def replay_residual(log: RobotLog, robot: RobotModel, settings: ObserverSettings
         kappa_ext=s.kappa_ext,
         kappa_eps=s.kappa_eps,
         observer_discretization=s.observer_discretization,
-        detection_kappa_f=int(s.detection_friction_band is not None),
-        detection_friction_velocity_band=s.detection_friction_band,
+        **detection_friction(s.detection_friction_band),
         dt=dt,
         torque_limit=None,
         # the damping matrix shapes the command only, never the residual: computed once instead of every 10
