@@ -126,6 +126,9 @@ class Oracle:
     #: the detection observer subtracts the friction model with this velocity band whatever kappa_f (None: it
     #: follows kappa_f with the model's band)
     detection_friction_band: float | None = None
+    #: K_f of the detection residual's second stage (None: none): the detector looks at r_f, r_f += (1 - e^{-K_f h})
+    #: (r - r_f) after each observer step, 0 on the first tick
+    detection_filter_gain: float | None = None
     threshold: float | None = 11.0
     reaction: str = "gravity"
     contact_reaction: str | None = None
@@ -195,6 +198,7 @@ class Oracle:
         self.event = None
         self.obs = [np.zeros((3, self.n)), np.zeros((3, self.n))]  # integral, p0, residual per observer (Euler)
         self.p_prev = np.zeros(self.n)  # exact form: the momentum of the last accepted tick
+        self.r_f = np.zeros(self.n)  # the detection residual after the second stage
         self.started, self.last_t, self.invalid, self.countdown = False, None, False, 0
         self.pending: tuple[np.ndarray | None, int] | None = None  # (next D, accepted ticks until it is used)
         self.full = True
@@ -232,6 +236,11 @@ class Oracle:
         return "precise_ee_compliant" if self.kappa_ext else "precise_stiff"
 
     def r_det(self) -> np.ndarray:
+        """The residual the detector looks at."""
+        return self.r_obs() if self.detection_filter_gain is None else self.r_f
+
+    def r_obs(self) -> np.ndarray:
+        """The detection observer's residual (the first observer's without one), before the second stage."""
         return self.obs[1 if self.detection_observer_gain is not None else 0][2]
 
     # ------------------------------------------------------------------ contract
@@ -320,6 +329,7 @@ class Oracle:
             for o in self.obs:
                 o[0], o[1], o[2] = 0.0, p, 0.0
             self.p_prev = p.copy()
+            self.r_f = np.zeros(n)
             self.started = True
         else:
             beta = tau_m - (g - C.T @ dq) - (self.kappa_f * tau_f - J.T @ wrench)  # tau_m - gamma - alpha, (4)-(6)
@@ -328,6 +338,9 @@ class Oracle:
                 tau_f_det = fr.coulomb * np.clip(dq / self.detection_friction_band, -1, 1) + fr.viscous * dq
                 beta_det = tau_m - (g - C.T @ dq) - (tau_f_det - J.T @ wrench)
             self.observe(p, (beta, beta_det), h)
+            if self.detection_filter_gain is not None:
+                b = math.exp(-self.detection_filter_gain * h)
+                self.r_f = b * self.r_f + (1.0 - b) * self.r_obs()
         if not all(np.all(np.isfinite(o)) for o in self.obs):
             self.invalid = True
             return self.reject((OBSERVER_INVALID, 0, -1, 0.0, 0.0, 0.0))
@@ -641,6 +654,8 @@ def core_controller(core: Any, robot: RobotModel, o: Oracle, dt: float = DT, **c
     p.detection_observer_gain = np.zeros(0) if det is None else np.array([det])
     if o.detection_friction_band is not None:
         p.detection_kappa_f, p.detection_friction_velocity_band = 1, o.detection_friction_band
+    if o.detection_filter_gain is not None:
+        p.detection_filter_gain = np.array([o.detection_filter_gain])
     p.threshold = np.zeros(0) if o.threshold is None else np.array([o.threshold])
     p.reaction, p.contact_reaction = o.reaction, o.contact_reaction
     p.observer_discretization = o.discretization

@@ -48,8 +48,9 @@ PHASES = {"gravity": ["gravity"], "brake": ["braking", "holding"], "retract": ["
 REACTION_PARAMS = list(PHASES)
 
 
-def controller_like(robot, o: Oracle) -> Controller:
-    """A Controller with the oracle's settings (torque_limit: the model's effort limits, as the oracle)."""
+def controller_like(robot, o: Oracle, **more) -> Controller:
+    """A Controller with the oracle's settings (torque_limit: the model's effort limits, as the oracle); ``more``:
+    further keywords."""
     return Controller(
         robot,
         stiffness=o.stiffness,
@@ -73,6 +74,7 @@ def controller_like(robot, o: Oracle) -> Controller:
         torque_rate_limit=o.torque_rate_limit,
         contact_geometry=o.geometry,
         isolation_share=o.isolation_share,
+        **more,
     )
 
 

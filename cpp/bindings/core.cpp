@@ -206,6 +206,7 @@ NB_MODULE(_core, m)
     .def_rw("detection_observer_gain", &P::detection_observer_gain)
     .def_rw("detection_kappa_f", &P::detection_kappa_f)
     .def_rw("detection_friction_velocity_band", &P::detection_friction_velocity_band)
+    .def_rw("detection_filter_gain", &P::detection_filter_gain)
     .def_rw("threshold", &P::threshold)
     .def_prop_rw(
       "reaction", [](const P & p) { return std::string(reflexarm::reactionName(p.reaction)); },

@@ -57,6 +57,8 @@ namespace reflexarm
     xi_ = q.damping_ratio;
     ko_ = q.observer_gain;
     ko_det_ = use_det ? q.detection_observer_gain : Eigen::VectorXd::Zero(n);
+    det_stage_ = q.detection_filter_gain.size() > 0;
+    kf_ = det_stage_ ? q.detection_filter_gain : Eigen::VectorXd::Zero(n);
     threshold_ = has_detector ? q.threshold : Eigen::VectorXd::Constant(n, kInf);
     has_springs_ = has_springs && (q.spring_stiffness.array() != 0.0).any();
     spring_k_ = has_springs ? q.spring_stiffness : Eigen::VectorXd::Zero(n);
@@ -110,6 +112,7 @@ namespace reflexarm
     const ReactionParams & rp = q.reaction_params;
     decay_.resize(n);
     decay_det_.resize(n);
+    decay_f_.resize(n);
     v_lim_.resize(n);
     q_safe_lo_.resize(n);
     q_safe_hi_.resize(n);
@@ -117,6 +120,7 @@ namespace reflexarm
     {
       decay_[i] = std::exp(-ko_[i] * q.dt);
       decay_det_[i] = std::exp(-ko_det_[i] * q.dt);
+      decay_f_[i] = std::exp(-kf_[i] * q.dt);
       const double vel = model.upperVelocityLimit[i];
       v_lim_[i] = (std::isfinite(vel) && vel > 0.0) ? vel : kInf;
       const double lower = model.lowerPositionLimit[i], upper = model.upperPositionLimit[i];
@@ -172,6 +176,7 @@ namespace reflexarm
     first_joints_.setZero(n);
     obs_.resize(n);
     obs_det_.resize(n);
+    r_f_.setZero(n);
     gravity_staged_ = false;
     has_last_q_ = false;
     has_prev_tau_ = false;
@@ -201,6 +206,7 @@ namespace reflexarm
     obs_det_.integral.setZero();
     obs_det_.p0.setZero();
     obs_det_.residual.setZero();
+    r_f_.setZero();
     detected_ = false;
     first_time_ = std::numeric_limits<double>::quiet_NaN();
     first_joints_.setZero();

@@ -3,7 +3,8 @@
 // detector has gains of its own, the detection observer (K_o,det). The detection observer subtracts the law's
 // friction (kappa_f) or, with detection_kappa_f, its own (the model's, in a velocity band of its own). Each is
 // stepped by explicit Euler over the integrated period or by the exact (zero-order-hold) discretization, stable at
-// any gain.
+// any gain. With detection_filter_gain the detector's residual goes through a second first-order stage (its exact
+// form), which makes it a second-order filter of the external torque.
 #include <cmath>
 
 #include "reflexarm/controller.hpp"
@@ -13,15 +14,9 @@ namespace reflexarm
 
   void Controller::updateObservers(const State & s, double h) noexcept
   {
-    if (!started_) // p(0): the integral of (4) starts here
+    if (!started_)
     {
-      obs_.integral.setZero();
-      obs_.residual.setZero();
-      obs_.p0 = p_;
-      obs_det_.integral.setZero();
-      obs_det_.residual.setZero();
-      obs_det_.p0 = p_;
-      started_ = true;
+      startObservers();
       return;
     }
     const Eigen::MatrixXd & C = data_c_.C;
@@ -40,6 +35,18 @@ namespace reflexarm
     }
   }
 
+  void Controller::startObservers() noexcept
+  {
+    obs_.integral.setZero();
+    obs_.residual.setZero();
+    obs_.p0 = p_;
+    obs_det_.integral.setZero();
+    obs_det_.residual.setZero();
+    obs_det_.p0 = p_;
+    r_f_.setZero();
+    started_ = true;
+  }
+
   void Controller::stepObserverJoint(int i, double dq, double head, double jt, double h, bool exact,
                                      bool nominal) noexcept
   {
@@ -54,22 +61,29 @@ namespace reflexarm
       obs_.integral[i] += h * (base + obs_.residual[i]);
       obs_.residual[i] = ko_[i] * (p_[i] - obs_.p0[i] - obs_.integral[i]);
     }
-    if (!use_det_)
-      return;
-    double base_det = base;
-    if (det_friction_) // detection_kappa_f: the detection observer's own friction model
+    if (use_det_)
     {
-      double alpha_det = frictionTorque(i, dq, inv_band_det_);
-      if (kappa_ext_)
-        alpha_det -= jt;
-      base_det = head - alpha_det;
+      double base_det = base;
+      if (det_friction_) // detection_kappa_f: the detection observer's own friction model
+      {
+        double alpha_det = frictionTorque(i, dq, inv_band_det_);
+        if (kappa_ext_)
+          alpha_det -= jt;
+        base_det = head - alpha_det;
+      }
+      if (exact)
+        stepExact(obs_det_, i, ko_det_[i], nominal ? decay_det_[i] : std::exp(-ko_det_[i] * h), base_det, h);
+      else
+      {
+        obs_det_.integral[i] += h * (base_det + obs_det_.residual[i]);
+        obs_det_.residual[i] = ko_det_[i] * (p_[i] - obs_det_.p0[i] - obs_det_.integral[i]);
+      }
     }
-    if (exact)
-      stepExact(obs_det_, i, ko_det_[i], nominal ? decay_det_[i] : std::exp(-ko_det_[i] * h), base_det, h);
-    else
+    if (det_stage_) // the second stage, r_f = b r_f + (1 - b) r over the period h (exact at any K_f)
     {
-      obs_det_.integral[i] += h * (base_det + obs_det_.residual[i]);
-      obs_det_.residual[i] = ko_det_[i] * (p_[i] - obs_det_.p0[i] - obs_det_.integral[i]);
+      const double b = nominal ? decay_f_[i] : std::exp(-kf_[i] * h);
+      const double r = use_det_ ? obs_det_.residual[i] : obs_.residual[i];
+      r_f_[i] = b * r_f_[i] + (1.0 - b) * r;
     }
   }
 
@@ -90,7 +104,7 @@ namespace reflexarm
   {
     double acc = 0.0;
     for (int i = 0; i < n_; ++i)
-      acc += obs_.integral[i] + obs_.residual[i] + obs_det_.integral[i] + obs_det_.residual[i];
+      acc += obs_.integral[i] + obs_.residual[i] + obs_det_.integral[i] + obs_det_.residual[i] + r_f_[i];
     return std::isfinite(acc);
   }
 

@@ -114,6 +114,8 @@ namespace reflexarm
         throw ConfigError("detection_friction_velocity_band must be a non-negative number of rad/s (0: "
                           "friction_velocity_band); got "
                           + std::to_string(p.detection_friction_velocity_band));
+      if (p.detection_filter_gain.size() > 0)
+        q.detection_filter_gain = asVector(p.detection_filter_gain, n, "detection_filter_gain", Sign::Positive);
       q.kappa_eps = checkSwitch(p.kappa_eps, "kappa_eps");
       q.kappa_ext = checkSwitch(p.kappa_ext, "kappa_ext");
       checkPositive(p.residual_limit, "residual_limit");

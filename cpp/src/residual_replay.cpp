@@ -48,15 +48,9 @@ namespace reflexarm
     /// updateObservers' loop with C^T dq and J^T F given (p_ and g_ hold the row's p and g).
     static void stepObservers(Controller & c, const State & s, const double * ct, const double * jt, double h)
     {
-      if (!c.started_) // p(0): the integral of (4) starts here
+      if (!c.started_)
       {
-        c.obs_.integral.setZero();
-        c.obs_.residual.setZero();
-        c.obs_.p0 = c.p_;
-        c.obs_det_.integral.setZero();
-        c.obs_det_.residual.setZero();
-        c.obs_det_.p0 = c.p_;
-        c.started_ = true;
+        c.startObservers();
         return;
       }
       const bool exact = c.params_.observer_discretization == ObserverDiscretization::Exact;

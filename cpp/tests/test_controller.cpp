@@ -164,7 +164,7 @@ namespace
   }
 
   // The collision pipeline inside update(): each reaction with the links' geometry (isolation spread over the
-  // ticks), Euler and exact observers, a measured contact (kappa_ext = 0 and a wrist force) and a collision.
+  // ticks), Euler and exact observers, with and without the detection residual's second stage.
   void testNoAllocationInThePipeline()
   {
     const pinocchio::Model model = makeArm();
@@ -179,6 +179,12 @@ namespace
       p.observer_discretization =
         variant < 4 ? reflexarm::ObserverDiscretization::Euler : reflexarm::ObserverDiscretization::Exact;
       p.detection_observer_gain = Eigen::VectorXd::Constant(1, variant < 4 ? 50.0 : 300.0);
+      if (variant % 2) // the detection residual's second stage and the detection observer's own friction model
+      {
+        p.detection_filter_gain = Eigen::VectorXd::Constant(1, 200.0);
+        p.detection_kappa_f = 1;
+        p.detection_friction_velocity_band = 0.1;
+      }
       p.reaction_params.isolation_points_per_tick = 16;
       reflexarm::Controller ctrl;
       ctrl.configure(model, p);

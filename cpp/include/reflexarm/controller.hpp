@@ -122,11 +122,13 @@ namespace reflexarm
     /// The retract plans with the modal damping's M(q) (crba of its part 0) when that is at most this many accepted
     /// ticks old (the default damping_update_period is 10: always), else with a crba of its own.
     static constexpr int kRetractMassAge = 10;
-    /// The residual the detector looks at (the detection observer's if there is one).
+    /// The residual the detector looks at: the detection observer's if there is one (else the observer's),
+    /// through the second stage (detection_filter_gain) if there is one.
     const Eigen::VectorXd & detectionResidual() const noexcept
     {
-      return use_det_ ? obs_det_.residual : obs_.residual;
+      return det_stage_ ? r_f_ : (use_det_ ? obs_det_.residual : obs_.residual);
     }
+    bool hasDetectionFilter() const noexcept { return det_stage_; } ///< detection_filter_gain given
     const ObserverState & observer() const noexcept { return obs_; }
     const ObserverState & detectionObserver() const noexcept { return obs_det_; }
     /// Mutable observer states, for diagnostics and tests (e.g. to exercise the invalid-observer latch).
@@ -176,9 +178,12 @@ namespace reflexarm
     double advanceClock(double t, double period) noexcept;
     // the momentum observers and the detection (observer.cpp)
     void updateObservers(const State & s, double h) noexcept;
+    /// The first accepted tick: p(0), where the integral of (4) starts; every residual 0.
+    void startObservers() noexcept;
     void stepExact(ObserverState & o, int i, double k, double decay, double base, double h) noexcept;
     /// Joint i of both observers over the period h: head = tau_m - (g - C^T dq), jt = (J^T F)_i (used with
-    /// kappa_ext); the friction of (6) per observer (kappa_f; the detection observer's own with detection_kappa_f).
+    /// kappa_ext); the friction of (6) per observer (kappa_f; the detection observer's own with detection_kappa_f);
+    /// then the detection residual's second stage (detection_filter_gain).
     void stepObserverJoint(int i, double dq, double head, double jt, double h, bool exact, bool nominal) noexcept;
     bool observersFinite() const noexcept;
     int detect() noexcept;
@@ -247,6 +252,8 @@ namespace reflexarm
     bool has_springs_ = false;
     Eigen::VectorXd q_lo_, q_hi_, dq_max_, ddq_max_, tau_m_max_, tau_max_, tau_step_;
     Eigen::VectorXd decay_, decay_det_; // exact observer: e^{-K_o dt} per joint at the nominal period
+    Eigen::VectorXd kf_, decay_f_;       // the detection residual's second stage: K_f, e^{-K_f dt}
+    bool det_stage_ = false;              // detection_filter_gain given
     Eigen::VectorXd v_lim_, q_safe_lo_, q_safe_hi_; // velocity limits (+inf: none), reaction posture bounds
     // the reaction under way (reaction.cpp)
     CollisionEvent event_;
@@ -274,6 +281,7 @@ namespace reflexarm
     Eigen::Matrix<std::uint8_t, Eigen::Dynamic, 1> over_, sat_, first_joints_;
     // state
     ObserverState obs_, obs_det_;
+    Eigen::VectorXd r_f_; // the detection residual after the second stage (detection_filter_gain)
     Eigen::Vector3d gravity_ = Eigen::Vector3d::Zero(); // last accepted
     bool gravity_staged_ = false;
     bool started_ = false, has_t_ = false, has_last_q_ = false, obs_invalid_ = false, has_prev_tau_ = false;

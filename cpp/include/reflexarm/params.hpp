@@ -115,6 +115,12 @@ namespace reflexarm
     /// Velocity band [rad/s] of the detection observer's friction model (wider than the velocity noise, so
     /// that noise does not flip its Coulomb term); 0: friction_velocity_band.
     double detection_friction_velocity_band = 0.0;
+    /// K_f [1/s] of a second stage on the detection residual: the residual the detector looks at is
+    /// r_f = e^{-K_f h} r_f + (1 - e^{-K_f h}) r (always this exact form; r_f = 0 on the first tick), so it is a
+    /// second-order filter of the external torque with real poles -K_o,det and -K_f (the second-order momentum
+    /// observer of Haddadin et al., T-RO 2017, with real poles): about half the first order's noise at the same
+    /// ramp lag. Empty: none (the paper's first order).
+    Eigen::VectorXd detection_filter_gain;
     /// zeta [Nm] per joint for detection (12), > 0; empty: detection off.
     Eigen::VectorXd threshold = Eigen::VectorXd::Constant(1, 11.0);
     Reaction reaction = Reaction::Gravity;          ///< reaction to an unmeasured (link) collision

@@ -27,6 +27,8 @@ def core_params(ctrl: Any, core: ModuleType) -> Any:
     p.detection_kappa_f = ctrl.detection_kappa_f
     band = ctrl.detection_friction_velocity_band
     p.detection_friction_velocity_band = 0.0 if band is None else band
+    kf = ctrl.detection_filter_gain
+    p.detection_filter_gain = np.zeros(0) if kf is None else kf.copy()
     p.threshold = np.zeros(0) if ctrl.detector is None else ctrl.detector.threshold.copy()
     p.reaction = ctrl.reaction
     p.contact_reaction = ctrl.contact_reaction

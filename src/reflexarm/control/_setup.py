@@ -13,7 +13,7 @@ from typing import TypedDict
 import numpy as np
 import numpy.typing as npt
 
-from reflexarm._validation import as_vector
+from reflexarm._validation import as_positive_scalar, as_switch, as_vector
 from reflexarm.errors import ConfigError, ReflexArmError
 from reflexarm.robots.robot_model import RobotModel
 
@@ -92,3 +92,19 @@ def detection_friction(band: float | None) -> DetectionFriction:
     """The :class:`~reflexarm.control.Controller` keywords of the detection observer's own friction model in the
     velocity band ``band`` [rad/s] (``detection_kappa_f=1``), or of none (``band`` None: it follows kappa_f)."""
     return {"detection_kappa_f": int(band is not None), "detection_friction_velocity_band": band}
+
+
+def check_detection_friction(kappa_f: object, band: object, has_observer: bool) -> tuple[int, float | None]:
+    """``Controller``'s (detection_kappa_f, detection_friction_velocity_band), checked: the friction model needs a
+    detection observer, and a band needs that friction model (no silently unused setting)."""
+    switch = as_switch(kappa_f, "detection_kappa_f")
+    if switch and not has_observer:
+        raise ConfigError("detection_kappa_f = 1 needs a detection observer (detection_observer_gain)")
+    if band is None:
+        return switch, None
+    if not switch:
+        raise ConfigError(
+            "detection_friction_velocity_band is the band of detection_kappa_f = 1's friction model; give "
+            "detection_kappa_f=1 with it"
+        )
+    return switch, as_positive_scalar(band, "detection_friction_velocity_band")

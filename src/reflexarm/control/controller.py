@@ -18,6 +18,7 @@ import numpy.typing as npt
 from reflexarm._validation import as_positive_scalar, as_switch, as_vector
 from reflexarm.control._core_params import core_params
 from reflexarm.control._setup import (
+    check_detection_friction,
     check_discretization,
     check_period_band,
     load_core,
@@ -124,6 +125,11 @@ class Controller:
             contact, not the contact less its friction.
         detection_friction_velocity_band: that friction model's velocity band [rad/s] (``None``: the
             model's); wider than the velocity noise keeps noise from flipping its Coulomb term.
+        detection_filter_gain: K_f [1/s], scalar or (n,): the detector looks at the detection residual filtered
+            once more, r_f += (1 - e^{-K_f h}) (r - r_f) (exact at any K_f), a second-order filter of the
+            external torque with poles -K_o,det and -K_f (the second-order observer of Haddadin et al., T-RO
+            2017, with real poles): about half the noise at the same ramp lag, so lower levels and an earlier
+            detection. ``Command.residual`` is then r_f. ``None`` (default): the paper's first order.
         threshold: zeta [Nm] per joint for collision detection (12); ``None`` disables detection.
         reaction: what a detected collision the wrist sensor does not measure does: ``"gravity"`` (13),
             ``"brake"``, ``"retract"``, ``"compliant"`` or ``"none"`` (see
@@ -174,6 +180,7 @@ class Controller:
         detection_observer_gain: npt.ArrayLike | None = None,
         detection_kappa_f: int = 0,
         detection_friction_velocity_band: float | None = None,
+        detection_filter_gain: npt.ArrayLike | None = None,
         threshold: npt.ArrayLike | None = 11.0,
         reaction: str = "gravity",
         contact_reaction: str | None = None,
@@ -214,16 +221,13 @@ class Controller:
             if detection_observer_gain is None
             else MomentumObserver(n, detection_observer_gain, self.dt, _euler=euler)
         )
-        self.detection_kappa_f = as_switch(detection_kappa_f, "detection_kappa_f")
-        if self.detection_kappa_f and self.detection_observer is None:
-            raise ConfigError("detection_kappa_f = 1 needs a detection observer (detection_observer_gain)")
-        if detection_friction_velocity_band is not None and not self.detection_kappa_f:
-            raise ConfigError("detection_friction_velocity_band is the band of detection_kappa_f = 1's friction model;"
-                              " give detection_kappa_f=1 with it")  # fmt: skip
-        self.detection_friction_velocity_band = (
+        self.detection_kappa_f, self.detection_friction_velocity_band = check_detection_friction(
+            detection_kappa_f, detection_friction_velocity_band, self.detection_observer is not None
+        )
+        self.detection_filter_gain = (
             None
-            if detection_friction_velocity_band is None
-            else as_positive_scalar(detection_friction_velocity_band, "detection_friction_velocity_band")
+            if detection_filter_gain is None
+            else as_vector(detection_filter_gain, n, "detection_filter_gain", positive=True)
         )
         self.detector = None if threshold is None else CollisionDetector(n, threshold)
         self.reaction, self.contact_reaction, self.reaction_settings = check_reactions(

@@ -115,8 +115,9 @@ class CollisionSetting:
     (``detection_observer_gain`` [1/s], None: the first observer detects), and the observers' discretization
     (``"euler"``, the paper's, or ``"exact"``, stable at any gain); ``detection_friction_band`` [rad/s]: the
     detection observer subtracts the friction model in this velocity band (``Controller(detection_kappa_f=1)``;
-    None: it follows kappa_f); ``reaction_settings``: the reactions' (brake time, retract distance, ...; None: their
-    defaults)."""
+    None: it follows kappa_f); ``detection_filter_gain`` [1/s]: the detection residual's second stage
+    (``Controller(detection_filter_gain=)``; None: none); ``reaction_settings``: the reactions' (brake time, retract
+    distance, ...; None: their defaults)."""
 
     name: str
     stiffness: float
@@ -128,6 +129,7 @@ class CollisionSetting:
     observer_discretization: str = "euler"
     detection_friction_band: float | None = None
     reaction_settings: ReactionSettings | None = None
+    detection_filter_gain: float | None = None
 
     def controller(self, robot: RobotModel) -> Controller:
         """This setting's controller on the model ``robot`` (the controller's model, not the plant's)."""
@@ -141,6 +143,7 @@ class CollisionSetting:
             reaction=self.reaction,
             observer_discretization=self.observer_discretization,
             **detection_friction(self.detection_friction_band),
+            detection_filter_gain=self.detection_filter_gain,
             reaction_settings=self.reaction_settings,
         )
 

@@ -189,11 +189,11 @@ def observer_input(trace: Trace, setting: CollisionSetting, model: Any) -> np.nd
 
     The run's controller (``setting`` on ``model``: its kappas, its friction model) replayed on the plant's
     true, noise-free q and dq and the measured motor torque (noise 0.07 Nm) with the detecting observer at
-    :data:`INPUT_GAIN` (exact form): the observer with its filter taken out."""
+    :data:`INPUT_GAIN` (exact form) and no second stage: the observer with its filter taken out."""
     from reflexarm.control import replay
 
     probe = replace(setting, detection_observer_gain=INPUT_GAIN, observer_discretization="exact", threshold=None,
-                    reaction="none").controller(model)  # fmt: skip
+                    reaction="none", detection_filter_gain=None).controller(model)  # fmt: skip
     return replay(probe, trace.t, trace.q, trace.dq, trace.tau_m, trace.wrench).residual
 
 

@@ -1,0 +1,144 @@
+"""The detection residual's second stage (``Controller(detection_filter_gain=K_f)``; issue 15's faster detection):
+the detector looks at the detection residual filtered once more, a second-order filter of the external torque.
+
+Checked against the plain oracle (``tests/controller_oracle.py``) tick by tick, with and without a detection
+observer, both observer forms, with a detection and each reaction after it; against the first-order residual
+filtered by scipy; the residual-only replay against the tick; the refusals."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from controller_oracle import DT, Oracle, core_controller, ticks
+from scipy.signal import lfilter
+from test_controller_oracle import REACTION_PARAMS, RUN_TICKS, SHORT, controller_like, run_both
+
+from reflexarm import load_robot
+from reflexarm.control import Controller, contract as _k, replay
+from reflexarm.control._setup import load_core
+from reflexarm.errors import ConfigError
+
+PANDA = load_robot("panda")
+
+#: [Nm] the stage filtered here against scipy's lfilter of the first-order residual: both evaluate
+#: r_f = b r_f + (1 - b) r in double precision in another order (~1e-16 relative per tick on ~10 Nm residuals).
+LFILTER_ATOL = 1e-12
+#: [Nm] a push's response as the difference of two runs: each run's residual carries ~10 Nm of velocity noise whose
+#: round-off (~1e-15 relative per tick) does not cancel exactly.
+PUSH_ATOL = 1e-9
+#: [Nm] the residual-only replay against the tick: the dynamics terms computed another way (ResidualTerms) differ by
+#: ~1e-14 Nm (measured up to 7e-15 here); the bar test_replay.py sets for the replay, far below any threshold
+REPLAY_ATOL = 1e-12
+
+
+@pytest.mark.parametrize("detection_gain", [None, 200.0])
+@pytest.mark.parametrize("discretization", ["euler", "exact"])
+def test_second_stage_equals_oracle(atlas, detection_gain, discretization):
+    """K_f = 150 1/s on the detection observer (or, without one, on the first observer) over the seeded run with its
+    rejected ticks and the clipped late period; the oracle with another K_f must differ, so the comparison sees the
+    stage (the code before this change has no stage: its residual is the oracle's r_obs, which also differs)."""
+    gain = detection_gain if discretization == "exact" or detection_gain is None else 100.0
+    kw = {"threshold": None, "reaction": "none", "detection_observer_gain": gain, "discretization": discretization}
+    o = Oracle(atlas, detection_filter_gain=150.0, **kw)
+    codes = run_both(atlas, o, _like(atlas, o))
+    assert sorted(set(codes)) == [_k.TIME_NOT_INCREASING, _k.OUT_OF_BOUNDS, _k.NON_FINITE, 0]
+    for other in (100.0, None):
+        broken = Oracle(atlas, detection_filter_gain=other, **kw)
+        with pytest.raises(AssertionError, match="residual"):
+            run_both(atlas, broken, _like(atlas, Oracle(atlas, detection_filter_gain=150.0, **kw)))
+
+
+@pytest.mark.parametrize("reaction", REACTION_PARAMS)
+def test_detection_and_reaction_on_the_second_stage_equal_oracle(atlas, reaction):
+    """A 40 Nm push from tick 100 detected on the staged residual (K_o,det 30, K_f 60 1/s): the detection tick, each
+    reaction's phases and the event record (its residual, peak and re-crossings are the staged residual's) equal
+    the oracle's on every tick."""
+    o = Oracle(atlas, kappa_eps=1, kappa_ext=1, reaction=reaction, detection_observer_gain=30.0,
+               detection_filter_gain=60.0, settings=SHORT, discretization="exact")  # fmt: skip
+    ctrl = _like(atlas, o)
+    run_both(atlas, o, ctrl, push=40.0, n_ticks=RUN_TICKS)
+    assert ctrl.event is not None and o.event is not None
+
+
+def test_second_stage_is_the_first_order_residual_filtered_once_more():
+    """A Panda log (its velocity noise alone moves the residual by ~10 Nm) with a 40 Nm push on joint 2 from tick 100:
+    the staged residual equals scipy's first-order filter (exact form, b = e^{-K_f dt}) of the unstaged one from 0
+    (LFILTER_ATOL). The push's own response, the run with it less the same run without it (the observers are
+    linear in tau_m), is the analytic one: 40 (1 - a^m) for the first order and, K_o = K_f (a = b),
+    40 (1 - a^m - m (1 - a) a^m) for the stage, m ticks into the push."""
+    t, q, dq, tau = _panda_log()
+    _, _, _, tau0 = _panda_log(push=0.0)
+    kw = {"threshold": None, "reaction": "none", "detection_observer_gain": 200.0, "observer_discretization": "exact"}
+    first, first0 = (replay(Controller(PANDA, **kw), t, q, dq, x).residual for x in (tau, tau0))
+    staged, staged0 = (replay(Controller(PANDA, detection_filter_gain=200.0, **kw), t, q, dq, x).residual
+                       for x in (tau, tau0))  # fmt: skip
+    b = math.exp(-200.0 * DT)
+    np.testing.assert_allclose(staged, lfilter([1.0 - b], [1.0, -b], first, axis=0), rtol=0, atol=LFILTER_ATOL)
+    m = np.arange(1, 300)
+    sign = np.sign(first[150, 1] - first0[150, 1])
+    np.testing.assert_allclose(sign * (first - first0)[99 + m, 1], 40.0 * (1.0 - b**m), rtol=0, atol=PUSH_ATOL)
+    np.testing.assert_allclose(sign * (staged - staged0)[99 + m, 1], 40.0 * (1.0 - b**m - m * (1.0 - b) * b**m),
+                               rtol=0, atol=PUSH_ATOL)  # fmt: skip
+    np.testing.assert_allclose((staged - staged0)[:, [0, 2, 3, 4, 5, 6]], 0.0, atol=PUSH_ATOL)
+
+
+def test_residual_only_replay_equals_the_tick_with_the_stage():
+    """replay() takes the residual-only path (no torque asked) on one and two threads; each equals Controller.step
+    tick by tick with the stage (the shared per-joint observer step and the stage in it), to the terms' rounding
+    (REPLAY_ATOL)."""
+    t, q, dq, tau = _panda_log()
+    kw = {"threshold": None, "reaction": "none", "detection_observer_gain": 100.0, "detection_filter_gain": 300.0,
+          "observer_discretization": "exact"}  # fmt: skip
+    from reflexarm.signals import Measurement, Reference
+
+    ctrl = Controller(PANDA, **kw)
+    g, w = PANDA.gravity, np.zeros(6)
+    z = np.zeros(PANDA.n)
+    by_tick = np.array([ctrl.step(Measurement(tk, qk, vk, uk, w, g), Reference(qk, z, z)).residual
+                        for tk, qk, vk, uk in zip(t, q, dq, tau, strict=True)])  # fmt: skip
+    for threads in (1, 2):
+        rep = replay(Controller(PANDA, **kw), t, q, dq, tau, threads=threads)
+        assert rep.residual_only
+        np.testing.assert_allclose(rep.residual, by_tick, rtol=0, atol=REPLAY_ATOL)
+
+
+def test_reset_starts_the_stage_from_zero():
+    """After reset() the staged residual of the same log is the same as a fresh controller's (the stage's state is
+    zeroed with the observers'); without zeroing it the second run would start from the first run's last value."""
+    t, q, dq, tau = _panda_log()
+    kw = {"threshold": None, "reaction": "none", "detection_observer_gain": 100.0, "detection_filter_gain": 50.0,
+          "observer_discretization": "exact"}  # fmt: skip
+    ctrl = Controller(PANDA, **kw)
+    first = replay(ctrl, t, q, dq, tau).residual
+    assert np.max(np.abs(first[-1])) > 10.0  # the push is on at the end: a state a reset must clear
+    ctrl.reset()
+    np.testing.assert_array_equal(replay(ctrl, t, q, dq, tau).residual, first)
+
+
+def test_bad_filter_gain_is_refused():
+    for bad in (0.0, -5.0, float("nan"), float("inf"), [100.0, 200.0]):
+        with pytest.raises(ConfigError, match="detection_filter_gain"):
+            Controller(PANDA, detection_observer_gain=100.0, detection_filter_gain=bad)
+    core = load_core()
+    o = Oracle(PANDA, detection_filter_gain=100.0)
+    p_ok = core_controller(core, PANDA, o)  # the core itself checks the gains it is configured with
+    assert p_ok is not None
+    p = core.ControllerParams()
+    p.detection_filter_gain = np.array([-1.0])
+    with pytest.raises(Exception, match="detection_filter_gain"):
+        core.Controller(PANDA.pin_model.saveToString(), p)
+
+
+def _like(robot, o: Oracle) -> Controller:
+    return controller_like(robot, o, detection_filter_gain=o.detection_filter_gain)
+
+
+def _panda_log(seconds: float = 0.4, push: float = 40.0):
+    """The oracle's seeded Panda run (measured signals along a random reference with noise), every tick accepted,
+    with ``push`` Nm added to joint 2's measured torque from tick 100 (0.1 s) on, as an external torque shows."""
+    rows = [(t, q, dq, tau) for _, (t, q, dq, tau, *_) in ticks(PANDA, push=push, faults=False,
+                                                                    n_ticks=int(round(seconds / DT)))]  # fmt: skip
+    t, q, dq, tau = (np.array(x) for x in zip(*rows, strict=True))
+    return t, q, dq, tau
