@@ -41,9 +41,9 @@ FORCE_DIRECTIONS = {
 }
 
 
-#: Relative difference of the two time constants below which the equal-poles forms are used: the general ones
-#: divide by T_1 - T_2, losing about eps / 1e-9 ~ 2e-7 of the exponential terms there (the equal-poles forms
-#: differ from the exact ones by about the relative difference, 1e-9, beneath it).
+#: Relative difference of the two time constants at or below which the equal-poles forms are used, at their mean
+#: (the general forms tend to them; the responses are symmetric in T_1, T_2, so the mean's error is of the order of
+#: the relative difference squared, 1e-18, below round-off).
 EQUAL_POLES = 1e-9
 #: Tolerance of the root finding, in multiples of the sum of the time constants (far below a period).
 ROOT_XTOL = 1e-12
@@ -59,6 +59,19 @@ def _equal(t1: float, t2: float) -> bool:
     return abs(t1 - t2) <= EQUAL_POLES * max(t1, t2)
 
 
+def _divided(t: float, t1: float, t2: float) -> tuple[float, float]:
+    """(T_1 e^{-t/T_1} - T_2 e^{-t/T_2}) / (T_1 - T_2) and (T_1^2 e^{-t/T_1} - T_2^2 e^{-t/T_2}) / (T_1 - T_2) at
+    ``t`` [s], T_1 != T_2. With x = t (T_1 - T_2) / (T_1 T_2) they are e^{-t/T_2} (1 + (t/T_2) E) and
+    e^{-t/T_2} (T_1 + T_2 + T_1 (t/T_2) E), E = (e^x - 1) / x: free of the cancellation of the differences for
+    near-equal poles (|x| <= 1); the differences themselves lose less than a digit beyond."""
+    x = t * (t1 - t2) / (t1 * t2)
+    if abs(x) > 1.0:
+        e1, e2 = math.exp(-t / t1), math.exp(-t / t2)
+        return (t1 * e1 - t2 * e2) / (t1 - t2), (t1 * t1 * e1 - t2 * t2 * e2) / (t1 - t2)
+    e2, r = math.exp(-t / t2), t / t2 * (math.expm1(x) / x if x != 0.0 else 1.0)
+    return e2 * (1.0 + r), e2 * (t1 + t2 + t1 * r)
+
+
 def step_response(t: float, time_constant: float, filter_time_constant: float | None = None) -> float:
     """The detector's residual at ``t`` [s] after a unit step of external torque, from rest: 1 - e^{-t/T_1} for
     the observer alone (``filter_time_constant`` None), else the cascade's (module docstring)."""
@@ -66,15 +79,17 @@ def step_response(t: float, time_constant: float, filter_time_constant: float | 
     if t2 is None:
         return -math.expm1(-t / t1)
     if _equal(t1, t2):
-        return 1.0 - (1.0 + t / t1) * math.exp(-t / t1)
-    return 1.0 - (t1 * math.exp(-t / t1) - t2 * math.exp(-t / t2)) / (t1 - t2)
+        tm = 0.5 * (t1 + t2)
+        return 1.0 - (1.0 + t / tm) * math.exp(-t / tm)
+    return 1.0 - _divided(t, t1, t2)[0]
 
 
 def _catch_up(t: float, t1: float, t2: float) -> float:
     """The cascade's ramp response minus its asymptote t - (T_1 + T_2), at ``t`` [s] (module docstring)."""
     if _equal(t1, t2):
-        return (2.0 * t1 + t) * math.exp(-t / t1)
-    return (t1 * t1 * math.exp(-t / t1) - t2 * t2 * math.exp(-t / t2)) / (t1 - t2)
+        tm = 0.5 * (t1 + t2)
+        return (2.0 * tm + t) * math.exp(-t / tm)
+    return _divided(t, t1, t2)[1]
 
 
 def ramp_response(t: float, time_constant: float, filter_time_constant: float | None = None) -> float:
