@@ -234,6 +234,25 @@ def test_the_stage_lowers_the_levels_and_is_recorded(noise_pairs):
     assert f"second stage K_f = {KF:g} 1/s" in format_pairs(staged) and "second stage" not in format_pairs(plain)
 
 
+def test_each_pair_s_proposal_reports_the_cascade_s_delays(noise_pairs):
+    """tune_thresholds at (k_o, K_f): the settings carry K_f (thresholds.json's "observer"), the delay of the step
+    torque solves zeta = s (1 - (T1 e^(-t/T1) - T2 e^(-t/T2)) / (T1 - T2)) (written out here), and the report
+    names the stage."""
+    from reflexarm.tuning._report import format_report
+
+    staged, _, _ = noise_pairs
+    for pair in staged.pairs:
+        prop, T1, T2 = pair.proposal, 1.0 / pair.gain, 1.0 / KF
+        d = prop.as_dict()
+        assert d["observer"]["detection_filter_gain"] == KF and d["filter_time_constant_s"] == pytest.approx(T2)
+        for jt in prop.joints:
+            t = jt.delays["collision_delay_s"]
+            assert t is not None
+            rise = 1.0 - (T1 * math.exp(-t / T1) - T2 * math.exp(-t / T2)) / (T1 - T2)
+            assert prop.step_torque * rise == pytest.approx(jt.collision, rel=1e-9)
+        assert f"second stage K_f = {KF:g} 1/s" in format_report(prop)
+
+
 def test_the_pairs_lags_are_the_cascade_s(noise_pairs):
     """The analytic step lag solves 1 - (T1 e^(-t/T1) - T2 e^(-t/T2)) / (T1 - T2) = 1/s (written out here); the
     ramp lags exceed the first order's and stay below 1/k_o + 1/K_f; the measured step lags (the synthetic step

@@ -137,14 +137,18 @@ class DetectionPairs:
         """JSON-ready, with the test inputs stated (``detection_pairs`` of ``thresholds.json``)."""
         kf = self.detection_filter_gain
         stage = "" if kf is None else f", then the second stage of K_f = {kf:g} 1/s (c = exp(-K_f dt))"
-        lag_t = "T = 1/k_o" if kf is None else "the cascade's root, bounded by T = 1/k_o + 1/K_f"
+        ramp = (
+            "T (1 + W0(-exp(-(1 + zeta / (slope T))))), T = 1/k_o"
+            if kf is None
+            else "the root of the cascade's ramp response (poles -k_o, -K_f), T = 1/k_o + 1/K_f"
+        )
         return {
             "method": {
                 "residual": "each log replayed once through the Controller (exact discretization), its residual "
                 f"refiltered to each gain (r_k = a r_k-1 + (1 - a) u_k, a = exp(-k_o dt)){stage}",
                 "levels": f"tune_thresholds at each gain, {self.rate_per_hour:g} false alarms/h for the arm",
-                "ramp_lag": f"analytic, a ramp of {self.ramp_slope:g} Nm/s from 0: T (1 + W0(-exp(-(1 + zeta / "
-                f"(slope T))))), T = 1/k_o without a second stage, else {lag_t}; T bounds the lag of any ramp",
+                "ramp_lag": f"analytic, a ramp of {self.ramp_slope:g} Nm/s from 0: {ramp}; T bounds the lag of "
+                "any ramp",
                 "step_lag": f"analytic, a step of {self.step_size:g} x zeta: T ln(s / (s - 1)) (the cascade's root "
                 "with a second stage)",
                 "measured_lags": "the same step and ramp added to the held-out residuals (tuning logs without "
