@@ -26,6 +26,9 @@ def format_report(proposal: ThresholdProposal) -> str:
         return "never" if v is None else f"{v:.3f}"
 
     st, n = proposal.settings, len(proposal.joints)
+    kf = st.detection_filter_gain
+    stage = "" if kf is None else f", second stage K_f = {kf:g} 1/s on the residual"
+    through = "" if kf is None else f" (then the root of the cascade's step response, T_f = {1.0 / kf:.4f} s)"
     if any(s.endswith(RECORDED_RESIDUAL) for s in proposal.sources):
         observer = (
             "residual recorded online by each run's controller, with the model and observer that run used "
@@ -35,7 +38,7 @@ def format_report(proposal: ThresholdProposal) -> str:
     else:
         observer = (
             f"observer k_o = {st.detection_gain:g} 1/s ({st.observer_discretization} form), kappa_f = {st.kappa_f}, "
-            f"EFC = {st.kappa_ext}"
+            f"EFC = {st.kappa_ext}{stage}"
         )
     head = (
         f"{len(proposal.sources)} log(s), {proposal.duration_s / 60:.1f} min; "
@@ -44,7 +47,7 @@ def format_report(proposal: ThresholdProposal) -> str:
         f"({proposal.rate_per_hour / n:.3g}/h per joint); contact level: {proposal.contact_rate_per_hour:g}/h\n"
         f"tail: {proposal.method} fit of the declustered |residual| above u (90 % bootstrap interval in brackets); "
         f"delay of a {proposal.step_torque:g} Nm step: t_d = -T_o ln(1 - (zeta - b)/s), "
-        f"T_o = {proposal.time_constant:.4f} s, b = 0 / b = -q95 (unfavourable)\n"
+        f"T_o = {proposal.time_constant:.4f} s{through}, b = 0 / b = -q95 (unfavourable)\n"
     )
     labels = [joint_label(jt.joint, jt.name) for jt in proposal.joints]
     w = max([len("joint"), *(len(x) for x in labels)])
@@ -82,8 +85,9 @@ def format_pairs(pairs: DetectionPairs) -> str:
     def ms(v: object) -> str:
         return "  -" if v is None else f"{1e3 * float(v):5.1f}"  # type: ignore[arg-type]
 
-    band = pairs.detection_friction_band
+    band, kf = pairs.detection_friction_band, pairs.detection_filter_gain
     own = "" if band is None else f", its friction model in a {band:g} rad/s band"
+    own += "" if kf is None else f", then a second stage K_f = {kf:g} 1/s (T = 1/k_o + 1/K_f)"
     head = (
         f"(k_o, zeta) pairs (exact observer{own}): levels at {pairs.rate_per_hour:g} false alarms/h; lag from the true "
         f"torque exceeding zeta_j to detection, ramp {pairs.ramp_slope:g} Nm/s and step {pairs.step_size:g} x "
@@ -98,7 +102,8 @@ def format_pairs(pairs: DetectionPairs) -> str:
         h = d["heldout"]
         held = "-" if h is None else f"{h['alarms']} in {h['duration_s'] / 3600:.2f} h"
         lines.append(
-            f"{p.gain:9g} {1e3 / p.gain:6.1f} {min(d['collision_Nm']):8.2f}..{max(d['collision_Nm']):8.2f} "
+            f"{p.gain:9g} {1e3 * (1.0 / p.gain + (0.0 if kf is None else 1.0 / kf)):6.1f} "
+            f"{min(d['collision_Nm']):8.2f}..{max(d['collision_Nm']):8.2f} "
             f"{ms(d['ramp_lag_max_s'])} {ms(d['step_lag_s'])} "
             f"{ms(d['measured_ramp_lag_median_s'])}/{ms(d['measured_ramp_lag_max_s'])} "
             f"{ms(d['measured_step_lag_median_s'])}/{ms(d['measured_step_lag_max_s'])} {held:>22}"

@@ -11,9 +11,16 @@ u_k = (r_k - a r_(k-1)) / (1 - a), and the residual of any other gain K' follows
 (:func:`refilter`): the residual the controller would have computed at K', to round-off (a test compares it
 with a replay at K'), at the cost of one linear filter instead of one controller pass per gain.
 
+With a second stage on the detection residual (``Controller(detection_filter_gain=K_f)``), the detector sees
+
+    r2_k = c r2_(k-1) + (1 - c) r_k,     c = e^(-K_f h) (always the zero-order-hold form), r2_0 = 0,
+
+a second filter of the same u with real poles at a and c. Both stages are linear and start from rest (r_0 =
+r2_0 = 0), so :func:`refilter` undoes a replay's stages and applies others in one filter: exact to round-off.
+
 The detector's lag (:func:`synthetic_lags`): a synthetic external torque (a step or a ramp) added to the
 log's input u at many ticks; the lag is the time from the tick at which the true torque first exceeds
-zeta_j to the tick at which |r_j| does (the detector checks once per tick).
+zeta_j to the tick at which |r_j| (|r2_j| with the stage) does (the detector checks once per tick).
 """
 
 from __future__ import annotations
@@ -26,9 +33,9 @@ import numpy.typing as npt
 from scipy.signal import lfilter
 
 from reflexarm.errors import ConfigError, DataError
-from reflexarm.tuning.replay import ResidualReplay
+from reflexarm.tuning.replay import ResidualReplay, check_filter_gain
 
-__all__ = ["DISCRETIZATIONS", "decay", "refilter", "synthetic_lags", "uniform_period"]
+__all__ = ["DISCRETIZATIONS", "decay", "refilter", "stage_decay", "synthetic_lags", "uniform_period"]
 
 #: The observer forms a replay can be refiltered from and to (as ``Controller(observer_discretization=)``).
 DISCRETIZATIONS = ("euler", "exact")
@@ -36,6 +43,10 @@ DISCRETIZATIONS = ("euler", "exact")
 #: Relative spread of the sampling period within which a log counts as uniformly sampled (a simulated log's
 #: periods differ by float round-off of MuJoCo's clock only).
 PERIOD_SPREAD = 1e-6
+#: A synthetic torque starts this many sums of time constants (1/k_o + 1/K_f) after a replay's start, where
+#: the residual's start from rest has settled: a step response is within e^-5 = 0.7 % of its end there with
+#: one stage, closer with two.
+SETTLE_TIME_CONSTANTS = 5.0
 
 
 def decay(gain: float, dt: float, discretization: str = "exact") -> float:
@@ -61,12 +72,38 @@ def uniform_period(t: npt.ArrayLike) -> bool:
     return d.size > 0 and float(np.ptp(d)) <= PERIOD_SPREAD * float(np.median(d))
 
 
-def refilter(replay: ResidualReplay, gain: float, discretization: str = "exact") -> ResidualReplay:
-    """The residual of a detection observer of ``gain`` [1/s] and ``discretization`` on the same log (module
-    docstring): ``replay`` must know its own gain and form (a :func:`~reflexarm.tuning.replay_residual`) and be
-    uniformly sampled.
+def stage_decay(filter_gain: float | None, dt: float) -> float | None:
+    """The second stage's c = e^(-K_f dt) for ``filter_gain`` K_f [1/s] at period ``dt`` [s]; None without one.
 
     Raises:
+        ConfigError: a K_f that is not a finite number > 0.
+    """
+    kf = check_filter_gain(filter_gain)
+    return None if kf is None else math.exp(-kf * dt)
+
+
+def _cascade(poles: list[float]) -> tuple[np.ndarray, np.ndarray]:
+    """Numerator and denominator (in z^-1) of the unit-DC-gain cascade prod_p (1 - p) / (1 - p z^-1)."""
+    den = np.array([1.0])
+    for p in poles:
+        den = np.convolve(den, [1.0, -p])
+    return np.array([math.prod(1.0 - p for p in poles)]), den
+
+
+def refilter(
+    replay: ResidualReplay, gain: float, discretization: str = "exact", filter_gain: float | None = None
+) -> ResidualReplay:
+    """The residual of a detection observer of ``gain`` [1/s] and ``discretization``, followed by a second stage
+    of ``filter_gain`` K_f [1/s] (None: none), on the same log (module docstring).
+
+    The replay's own stages are undone (its observer's a, and its second stage's c when
+    ``replay.detection_filter_gain`` is set), the new ones applied, from rest: poles both have are kept as they
+    are (not divided out and back). ``replay`` must know its own gain and form (a
+    :func:`~reflexarm.tuning.replay_residual`) and be uniformly sampled; it is returned as it is when nothing
+    changes.
+
+    Raises:
+        ConfigError: a bad gain, form or K_f.
         DataError: the replay's gain or form is unknown (a recorded residual), or its period is not uniform
             (replay such a log at each gain instead).
     """
@@ -77,19 +114,32 @@ def refilter(replay: ResidualReplay, gain: float, discretization: str = "exact")
         )
     if not uniform_period(replay.t):
         raise DataError(f"{replay.source}: the period is not uniform; replay the log at each gain instead")
-    a_from = decay(replay.detection_gain, replay.dt, replay.discretization)
-    a_to = decay(gain, replay.dt, discretization)
-    if a_from == a_to:
-        return replay
-    # r' = (1 - a') / (1 - a) * (1 - a z^-1) / (1 - a' z^-1) r, from r_0 = 0 (the first tick's residual)
-    b = np.array([1.0, -a_from]) * (1.0 - a_to) / (1.0 - a_from)
-    out = lfilter(b, [1.0, -a_to], replay.residual, axis=0)
-    return replace(replay, residual=out, detection_gain=float(gain), discretization=discretization)
+    c_from, c_to = stage_decay(replay.detection_filter_gain, replay.dt), stage_decay(filter_gain, replay.dt)
+    undo = [decay(replay.detection_gain, replay.dt, replay.discretization)] + ([] if c_from is None else [c_from])
+    apply = [decay(gain, replay.dt, discretization)] + ([] if c_to is None else [c_to])
+    for p in list(undo):  # a pole both cascades have stays (exactly: the same gain at the same period)
+        if p in apply:
+            undo.remove(p)
+            apply.remove(p)
+    kf = None if filter_gain is None else float(filter_gain)
+    labels = (float(gain), discretization, kf)
+    if not undo and not apply:  # the same cascade (its stages perhaps named in the other order)
+        if (replay.detection_gain, replay.discretization, replay.detection_filter_gain) == labels:
+            return replay
+        return replace(replay, detection_gain=labels[0], discretization=discretization, detection_filter_gain=kf)
+    # r' = H_to / H_from r from rest (r_0 = 0 at the first tick): the inverse of the old stages is a finite filter
+    num_from, den_from = _cascade(undo)
+    num_to, den_to = _cascade(apply)
+    out = lfilter(np.convolve(den_from, num_to) / num_from[0], den_to, replay.residual, axis=0)
+    return replace(replay, residual=out, detection_gain=labels[0], discretization=discretization,
+                   detection_filter_gain=kf)  # fmt: skip
 
 
-def _response(torque: np.ndarray, a: float) -> np.ndarray:
-    """The recursion's response (from rest) to the per-period mean external torques ``torque``."""
-    return lfilter([1.0 - a], [1.0, -a], torque)
+def _response(torque: np.ndarray, poles: list[float]) -> np.ndarray:
+    """The detector's residual's response (from rest) to the per-period mean external torques ``torque``: the
+    observer (pole a) and the second stage (pole c), if any."""
+    num, den = _cascade(poles)
+    return lfilter(num, den, torque)
 
 
 def synthetic_lags(
@@ -106,12 +156,14 @@ def synthetic_lags(
     """Measured lags [s] of the detector at ``levels`` (zeta per joint [Nm]) on synthetic external torques
     added to the replays' residuals, (joints, count) (NaN: not detected within ``window_s``).
 
-    Per joint and draw: a random tick k0 of a random replay (away from its start by 5 time constants), a
-    random sign, and the torque ``kind`` from the start of the period ending at tick k0: "step", ``size`` x
-    zeta_j (the true torque exceeds zeta_j at once: the lag is at least one period); "ramp", ``slope`` [Nm/s]
-    (it exceeds zeta_j at zeta_j / slope). The lag counts from that time to the end of the first period whose
-    tick has |r_j| > zeta_j, the residual being the replay's plus the recursion's response to the torque's mean
-    over each period; noise pointing along the torque can make a ramp's lag negative (kept as measured).
+    The residual is the detector's: the observer of the replays' gain and form, then their second stage
+    (``detection_filter_gain``), if any. Per joint and draw: a random tick k0 of a random replay (away from its
+    start by :data:`SETTLE_TIME_CONSTANTS` x (1/k_o + 1/K_f), the sum of the time constants), a random sign, and
+    the torque ``kind`` from the start of the period ending at tick k0: "step", ``size`` x zeta_j (the true
+    torque exceeds zeta_j at once: the lag is at least one period); "ramp", ``slope`` [Nm/s] (it exceeds zeta_j
+    at zeta_j / slope). The lag counts from that time to the end of the first period whose tick has
+    |r_j| > zeta_j, the residual being the replay's plus the cascade's response to the torque's mean over each
+    period; noise pointing along the torque can make a ramp's lag negative (kept as measured).
     """
     if kind not in ("step", "ramp"):
         raise ConfigError(f"unknown synthetic torque {kind!r}; choose 'step' or 'ramp'")
@@ -120,9 +172,11 @@ def synthetic_lags(
     dt, gain = replays[0].dt, replays[0].detection_gain
     if gain is None or replays[0].discretization is None:
         raise DataError("synthetic_lags needs replays of a known gain and discretization")
-    a = decay(gain, dt, replays[0].discretization)
+    kf = replays[0].detection_filter_gain
+    c_stage = stage_decay(kf, dt)
+    poles = [decay(gain, dt, replays[0].discretization)] + ([] if c_stage is None else [c_stage])
     w = int(math.ceil(window_s / dt))
-    skip = int(math.ceil(5.0 / gain / dt))
+    skip = int(math.ceil(SETTLE_TIME_CONSTANTS * (1.0 / gain + (0.0 if kf is None else 1.0 / kf)) / dt))
     usable = [r for r in replays if r.t.size > skip + w + 1]
     if not usable:
         raise DataError(f"the replays are shorter than {(skip + w + 1) * dt:g} s; no room for a synthetic torque")
@@ -133,7 +187,7 @@ def synthetic_lags(
             torque, t_cross = np.full(w, size * zeta[j]), 0.0
         else:  # the mean of slope * t over each period
             torque, t_cross = slope * (ends - dt / 2.0), zeta[j] / slope
-        resp = _response(torque, a)
+        resp = _response(torque, poles)
         for c in range(count):
             rep = usable[int(rng.integers(len(usable)))]
             k0 = int(rng.integers(skip, rep.t.size - w))

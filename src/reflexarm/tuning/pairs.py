@@ -14,6 +14,11 @@ visible, for every gain of a list (exact discretization, stable at any gain):
    ramp and step added to held-out logs (:func:`~reflexarm.tuning.synthetic_lags`: the noise included);
 4. per gain, the false alarms on held-out logs (other noise and model seeds than the tuning logs), counted
    as :func:`~reflexarm.tuning.heldout.count_alarms` does (excursions closer than 5 / k_o are one alarm).
+
+With a second stage on the detection residual (``ObserverSettings.detection_filter_gain`` K_f), every pair is
+(k_o, the same K_f): the logs are replayed once without it (a first-order residual, which refilters to any
+gain and stage), refiltered to each k_o followed by the stage; the analytic lags are the cascade's
+(:func:`~reflexarm.tuning.ramp_lag` bounded by 1/k_o + 1/K_f) and the declustering gap 5 x (1/k_o + 1/K_f).
 """
 
 from __future__ import annotations
@@ -30,11 +35,11 @@ from reflexarm.errors import ConfigError
 from reflexarm.logs.robot_log import RobotLog
 from reflexarm.robots.robot_model import RobotModel
 from reflexarm.tuning.defaults import DEFAULT_CONTACT_RATE, DEFAULT_METHOD, DEFAULT_RATE
-from reflexarm.tuning.delays import ramp_lag
+from reflexarm.tuning.delays import detection_delay, ramp_lag
 from reflexarm.tuning.gains import refilter, synthetic_lags, uniform_period
 from reflexarm.tuning.heldout import count_alarms
 from reflexarm.tuning.replay import ObserverSettings, ResidualReplay, load_free_motion_log, replay_residual
-from reflexarm.tuning.study import ThresholdProposal, tune_thresholds
+from reflexarm.tuning.study import GAP_TIME_CONSTANTS, ThresholdProposal, tune_thresholds
 
 __all__ = ["DEFAULT_DETECTION_GAINS", "DetectionPairs", "GainPair", "parse_gains", "propose_detection_pairs"]
 
@@ -61,7 +66,8 @@ def parse_gains(text: str | Sequence[float]) -> tuple[float, ...]:
 
 @dataclass
 class GainPair:
-    """One (k_o, zeta) pair: the levels tuned at ``gain`` and what they give (module docstring)."""
+    """One (k_o, zeta) pair: the levels tuned at ``gain`` and what they give (module docstring);
+    ``detection_filter_gain``: K_f [1/s] of the residual's second stage the levels were tuned with (None: none)."""
 
     gain: float
     proposal: ThresholdProposal = field(repr=False)
@@ -70,6 +76,7 @@ class GainPair:
     measured_step_lag_s: np.ndarray = field(repr=False)
     measured_ramp_lag_s: np.ndarray = field(repr=False)
     heldout: dict[str, Any] | None = None
+    detection_filter_gain: float | None = None
 
     @property
     def collision(self) -> np.ndarray:
@@ -87,6 +94,7 @@ class GainPair:
             "detection_observer_gain": self.gain,
             "observer_discretization": "exact",
             "time_constant_s": 1.0 / self.gain,
+            "detection_filter_gain": self.detection_filter_gain,
             "collision_Nm": [float(v) for v in self.collision],
             "contact_Nm": [float(v) for v in self.proposal.contact],
             "ramp_lag_s": self.ramp_lag_s,
@@ -115,6 +123,8 @@ class DetectionPairs:
     heldout_sources: list[str]
     #: the detection observer's own friction band [rad/s] the residuals had (ObserverSettings), None: none
     detection_friction_band: float | None = None
+    #: K_f [1/s] of the detection residual's second stage at every gain (ObserverSettings), None: none
+    detection_filter_gain: float | None = None
 
     def pair(self, gain: float) -> GainPair:
         """The pair tuned at ``gain`` [1/s] (ConfigError naming the gains if there is none)."""
@@ -125,22 +135,31 @@ class DetectionPairs:
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready, with the test inputs stated (``detection_pairs`` of ``thresholds.json``)."""
+        kf = self.detection_filter_gain
+        stage = "" if kf is None else f", then the second stage of K_f = {kf:g} 1/s (c = exp(-K_f dt))"
+        ramp = (
+            "T (1 + W0(-exp(-(1 + zeta / (slope T))))), T = 1/k_o"
+            if kf is None
+            else "the root of the cascade's ramp response (poles -k_o, -K_f), T = 1/k_o + 1/K_f"
+        )
         return {
             "method": {
                 "residual": "each log replayed once through the Controller (exact discretization), its residual "
-                "refiltered to each gain (r_k = a r_k-1 + (1 - a) u_k, a = exp(-k_o dt))",
+                f"refiltered to each gain (r_k = a r_k-1 + (1 - a) u_k, a = exp(-k_o dt)){stage}",
                 "levels": f"tune_thresholds at each gain, {self.rate_per_hour:g} false alarms/h for the arm",
-                "ramp_lag": f"analytic, a ramp of {self.ramp_slope:g} Nm/s from 0: T (1 + W0(-exp(-(1 + zeta / "
-                "(slope T))))), T = 1/k_o; T bounds the lag of any ramp",
-                "step_lag": f"analytic, a step of {self.step_size:g} x zeta: T ln(s / (s - 1))",
+                "ramp_lag": f"analytic, a ramp of {self.ramp_slope:g} Nm/s from 0: {ramp}; T bounds the lag of "
+                "any ramp",
+                "step_lag": f"analytic, a step of {self.step_size:g} x zeta: T ln(s / (s - 1)) (the cascade's root "
+                "with a second stage)",
                 "measured_lags": "the same step and ramp added to the held-out residuals (tuning logs without "
                 "held-out logs) at random ticks and signs, from the true torque exceeding zeta_j to the first "
                 "tick with |r_j| > zeta_j",
-                "heldout": "alarms of the arm (any joint over its level; excursions closer than 5/k_o are one) "
-                "on logs of other seeds than the tuning logs",
+                "heldout": "alarms of the arm (any joint over its level; excursions closer than 5 x (1/k_o + "
+                "1/K_f) are one, 1/K_f with a second stage) on logs of other seeds than the tuning logs",
             },
             "rate_per_hour": self.rate_per_hour,
             "detection_friction_band": self.detection_friction_band,
+            "detection_filter_gain": self.detection_filter_gain,
             "ramp_slope_Nm_per_s": self.ramp_slope,
             "step_size_times_zeta": self.step_size,
             "logs": self.sources,
@@ -166,7 +185,8 @@ class DetectionPairs:
 
 
 def _replay_once(item: Item, robot: RobotModel, s: ObserverSettings, load: Callable[[Any], RobotLog]) -> Any:
-    """A replay at ``s`` (exact) if ``item`` refilters, else the log itself (replayed at each gain later)."""
+    """A replay at ``s`` (exact, no second stage) if ``item`` refilters, else the log itself (replayed at each
+    gain later); a residual given is kept as it is (refiltered from its own gain and stage)."""
     if isinstance(item, ResidualReplay):
         return item
     log = item if isinstance(item, RobotLog) else load(item)
@@ -175,16 +195,19 @@ def _replay_once(item: Item, robot: RobotModel, s: ObserverSettings, load: Calla
     return replay_residual(log, robot, s)
 
 
-def _at_gain(item: Any, gain: float, robot: RobotModel, s: ObserverSettings) -> ResidualReplay:
+def _at_gain(item: Any, s: ObserverSettings, robot: RobotModel) -> ResidualReplay:
+    """The detector's residual at ``s`` (its detection gain, exact, and its second stage): ``item`` refiltered
+    if it is a replay, else replayed."""
     if isinstance(item, ResidualReplay):
-        return refilter(item, gain, "exact")
-    return replay_residual(item, robot, replace(s, detection_observer_gain=gain))
+        return refilter(item, s.detection_gain, "exact", s.detection_filter_gain)
+    return replay_residual(item, robot, s)
 
 
-def _heldout_alarms(replays: list[ResidualReplay], levels: np.ndarray, gain: float) -> dict[str, Any]:
+def _heldout_alarms(replays: list[ResidualReplay], levels: np.ndarray, gap_s: float) -> dict[str, Any]:
+    """Alarms of the arm on the held-out ``replays`` at ``levels`` [Nm], excursions closer than ``gap_s`` one."""
     alarms, per_joint, hours = 0, np.zeros(levels.size, dtype=int), 0.0
     for r in replays:
-        c = count_alarms(r.residual, levels, r.dt, 5.0 / gain)
+        c = count_alarms(r.residual, levels, r.dt, gap_s)
         alarms += int(c["alarms"])  # type: ignore[call-overload]
         per_joint += np.array([c["alarms_per_joint"][str(j + 1)] for j in range(levels.size)])  # type: ignore[index]
         hours += r.duration / 3600.0
@@ -193,6 +216,7 @@ def _heldout_alarms(replays: list[ResidualReplay], levels: np.ndarray, gain: flo
         "alarms": alarms,
         "alarms_per_hour": alarms / hours if hours > 0 else None,
         "alarms_per_joint": [int(v) for v in per_joint],
+        "gap_s": gap_s,
     }
 
 
@@ -215,7 +239,8 @@ def propose_detection_pairs(
 ) -> DetectionPairs:
     """Levels per joint for each detection gain, with the lag and held-out false alarms each gives (module
     docstring). ``logs`` and ``heldout``: free-motion logs, files or exact-form replays (of other seeds);
-    ``settings``: the slow observer and model terms (its detection gain and form are set per pair).
+    ``settings``: the slow observer and model terms (its detection gain and form are set per pair; its
+    ``detection_filter_gain``, if any, is every pair's second stage).
 
     Raises:
         ConfigError: no gain, a bad gain, slope or step size; the errors of :func:`tune_thresholds`.
@@ -224,15 +249,16 @@ def propose_detection_pairs(
     if not (math.isfinite(ramp_slope) and ramp_slope > 0 and math.isfinite(step_size) and step_size > 1):
         raise ConfigError(f"ramp_slope must be > 0 [Nm/s] and step_size > 1 [x zeta]; got {ramp_slope}, {step_size}")
     base = replace(settings or ObserverSettings(), observer_discretization="exact")
-    ref = replace(base, detection_observer_gain=gain_list[-1])
+    # the reference replay is first-order (no stage): refilter takes it to any gain and stage
+    ref = replace(base, detection_observer_gain=gain_list[-1], detection_filter_gain=None)
     read = load or (lambda path: load_free_motion_log(path, robot))
     tune_items = [_replay_once(x, robot, ref, read) for x in logs]
     held_items = [_replay_once(x, robot, ref, read) for x in heldout]
     pairs = []
     for gain in gain_list:
         s = replace(base, detection_observer_gain=gain)
-        reps = [_at_gain(x, gain, robot, s) for x in tune_items]
-        held = [_at_gain(x, gain, robot, s) for x in held_items]
+        reps = [_at_gain(x, s, robot) for x in tune_items]
+        held = [_at_gain(x, s, robot) for x in held_items]
         proposal = tune_thresholds(
             reps, robot, settings=s, rate_per_hour=rate_per_hour, contact_rate_per_hour=contact_rate_per_hour,
             method=method, allow_extrapolation=allow_extrapolation, seed=seed,
@@ -241,19 +267,23 @@ def propose_detection_pairs(
         zeta = proposal.collision
         lag_on = held or reps
         draws = {"count": lag_draws, "seed": seed}
+        t_f, gap = s.filter_time_constant, GAP_TIME_CONSTANTS * s.detection_time_scale
+        step_lag = detection_delay(1.0, step_size, 1.0 / gain, filter_time_constant=t_f)
+        assert step_lag is not None  # a step of step_size > 1 times zeta always crosses it
         pairs.append(
             GainPair(
                 gain=gain,
                 proposal=proposal,
-                ramp_lag_s=[ramp_lag(float(z), ramp_slope, 1.0 / gain) for z in zeta],
-                step_lag_s=math.log(step_size / (step_size - 1.0)) / gain,
+                ramp_lag_s=[ramp_lag(float(z), ramp_slope, 1.0 / gain, t_f) for z in zeta],
+                step_lag_s=step_lag,
                 measured_step_lag_s=synthetic_lags(lag_on, zeta, kind="step", size=step_size, **draws),
                 measured_ramp_lag_s=synthetic_lags(lag_on, zeta, kind="ramp", slope=ramp_slope, **draws),
-                heldout=_heldout_alarms(held, zeta, gain) if held else None,
+                heldout=_heldout_alarms(held, zeta, gap) if held else None,
+                detection_filter_gain=s.detection_filter_gain,
             )
         )  # fmt: skip
     return DetectionPairs(
         pairs, float(rate_per_hour), float(ramp_slope), float(step_size),
         [getattr(x, "source", str(x)) for x in tune_items], [getattr(x, "source", str(x)) for x in held_items],
-        base.detection_friction_band,
+        base.detection_friction_band, base.detection_filter_gain,
     )  # fmt: skip

@@ -50,9 +50,12 @@ def plot_residual_levels(proposal: ThresholdProposal, path: str | Path) -> Path:
         ax.set_ylabel(f"|r_{j + 1}| [Nm]\n{jt.name}", fontsize=8)
         ax.legend(loc="upper right", fontsize=7, ncol=2)
     axes[-1, 0].set_xlabel("time in the logs, placed end to end [s]")
+    kf = proposal.settings.detection_filter_gain
+    stage = "" if kf is None else f", second stage K_f = {kf:g} 1/s"
     fig.suptitle(
         f"free-motion residuals and proposed levels: collision {proposal.rate_per_hour:g}/h, "
-        f"contact {proposal.contact_rate_per_hour:g}/h for the arm (k_o = {proposal.settings.detection_gain:g} 1/s)",
+        f"contact {proposal.contact_rate_per_hour:g}/h for the arm (k_o = {proposal.settings.detection_gain:g} 1/s"
+        f"{stage})",
         fontsize=10,
     )
     fig.tight_layout()

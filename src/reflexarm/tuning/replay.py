@@ -15,6 +15,7 @@ import os
 import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -45,6 +46,19 @@ class ThresholdWarning(UserWarning):
     trace whose velocities are not the measured ones)."""
 
 
+def check_filter_gain(value: object) -> float | None:
+    """``value`` as the K_f [1/s] of the detection residual's second stage: None (no stage) or a finite number > 0.
+
+    Raises:
+        ConfigError: anything else, naming ``detection_filter_gain``.
+    """
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+        raise ConfigError(f"detection_filter_gain must be a finite gain > 0 [1/s] (or None: no stage); got {value!r}")
+    return float(value)
+
+
 @dataclass(frozen=True)
 class ObserverSettings:
     """The observer settings the user runs (:class:`~reflexarm.control.Controller` arguments).
@@ -62,6 +76,14 @@ class ObserverSettings:
             filter's zero-order-hold form, stable at any gain), as ``Controller(observer_discretization=)``.
         detection_friction_band: the detection observer subtracts the friction model in this velocity band
             [rad/s] (``Controller(detection_kappa_f=1)``); None: it follows kappa_f (the paper's).
+        detection_filter_gain: K_f [1/s] of a second stage on the detection residual,
+            r2_k = b r2_(k-1) + (1 - b) r_k with b = e^(-K_f dt) whatever the observer's form, r2 = 0 at the
+            first tick (``Controller(detection_filter_gain=)``): the detector then compares |r2_j| with zeta_j,
+            a second-order filter of the external torque with real poles -k_o and -K_f (Haddadin et al., T-RO
+            2017); None: no stage, the detector sees the observer's residual r.
+
+    Raises:
+        ConfigError: a ``detection_filter_gain`` that is not a finite number > 0.
     """
 
     observer_gain: float = 5.0
@@ -71,6 +93,10 @@ class ObserverSettings:
     kappa_eps: int = 0
     observer_discretization: str = "euler"
     detection_friction_band: float | None = None
+    detection_filter_gain: float | None = None
+
+    def __post_init__(self) -> None:
+        check_filter_gain(self.detection_filter_gain)
 
     @property
     def detection_gain(self) -> float:
@@ -78,14 +104,29 @@ class ObserverSettings:
         return float(self.observer_gain if self.detection_observer_gain is None else self.detection_observer_gain)
 
     def time_constant(self, dt: float) -> float:
-        """Time constant of the detecting residual's step response at the period ``dt`` [s]: 1/k_o for the
-        exact form; -dt / ln(1 - k_o dt) for Euler (1/k_o to 0.3 % for k_o dt <= 0.005)."""
+        """Time constant of the detection observer's step response at the period ``dt`` [s] (the first stage;
+        the second one's is :attr:`filter_time_constant`): 1/k_o for the exact form; -dt / ln(1 - k_o dt) for
+        Euler (1/k_o to 0.3 % for k_o dt <= 0.005)."""
         k_o = self.detection_gain
         if self.observer_discretization == "exact":
             return 1.0 / k_o
         if k_o * dt >= 1.0:
             raise ConfigError(f"the Euler observer is unstable at k_o dt = {k_o * dt:g} >= 1; use the exact form")
         return -dt / math.log1p(-k_o * dt)
+
+    @property
+    def filter_time_constant(self) -> float | None:
+        """Time constant 1/K_f of the detection residual's second stage [s] (its zero-order-hold form is exact at
+        any period); None without the stage."""
+        return None if self.detection_filter_gain is None else 1.0 / self.detection_filter_gain
+
+    @property
+    def detection_time_scale(self) -> float:
+        """The detector's time scale [s]: the sum of its time constants, 1/k_o + 1/K_f (1/k_o without the stage).
+
+        A slow ramp of external torque is trailed by this much (the ramp lag's asymptote; the cascade's
+        k_eff = 1 / (1/k_o + 1/K_f)), and the declustering gaps count in it."""
+        return 1.0 / self.detection_gain + (self.filter_time_constant or 0.0)
 
     def as_dict(self) -> dict[str, object]:
         """JSON-ready settings."""
@@ -104,6 +145,9 @@ class ResidualReplay:
         detection_gain: k_o of the residual [1/s] and discretization ("euler"/"exact") of its observer, when
             known (a replay knows them; a recorded residual does not): :func:`~reflexarm.tuning.refilter`
             needs them to give the residual of another gain.
+        detection_filter_gain: K_f [1/s] of the second stage the residual went through
+            (:attr:`ObserverSettings.detection_filter_gain`), when known; None: none (or unknown, for a
+            recorded residual).
     """
 
     source: str
@@ -114,6 +158,7 @@ class ResidualReplay:
     faults: tuple[str, ...]
     detection_gain: float | None = None
     discretization: str | None = None
+    detection_filter_gain: float | None = None
 
     @property
     def duration(self) -> float:
@@ -127,7 +172,8 @@ def replay_residual(log: RobotLog, robot: RobotModel, settings: ObserverSettings
     Args:
         log: a free-motion log (q, dq, tau_m; a wrench if ``settings.kappa_ext``), the robot's joint order.
         robot: the controller's model (the user's identified model, else the robot file's nominal one).
-        settings: the observer settings (default: :class:`ObserverSettings`' defaults, the paper's).
+        settings: the observer settings (default: :class:`ObserverSettings`' defaults, the paper's); with a
+            ``detection_filter_gain`` the residual kept is the second stage's (the detector's), r2.
 
     Raises:
         ConfigError: the log has another joint count than ``robot``; EFC asked without a wrench in the log;
@@ -141,6 +187,9 @@ def replay_residual(log: RobotLog, robot: RobotModel, settings: ObserverSettings
     if s.kappa_ext and log.wrench is None:
         raise ConfigError(f"kappa_ext = 1 (EFC) needs the wrist wrench; {log.source} has no fx..mz columns")
     dt = float(np.median(np.diff(log.t)))
+    # the keyword only with a stage: a core without the second stage still replays the first-order residual
+    kf = s.detection_filter_gain
+    stage: dict[str, Any] = {} if kf is None else {"detection_filter_gain": kf}
     ctrl = Controller(
         robot,
         observer_gain=s.observer_gain,
@@ -152,6 +201,7 @@ def replay_residual(log: RobotLog, robot: RobotModel, settings: ObserverSettings
         kappa_eps=s.kappa_eps,
         observer_discretization=s.observer_discretization,
         **detection_friction(s.detection_friction_band),
+        **stage,
         dt=dt,
         torque_limit=None,
         # the damping matrix shapes the command only, never the residual: computed once instead of every 10
@@ -171,7 +221,10 @@ def replay_residual(log: RobotLog, robot: RobotModel, settings: ObserverSettings
             ThresholdWarning,
             stacklevel=2,
         )
-    return ResidualReplay(log.source, t, out, dt, n_fault, tuple(faults), s.detection_gain, s.observer_discretization)
+    return ResidualReplay(
+        log.source, t, out, dt, n_fault, tuple(faults), s.detection_gain, s.observer_discretization,
+        s.detection_filter_gain,
+    )  # fmt: skip
 
 
 #: Columns of a reflexarm trace (:class:`~reflexarm.sim.Trace` Parquet layout) a replay reads.

@@ -2,8 +2,8 @@
 
 :func:`tune_thresholds` replays the observer on the logs (:func:`~reflexarm.tuning.replay_residual`),
 fits the tail of each joint's |residual| (:mod:`reflexarm.tuning.tail`: excursions declustered with a gap
-of 5 / k_o, the 30 largest above u, an exponential tail by default, :data:`DEFAULT_METHOD`) and proposes,
-as libfranka does, two levels per joint:
+of 5 x (1/k_o + 1/K_f), 1/K_f with a second stage only; the 30 largest above u, an exponential tail by
+default, :data:`DEFAULT_METHOD`) and proposes, as libfranka does, two levels per joint:
 
 * **collision** zeta_j: false alarms at the user's rate R [1/h] for the whole arm;
 * **contact** level: a lower one at the rate R_c [1/h] (default 60, one per minute), for logging or a soft
@@ -22,7 +22,9 @@ zeta at
     t_d = -T_o ln(1 - (zeta - b) / s)     (never if s <= zeta - b),
 
 given for b = 0 ("nominal") and b = -q95 ("unfavourable": the residual's 95th percentile of |r| in the
-logs, e.g. friction, pointing against the step); :func:`~reflexarm.tuning.force_step_delays` does the same
+logs, e.g. friction, pointing against the step); with a second stage of gain K_f on the residual
+(:attr:`~reflexarm.tuning.ObserverSettings.detection_filter_gain`) t_d is the root of the cascade's step
+response (:func:`~reflexarm.tuning.detection_delay`); :func:`~reflexarm.tuning.force_step_delays` does the same
 for a force at the end effector. Each level is checked against the logs: crossed more often than its
 rate allows (:data:`CONSISTENCY_QUANTILE` of the Poisson count), it is flagged with a warning.
 """
@@ -68,8 +70,9 @@ __all__ = [
 #: Largest return period of a level, in multiples of the logs' span: a tail fit is trusted to about an
 #: order of magnitude beyond the data (Coles 2001, Sec. 4.4: return-level intervals widen quickly past it).
 MAX_EXTRAPOLATION = 10.0
-#: Declustering gap in observer time constants: excursions closer than 5 / k_o (1 s at k_o = 5 1/s, where
-#: the observer's step response has settled to 99.3 %) are one alarm, as a latched detector sees them.
+#: Declustering gap in the detector's time scale 1/k_o + 1/K_f (1/k_o without a second stage): excursions closer
+#: than 5 x that (1 s at k_o = 5 1/s, where the observer's step response has settled to 99.3 %; a cascade's step
+#: response is at least as settled at 5 x its sum of time constants) are one alarm, as a latched detector sees.
 GAP_TIME_CONSTANTS = 5.0
 #: A level is flagged when the logs cross it more often than this quantile of the Poisson count its rate
 #: predicts over the logs' span (1 % false flags on a well-fitted tail).
@@ -187,8 +190,8 @@ class ThresholdProposal:
                 "per-joint rate; 90 % bootstrap interval",
                 "per_joint_rate": "the arm's rate split evenly over the joints (rate / n)",
                 "delay": "t_d = -T_o ln(1 - (zeta - b) / s), T_o = -dt / ln(1 - k_o dt) (Euler) or 1 / k_o (exact); "
-                "b = 0 (nominal) or "
-                "-q95 of |r| (unfavourable)",
+                "b = 0 (nominal) or -q95 of |r| (unfavourable); with a second stage (detection_filter_gain K_f) "
+                "the root of b + s step(t) = zeta, step(t) = 1 - (T_o e^(-t/T_o) - T_f e^(-t/T_f)) / (T_o - T_f)",
             },
             "rate_per_hour": self.rate_per_hour,
             "contact_rate_per_hour": self.contact_rate_per_hour,
@@ -196,6 +199,7 @@ class ThresholdProposal:
             "step_torque_Nm": self.step_torque,
             "observer": self.settings.as_dict(),
             "time_constant_s": self.time_constant,
+            "filter_time_constant_s": self.settings.filter_time_constant,
             "logs": self.sources,
             "duration_s": self.duration_s,
             "fault_ticks": self.fault_ticks,
@@ -303,15 +307,16 @@ def _joint_thresholds(
     dt: float,
     fit: TailFit,
     rates: dict[str, float],
-    delay: tuple[float, float],
+    delay: tuple[float, float, float | None],
     boot: tuple[int, int],
     notes: list[str],
 ) -> JointThresholds:
     """One joint's two levels at their per-joint ``rates`` [1/h] from the fitted tail of its |residual| ``parts``
     (period ``dt`` [s]), each raised when the logs
     cross it more often than its rate allows (a warning, noted in ``notes``), with the delays of a step
-    (``delay``: step torque [Nm], time constant [s]) and ``boot``: (bootstrap draws, seed) of the intervals."""
-    step_torque, time_constant = delay
+    (``delay``: step torque [Nm], the observer's and the second stage's time constants [s], the latter None
+    without one) and ``boot``: (bootstrap draws, seed) of the intervals."""
+    step_torque, time_constant, t_f = delay
     q95 = float(np.quantile(np.concatenate(parts), 0.95))
     delays: dict[str, float | None] = {}
     in_logs: dict[str, float] = {}
@@ -334,8 +339,8 @@ def _joint_thresholds(
             levels[level] = zeta = raised
             counted = count_crossings(parts, zeta, dt, fit)[0]
         in_logs[f"{level}_alarms_in_logs"], in_logs[f"{level}_alarms_expected"] = counted, expected
-        delays[f"{level}_delay_s"] = detection_delay(zeta, step_torque, time_constant)
-        delays[f"{level}_delay_unfavourable_s"] = detection_delay(zeta, step_torque, time_constant, -q95)
+        delays[f"{level}_delay_s"] = detection_delay(zeta, step_torque, time_constant, filter_time_constant=t_f)
+        delays[f"{level}_delay_unfavourable_s"] = detection_delay(zeta, step_torque, time_constant, -q95, t_f)
     n_boot, seed = boot
     return JointThresholds(
         joint=j,
@@ -382,7 +387,7 @@ def tune_thresholds(
         step_force: if given, the delay of a force step of this size [N] at the end effector along the base
             axes, mapped by J_v^T at the first log's median posture (:func:`~reflexarm.tuning.force_step_delays`).
         method: tail model, "exponential" (default, :data:`DEFAULT_METHOD`) or "gpd".
-        gap_s: declustering gap [s] (default :data:`GAP_TIME_CONSTANTS` / k_o).
+        gap_s: declustering gap [s] (default :data:`GAP_TIME_CONSTANTS` x (1/k_o + 1/K_f), 1/K_f with a stage).
         allow_extrapolation: warn instead of raising when the logs are too short for a rate.
         n_boot, seed: bootstrap draws and their seed for the intervals.
         load: reads a log file given by path (default :func:`~reflexarm.tuning.load_free_motion_log`).
@@ -400,13 +405,12 @@ def tune_thresholds(
     read = load or (lambda path: load_free_motion_log(path, robot))
     replays, posture, coverage, notes = _replay_logs(log_list, robot, s, read)
     dt = _common_period(replays)
-    k_o = s.detection_gain
     time_constant = s.time_constant(dt)
-    gap = GAP_TIME_CONSTANTS / k_o if gap_s is None else float(gap_s)
+    gap = GAP_TIME_CONSTANTS * s.detection_time_scale if gap_s is None else float(gap_s)
     duration = sum(r.duration for r in replays)
     arm_rates = {"collision": rate, "contact": contact_rate}
     _check_duration(duration, robot.n, arm_rates, allow_extrapolation, notes)
-    delay = (step_torque, time_constant)
+    delay = (step_torque, time_constant, s.filter_time_constant)
     joints = _fit_joints(replays, robot, dt, gap, method, arm_rates, delay, (n_boot, seed), notes)
     proposal = ThresholdProposal(
         joints=joints,
@@ -424,7 +428,7 @@ def tune_thresholds(
         coverage=coverage,
     )
     if step_force is not None and posture is not None:
-        _add_force_steps(proposal, robot, posture, step_force, time_constant)
+        _add_force_steps(proposal, robot, posture, step_force, delay[1:])
     return proposal
 
 
@@ -446,12 +450,12 @@ def _fit_joints(
     gap: float,
     method: str,
     arm_rates: dict[str, float],
-    delay: tuple[float, float],
+    delay: tuple[float, float, float | None],
     boot: tuple[int, int],
     notes: list[str],
 ) -> list[JointThresholds]:
     """Each joint's tail fit of its pooled |residual| and its two levels at its share 1/n of the arm's rates
-    ``arm_rates`` [1/h] (``delay``: step torque [Nm], time constant [s]; ``boot``: bootstrap draws and the
+    ``arm_rates`` [1/h] (``delay``: step torque [Nm], time constants [s]; ``boot``: bootstrap draws and the
     first joint's seed, the next joints' counted on from it)."""
     n = robot.n
     n_boot, seed = boot
@@ -469,12 +473,17 @@ def _fit_joints(
 
 
 def _add_force_steps(
-    proposal: ThresholdProposal, robot: RobotModel, posture: np.ndarray, step_force: float, time_constant: float
+    proposal: ThresholdProposal,
+    robot: RobotModel,
+    posture: np.ndarray,
+    step_force: float,
+    time_constants: tuple[float, float | None],
 ) -> None:
-    """The delays of a force step of ``step_force`` [N] at the end effector at ``posture``, set on ``proposal``."""
+    """The delays of a force step of ``step_force`` [N] at the end effector at ``posture``, set on ``proposal``
+    (``time_constants``: the observer's and the second stage's [s], None without one)."""
     proposal.step_force = float(step_force)
     proposal.force_posture = [float(v) for v in posture]
     proposal.force_steps = {
-        "collision": force_step_delays(robot, posture, step_force, proposal.collision, time_constant),
-        "contact": force_step_delays(robot, posture, step_force, proposal.contact, time_constant),
+        "collision": force_step_delays(robot, posture, step_force, proposal.collision, *time_constants),
+        "contact": force_step_delays(robot, posture, step_force, proposal.contact, *time_constants),
     }
