@@ -11,14 +11,15 @@ import math
 
 import numpy as np
 import pytest
-from controller_oracle import DT, Oracle, core_controller, ticks
 from scipy.signal import lfilter
-from test_controller_oracle import REACTION_PARAMS, RUN_TICKS, SHORT, controller_like, run_both
 
+from controller_oracle import DT, Oracle, core_controller, ticks
 from reflexarm import load_robot
-from reflexarm.control import Controller, contract as _k, replay
+from reflexarm.control import Controller, replay
+from reflexarm.control import contract as _k
 from reflexarm.control._setup import load_core
 from reflexarm.errors import ConfigError
+from test_controller_oracle import REACTION_PARAMS, RUN_TICKS, SHORT, controller_like, run_both
 
 PANDA = load_robot("panda")
 
@@ -142,3 +143,61 @@ def _panda_log(seconds: float = 0.4, push: float = 40.0):
                                                                     n_ticks=int(round(seconds / DT)))]  # fmt: skip
     t, q, dq, tau = (np.array(x) for x in zip(*rows, strict=True))
     return t, q, dq, tau
+
+
+#: [s] the Controller's detection on a ramp against the cascade's continuous ramp lag: test_detection_tuning's two
+#: periods (the detector checks once per tick; the observer holds the period's mean torque) and one more for the
+#: stage, which filters the observer's output sampled once per tick.
+CASCADE_LAG_TOLERANCE_S = 3 * DT
+
+
+@pytest.mark.parametrize(("gain", "filter_gain"), [(100.0, 200.0), (200.0, 200.0), (50.0, 500.0)])
+def test_controller_detects_a_ramp_at_the_cascade_s_ramp_lag(atlas, gain, filter_gain):
+    """A ramp of external torque on joint 2 of the still arm (no noise): the Controller with the stage detects it
+    ramp_lag(zeta, slope, 1/k_o, 1/K_f) after the torque exceeds zeta (the tuning's analytic lag, root-found on the
+    cascade's continuous response), within CASCADE_LAG_TOLERANCE_S."""
+    from reflexarm.experiments.collision import EE_START
+    from reflexarm.signals import Measurement, Reference
+    from reflexarm.tuning import ramp_lag
+
+    slope, zeta, j, N = 400.0, 8.0, 1, 1000
+    levels = np.full(atlas.n, 1e3)
+    levels[j] = zeta
+    ctrl = Controller(atlas, detection_observer_gain=gain, detection_filter_gain=filter_gain, threshold=levels,
+                      observer_discretization="exact", reaction="none", torque_limit=None)  # fmt: skip
+    g = atlas.compute_gravity(EE_START)
+    zeros, gravity = np.zeros(atlas.n), np.asarray(atlas.gravity, dtype=float)
+    t_detect = None
+    for k in range(N):
+        tau = g.copy()
+        tau[j] -= slope * DT * k
+        if ctrl.step(Measurement(k * DT, EE_START, zeros, tau, np.zeros(6), gravity),
+                     Reference(EE_START, zeros, zeros)).collision:  # fmt: skip
+            t_detect = k * DT
+            break
+    assert t_detect is not None
+    want = ramp_lag(zeta, slope, 1.0 / gain, 1.0 / filter_gain)
+    assert t_detect - zeta / slope == pytest.approx(want, abs=CASCADE_LAG_TOLERANCE_S)
+    assert want > ramp_lag(zeta, slope, 1.0 / gain)
+
+
+@pytest.mark.parametrize("form", ["euler", "exact"])
+@pytest.mark.parametrize("band", [None, 0.1])
+def test_replay_with_the_stage_is_the_refiltered_first_order_replay(atlas, form, band):
+    """The tuning's shortcut: one first-order replay at 400 1/s refiltered to (40 1/s, K_f 60 1/s) equals a replay
+    through the Controller with the stage (either observer form; with the detection observer's own friction model
+    too), and records the stage."""
+    from reflexarm.tuning import ObserverSettings, refilter, replay_residual
+    from test_detection_tuning import _still_log
+
+    log = _still_log(atlas, 2.0, seed=1)
+    base = ObserverSettings(detection_observer_gain=400.0, observer_discretization="exact",
+                            detection_friction_band=band)  # fmt: skip
+    fast = replay_residual(log, atlas, base)
+    s = ObserverSettings(detection_observer_gain=40.0, observer_discretization=form, detection_friction_band=band,
+                         detection_filter_gain=60.0)  # fmt: skip
+    staged = replay_residual(log, atlas, s)
+    assert staged.detection_filter_gain == 60.0 and fast.detection_filter_gain is None
+    # 1e-9 Nm as test_detection_tuning's refilter check: the inverse filter divides by 1 - e^{-0.4}
+    np.testing.assert_allclose(refilter(fast, 40.0, form, filter_gain=60.0).residual, staged.residual, atol=1e-9)
+    assert np.max(np.abs(refilter(fast, 40.0, form).residual - staged.residual)) > 1e-3  # the stage is seen
