@@ -43,6 +43,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="the detection observer subtracts the friction model in this velocity band (detection_kappa_f"
                    " = 1), levels tuned on that residual; e.g. 0.1, wider than the velocity noise (default: off, the "
                    "paper's kappa_f = 0)")  # fmt: skip
+    p.add_argument("--detection-filter-gain", type=float, default=None, metavar="K_F",
+                   help="each pair's detector looks at its residual filtered once more by a first-order stage of "
+                   "this gain [1/s] (a second-order observer with poles k_o and K_F; Controller(detection_filter_gain"
+                   "=)), levels tuned on that residual; e.g. 200 (default: none, the paper's first order)")  # fmt: skip
     p.add_argument("--merge", nargs="+", default=None, metavar="JSON",
                    help="merge detection_study.json files (arms run in parallel) into --out")  # fmt: skip
     p.add_argument("--out", type=Path, default=Path("results/detection-study"), help="output folder")
@@ -55,6 +59,8 @@ def _print(name: str, arm: dict[str, Any]) -> None:
 
     band = arm.get("detection_friction_band")
     own = "" if band is None else f", the detection observer's friction in a {band:g} rad/s band"
+    kf = arm.get("detection_filter_gain")
+    own += "" if kf is None else f", its residual through a second stage of K_f = {kf:g} 1/s"
     print(f"\n{name} (plant friction {arm['plant_friction']}{own})")
     print(f"{'k_o':>5} {'zeta max':>8} {'ramp':>5} {'meas':>5} {'FA/h':>6} {'demo lag':>8} {'joint':>5} {'own':>5} "
           f"{'delay':>6} {'link lag':>8} {'joint':>5} {'own':>5} {'delay':>6} {'pulses':>7}")  # fmt: skip
@@ -99,6 +105,7 @@ def _detection_study(args: argparse.Namespace) -> int:
             tune_s=60.0 * args.tune_minutes, tune_models=args.tune_models, heldout_s=60.0 * args.heldout_minutes,
             pulses=args.pulses, rate_per_hour=args.rate, model_seeds=args.model_seeds,
             contact_seeds=args.contact_seeds, detection_friction_band=args.detection_friction_band,
+            detection_filter_gain=args.detection_filter_gain,
         )  # fmt: skip
     if args.merge:
         for name, arm in study.arms.items():

@@ -225,7 +225,9 @@ class DetectionStudy:
             for p in a["pairs"]["pairs"]:
                 k = p["detection_observer_gain"]
                 h = p["heldout"] or {}
-                row = {"arm": name, "gain_per_s": k, "time_constant_s": 1.0 / k,
+                kf = p.get("detection_filter_gain")
+                row = {"arm": name, "gain_per_s": k, "filter_gain_per_s": kf,
+                       "time_constant_s": 1.0 / k + (0.0 if kf is None else 1.0 / kf),
                        "max_collision_Nm": max(p["collision_Nm"]), "min_collision_Nm": min(p["collision_Nm"]),
                        "ramp_lag_max_s": p["ramp_lag_max_s"], "step_lag_s": p["step_lag_s"],
                        "measured_step_lag_median_s": p["measured_step_lag_median_s"],
@@ -290,16 +292,19 @@ def lag_spread(runs: Sequence[dict[str, Any]], key: str = "lag_detecting_joint_s
 
 
 def _contact_runs(
-    arm: StudyArm, gain: float, levels: np.ndarray, seed: int, model_seed: int, band: float | None = None
+    arm: StudyArm, gain: float, levels: np.ndarray, seed: int, model_seed: int, band: float | None = None,
+    filter_gain: float | None = None,
 ) -> dict[str, Any]:
     """The demo contact and the link collision with the pair (gain, levels), noise seed ``seed`` (B) on the
-    model of ``model_seed`` (``band``: the detection observer's friction band, None: none); lag and delay each."""
+    model of ``model_seed`` (``band``: the detection observer's friction band, None: none; ``filter_gain``: the
+    detection residual's second stage K_f, None: none); lag and delay each."""
     from reflexarm.experiments.collision import run_ee_collision, run_link_collision
     from reflexarm.experiments.collision_events import collision_outcome
 
     setting = DetectionSetting(
         "Coll.Det", stiffness=300.0, observer_gain=5.0, detection_observer_gain=gain,
         threshold=tuple(float(v) for v in levels), reaction="gravity", detection_friction_band=band,
+        detection_filter_gain=filter_gain,
     )  # fmt: skip
     model, _ = controller_model(arm.robot, 0.1, model_seed, None)
     kw: dict[str, Any] = {"robot": arm.robot, "model_error": 0.1, "model_seed": model_seed, "seed": seed,
@@ -339,7 +344,7 @@ def _pulse_scene(arm: StudyArm, count: int, rng: np.random.Generator) -> tuple[l
 
 def _pulses(
     arm: StudyArm, pairs: Any, model_error: np.ndarray, count: int, seed: int, model_seed: int,
-    band: float | None = None,
+    band: float | None = None, filter_gain: float | None = None,
 ) -> dict[str, Any]:
     """Short impacts during free motion: the share caught by each pair, among pulses whose true joint torque
     peaks above 3x the model error of some joint ("eligible") and among all."""
@@ -352,7 +357,7 @@ def _pulses(
     t, tau_ext = traces[0].t, traces[0].tau_ext
     caught: dict[str, dict[str, Any]] = {}
     for p in pairs.pairs:
-        r = refilter(rep, p.gain).residual
+        r = refilter(rep, p.gain, filter_gain=filter_gain).residual
         hits = []
         for s in specs:
             on = (t >= s["t_on_s"]) & (t <= s["t_off_s"])
@@ -382,6 +387,7 @@ def study_arm_detection(
     model_seeds: str = "same",
     contact_seeds: int = DEFAULT_CONTACT_SEEDS,
     detection_friction_band: float | None = None,
+    detection_filter_gain: float | None = None,
 ) -> dict[str, Any]:
     """One arm of the study (module docstring): pairs, false alarms, noise growth, contacts, pulses.
 
@@ -391,7 +397,10 @@ def study_arm_detection(
     then cover another arm's model errors too). ``contact_seeds``: noise seeds of the contact runs (>= 1).
     ``detection_friction_band`` [rad/s]: every run's detection observer subtracts the friction model in this
     velocity band (``Controller(detection_kappa_f=1)``), the levels are tuned on that residual; None: the
-    paper's (kappa_f = 0)."""
+    paper's (kappa_f = 0). ``detection_filter_gain`` [1/s]: every pair's detector looks at its residual through
+    the second stage K_f (``Controller(detection_filter_gain=)``; pairs (k_o, K_f), tuned on that residual); the
+    free-motion runs record the first order, which :func:`~reflexarm.tuning.refilter` takes to each pair's
+    cascade. The model error and the noise growth stay the first order's."""
     import warnings
 
     from reflexarm.tuning import ThresholdWarning, propose_detection_pairs
@@ -400,13 +409,14 @@ def study_arm_detection(
         raise ConfigError(f"contact_seeds must be an integer >= 1; got {contact_seeds!r}")
     if model_seeds not in MODEL_SEEDS:
         raise ConfigError(f"model_seeds must be one of {', '.join(MODEL_SEEDS)}; got {model_seeds!r}")
+    ObserverSettings(detection_filter_gain=detection_filter_gain)  # a bad K_f refused before the minutes of runs
     same = model_seeds == "same"
 
     def model_of(seed: int) -> int:
         return ARM_MODEL_SEED if same else seed
 
     ref = max(gains)
-    band = detection_friction_band
+    band, kf = detection_friction_band, detection_filter_gain
     fm = {"gain": ref, "motion": motion, "chunk_s": chunk_s, "detection_friction_band": band}
     tune = [r for i in range(tune_models) for r in free_motion_residuals(
         arm, tune_s, model_seed=model_of(SEEDS["A"] + i), seed=SEEDS["A"] + i, motion_seed=SEEDS["A"] + i,
@@ -417,21 +427,22 @@ def study_arm_detection(
         warnings.simplefilter("always", ThresholdWarning)
         pairs = propose_detection_pairs(tune, arm.robot, gains, heldout=held, rate_per_hour=rate_per_hour,
                                         allow_extrapolation=True,
-                                        settings=ObserverSettings(detection_friction_band=band))  # fmt: skip
+                                        settings=ObserverSettings(detection_friction_band=band,
+                                                                  detection_filter_gain=kf))  # fmt: skip
     slow = [refilter(r, min(gains)) for r in tune]
     model_error = np.max([np.abs(r.residual[int(5 / min(gains) / r.dt) :]).max(axis=0) for r in slow], axis=0)
     out: dict[str, Any] = {"plant_friction": arm.plant_friction, "joints": arm.robot.joint_names,
                            "pairs": pairs.as_dict(), "noise_growth": noise_growth(held[:1], gains),
                            "warnings": sorted({str(w.message) for w in caught})[:20]}  # fmt: skip
     out["model_seeds"] = {"mode": model_seeds, "arm_model_seed": ARM_MODEL_SEED if same else None}
-    out["detection_friction_band"] = band
+    out["detection_friction_band"], out["detection_filter_gain"] = band, kf
     out["contacts"], out["contact_seeds"] = {}, {}
     for p in pairs.pairs:  # the first seed's runs in "contacts"; over the seeds, the lags' spread
-        runs = [_contact_runs(arm, p.gain, p.collision, SEEDS["B"] + i, model_of(SEEDS["B"] + i), band)
+        runs = [_contact_runs(arm, p.gain, p.collision, SEEDS["B"] + i, model_of(SEEDS["B"] + i), band, kf)
                 for i in range(contact_seeds)]  # fmt: skip
         out["contacts"][str(p.gain)] = runs[0]
         out["contact_seeds"][str(p.gain)] = {scen: lag_spread([r[scen] for r in runs]) for scen in runs[0]}
-    out["pulses"] = (_pulses(arm, pairs, model_error, pulses, SEEDS["B"] + 1, model_of(SEEDS["B"] + 1), band)
+    out["pulses"] = (_pulses(arm, pairs, model_error, pulses, SEEDS["B"] + 1, model_of(SEEDS["B"] + 1), band, kf)
                      if pulses else {})  # fmt: skip
     return out
 
