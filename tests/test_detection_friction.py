@@ -135,7 +135,7 @@ def test_the_ros_node_s_controller_takes_the_band_from_its_parameter_or_the_tune
     observer = {"detection_observer_gain": 100.0, "detection_friction_band": 0.2}
     tuned.write_text(json.dumps({"collision_Nm": [9.0] * 7, "observer": observer}))
     assert built(detection_observer_gain=100.0, threshold=str(tuned)).detection_friction_velocity_band == 0.2
-    with pytest.raises(ConfigError, match="detection_friction_band and rearm_after must be >= 0"):
+    with pytest.raises(ConfigError, match="detection_friction_band, detection_filter_gain and rearm_after must be"):
         built(detection_observer_gain=100.0, detection_friction_band=-0.1)
     with pytest.raises(ConfigError, match="needs a detection observer"):
         built(detection_friction_band=0.1)

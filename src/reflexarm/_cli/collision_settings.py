@@ -22,6 +22,7 @@ def with_detection(setting: Any, detection: DetectionChoice) -> Any:
         reaction=detection.reaction,
         observer_discretization=detection.observer_discretization,
         detection_friction_band=detection.detection_friction_band,
+        detection_filter_gain=detection.detection_filter_gain,
         reaction_settings=detection.reaction_settings,
     )
 
@@ -37,6 +38,8 @@ def setting_line(setting: Any) -> str:
         gains += f", detection k_o = {setting.detection_observer_gain:g} 1/s"
     if setting.detection_friction_band is not None:
         gains += f", its friction in a {setting.detection_friction_band:g} rad/s band"
+    if setting.detection_filter_gain is not None:
+        gains += f", a second stage of K_f = {setting.detection_filter_gain:g} 1/s"
     return (
         f"[{setting.name}] k = {setting.stiffness:g} Nm/rad, detection zeta = {zeta_text} Nm, {gains}, "
         f"reaction {setting.reaction}{changed_settings(setting.reaction_settings)}"

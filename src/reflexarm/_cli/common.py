@@ -9,6 +9,13 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from reflexarm._cli.threshold_files import (
+    detection_band,
+    filter_gain,
+    read_threshold,
+    tuned_filter_gain,
+    tuned_friction_band,
+)
 from reflexarm.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -224,6 +231,15 @@ def add_detection_options(
         " = 1; needs --detection-observer-gain) (default: a thresholds.json's, tuned with it; else off)",
     )
     g.add_argument(
+        "--detection-filter-gain",
+        type=float,
+        default=None,
+        metavar="K_F",
+        help="the detector looks at the detection residual filtered once more by a first-order stage of this gain "
+        "[1/s] (a second-order observer; Controller(detection_filter_gain)) (default: a thresholds.json's, tuned "
+        "with it; else none)",
+    )
+    g.add_argument(
         "--reaction",
         choices=REACTION_CHOICES,
         default=reaction,
@@ -295,6 +311,7 @@ class DetectionChoice:
     observer_discretization: str = "euler"
     detection_friction_band: float | None = None  # the detection observer's own friction band [rad/s]
     reaction_settings: ReactionSettings | None = None  # --reaction-setting (None: the defaults)
+    detection_filter_gain: float | None = None  # K_f of the detection residual's second stage [1/s]
 
     def label(self) -> str:
         """One line for the console."""
@@ -309,6 +326,8 @@ class DetectionChoice:
             gains += f" ({self.observer_discretization} observers)"
         if self.detection_friction_band is not None:
             gains += f", its friction in a {self.detection_friction_band:g} rad/s band"
+        if self.detection_filter_gain is not None:
+            gains += f", a second stage of K_f = {self.detection_filter_gain:g} 1/s"
         src = "" if self.source == "command line" else f" (from {self.source})"
         return f"zeta = {zeta}{src}{gains}, reaction {self.reaction}{changed_settings(self.reaction_settings)}"
 
@@ -321,6 +340,7 @@ class DetectionChoice:
             "detection_observer_gain_per_s": self.detection_observer_gain,
             "observer_discretization": self.observer_discretization,
             "detection_friction_band_rad_s": self.detection_friction_band,
+            "detection_filter_gain_per_s": self.detection_filter_gain,
             "reaction": self.reaction,
             "reaction_settings": None if self.reaction_settings is None else asdict(self.reaction_settings),
         }
@@ -330,85 +350,6 @@ def _gain(value: float | None, flag: str) -> float | None:
     if value is not None and (not math.isfinite(value) or value <= 0.0):
         raise ConfigError(f"{flag} must be a positive gain [1/s]; got {value:g}")
     return value
-
-
-def read_threshold(
-    value: str, robot: RobotModel, gain: float | None = None
-) -> tuple[float | tuple[float, ...], str, float | None]:
-    """(zeta, its source, the detecting k_o it was tuned for) from ``--threshold``: a number [Nm], a comma
-    list with one positive level per joint of ``robot``, or a ``thresholds.json`` of ``tune-thresholds``
-    (its ``collision_Nm``, checked against the robot's joints by count and, when the file has them, names).
-    A file with (k_o, zeta) pairs (``tune-thresholds --detection-gains``) gives the pair tuned at ``gain``,
-    the detecting k_o of the run [1/s], when it has one; else its top-level levels.
-
-    Raises:
-        ConfigError: a non-positive or non-finite level, a list of the wrong length, a missing or malformed
-            file, a file for other joints.
-    """
-    text = str(value).strip()
-    path = Path(text)
-    if path.suffix.lower() == ".json" or path.is_file():
-        return _read_threshold_file(path, robot, gain)
-    parts = [s.strip() for s in text.split(",")]
-    try:
-        levels = [float(s) for s in parts]
-    except ValueError:
-        raise ConfigError(
-            f"--threshold expects a level [Nm], a comma list of {robot.n} levels or a thresholds.json file; "
-            f"got {text!r}"
-        ) from None
-    bad = [v for v in levels if not math.isfinite(v) or v <= 0.0]
-    if bad:
-        raise ConfigError(f"--threshold levels must be positive torques [Nm]; got {text!r}")
-    if len(levels) == 1:
-        return levels[0], "command line", None
-    if len(levels) != robot.n:
-        raise ConfigError(
-            f"--threshold has {len(levels)} levels; robot {robot.name!r} has {robot.n} joints "
-            f"({', '.join(robot.joint_names)})"
-        )
-    return tuple(levels), "command line", None
-
-
-def _pair_at(doc: object, gain: float | None) -> dict[str, object] | None:
-    """The ``detection_pairs`` entry of a thresholds file tuned at ``gain`` [1/s], if any."""
-    from reflexarm.experiments.tuned_detection import pair_at_gain
-
-    if gain is None or not isinstance(doc, dict) or not isinstance(doc.get("detection_pairs"), dict):
-        return None
-    return pair_at_gain(doc["detection_pairs"].get("pairs"), gain)
-
-
-def _read_threshold_file(
-    path: Path, robot: RobotModel, gain: float | None = None
-) -> tuple[tuple[float, ...], str, float | None]:
-    from reflexarm._validation import read_json_file
-
-    doc = read_json_file(path, f"--threshold {str(path)!r}")
-    pair = _pair_at(doc, gain)
-    if pair is not None:
-        doc = {**doc, "collision_Nm": pair.get("collision_Nm"), "observer": {"detection_observer_gain": gain}}
-    levels = doc.get("collision_Nm") if isinstance(doc, dict) else None
-    if not isinstance(levels, list) or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in levels):
-        raise ConfigError(
-            f"--threshold: {str(path)!r} has no 'collision_Nm' list of numbers (write it with 'reflexarm "
-            "tune-thresholds')"
-        )
-    if len(levels) != robot.n:
-        raise ConfigError(
-            f"--threshold: {str(path)!r} has {len(levels)} levels; robot {robot.name!r} has {robot.n} joints"
-        )
-    names = [j.get("name") for j in doc.get("joints", []) if isinstance(j, dict)]
-    if len(names) == robot.n and names != list(robot.joint_names):
-        raise ConfigError(
-            f"--threshold: {str(path)!r} is for joints {names}; robot {robot.name!r} has {list(robot.joint_names)}"
-        )
-    if not all(math.isfinite(v) and v > 0.0 for v in levels):
-        raise ConfigError(f"--threshold: {str(path)!r} has non-positive levels {levels}")
-    observer = doc.get("observer") if isinstance(doc.get("observer"), dict) else {}
-    tuned = observer.get("detection_observer_gain") or observer.get("observer_gain")
-    label = str(path) if pair is None else f"{path} (its pair at detection k_o = {gain:g} 1/s)"
-    return tuple(float(v) for v in levels), label, None if tuned is None else float(tuned)
 
 
 def detection_choice(args: argparse.Namespace, robot: RobotModel) -> DetectionChoice:
@@ -429,7 +370,11 @@ def detection_choice(args: argparse.Namespace, robot: RobotModel) -> DetectionCh
     if band is not None and args.detection_observer_gain is None:
         raise ConfigError("--detection-friction-band (or a thresholds.json tuned with one) needs "
                           "--detection-observer-gain: the friction goes into the detection observer")  # fmt: skip
+    kf = getattr(args, "detection_filter_gain", None)
+    if kf is None and source != "command line":  # levels tuned on the residual through the second stage
+        kf = tuned_filter_gain(args.threshold)
     return DetectionChoice(
+        detection_filter_gain=filter_gain(kf),
         reaction_settings=reaction_settings_of(getattr(args, "reaction_setting", None)),
         detection_friction_band=band,
         observer_discretization=discretization,
@@ -440,25 +385,6 @@ def detection_choice(args: argparse.Namespace, robot: RobotModel) -> DetectionCh
         source=source,
         tuned_gain=tuned,
     )
-
-
-def detection_band(value: object) -> float | None:
-    """``--detection-friction-band`` (or a file's) checked: None, or a positive finite velocity band [rad/s]."""
-    if value is None:
-        return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-        raise ConfigError(f"--detection-friction-band must be a positive velocity band [rad/s]; got {value!r}")
-    return float(value)
-
-
-def tuned_friction_band(value: str) -> float | None:
-    """The detection friction band a thresholds.json's levels were tuned with (its observer settings), if any."""
-    from reflexarm._validation import read_json_file
-
-    doc = read_json_file(Path(str(value).strip()), f"--threshold {value!r}")
-    observer = doc.get("observer") if isinstance(doc, dict) else None
-    band = observer.get("detection_friction_band") if isinstance(observer, dict) else None
-    return float(band) if isinstance(band, (int, float)) and not isinstance(band, bool) else None
 
 
 def tuned_gain_note(choice: DetectionChoice, default_gain: float) -> str | None:

@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from reflexarm._cli.common import add_model_options, detection_band, format_table, model_choice
+from reflexarm._cli.common import add_model_options, detection_band, filter_gain, format_table, model_choice
 from reflexarm._cli.log_options import add_log_options, load_log_from_args
 from reflexarm._cli.robot_options import DEFAULT_ROBOT, add_robot_options
 from reflexarm.errors import ConfigError
@@ -57,6 +57,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--detection-friction-band", type=float, default=None, metavar="RAD_S",
         help="the detecting observer subtracts the friction model in this velocity band [rad/s] (default: the "
         "thresholds file's, tuned with it; else off)",
+    )  # fmt: skip
+    g.add_argument(
+        "--detection-filter-gain", type=float, default=None, metavar="K_F",
+        help="the detector looks at the residual filtered once more by a first-order stage of this gain [1/s] "
+        "(default: the thresholds file's, tuned with it; else none)",
     )  # fmt: skip
     p.add_argument("--no-isolation", action="store_true", help="skip the isolation of each event (link, force)")
     p.add_argument("--out", type=Path, default=Path("results/detect"), help="output folder (default results/detect)")
@@ -124,6 +129,7 @@ def _settings(args: argparse.Namespace, doc: dict[str, Any]) -> Any:
         print(f"warning: the levels were tuned for a detecting k_o = {tuned:g} 1/s; detecting with {k_det:g} 1/s "
               "(leave out --detection-observer-gain to use the tuned one)", file=sys.stderr)  # fmt: skip
     band = detection_band(pick(args.detection_friction_band, "detection_friction_band", None))
+    kf = filter_gain(pick(args.detection_filter_gain, "detection_filter_gain", None))
     return ObserverSettings(
         observer_gain=float(k_comp),
         detection_observer_gain=float(k_det),
@@ -131,12 +137,15 @@ def _settings(args: argparse.Namespace, doc: dict[str, Any]) -> Any:
         kappa_ext=int(pick(args.kappa_ext, "kappa_ext", 0)),
         observer_discretization="exact",
         detection_friction_band=band,
+        detection_filter_gain=kf,
     )
 
 
 def _print_log(d: Any, replay_how: str) -> None:
     k_o, band = d.settings.detection_gain, d.settings.detection_friction_band
     own = "" if band is None else f", its friction model in a {band:g} rad/s band"
+    kf = d.settings.detection_filter_gain
+    own += "" if kf is None else f", its residual through a second stage of K_f = {kf:g} 1/s"
     print(f"\n{d.source}: {d.t.size} samples, {d.duration:.1f} s at {d.rate_hz:.4g} Hz: delay resolution "
           f"{1e3 * d.dt:.3g} ms (one period); detection observer k_o = {k_o:g} 1/s, exact (k_o dt = {k_o * d.dt:.3g})"
           f"{own}; replay: {replay_how}")  # fmt: skip

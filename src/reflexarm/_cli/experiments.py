@@ -281,6 +281,7 @@ def _mode_table(args: argparse.Namespace) -> int:
             reaction=detection.reaction,
             detection_friction_band=detection.detection_friction_band,
             reaction_settings=detection.reaction_settings,
+            detection_filter_gain=detection.detection_filter_gain,
         )
     write_json(
         out / "mode_table.json",

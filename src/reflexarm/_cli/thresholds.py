@@ -55,6 +55,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="the detection observer subtracts the friction model in this velocity band [rad/s] whatever --kappa-f "
         "(Controller(detection_kappa_f=1); needs --detection-observer-gain or --detection-gains) (default: off)",
     )  # fmt: skip
+    g.add_argument(
+        "--detection-filter-gain", type=float, default=None, metavar="K_F",
+        help="the detector looks at the residual filtered once more by a first-order stage of this gain [1/s] "
+        "(Controller(detection_filter_gain); --detection-gains then tunes pairs (k_o, K_F)) (default: none)",
+    )  # fmt: skip
     g.add_argument("--kappa-ext", type=int, choices=_SWITCH, default=0, help="EFC: wrist wrench in the observer")
     g.add_argument("--kappa-eps", type=int, choices=_SWITCH, default=0, help="disturbance compensation (recorded only)")
     t = p.add_argument_group("levels")
@@ -135,6 +140,7 @@ def _load(args: argparse.Namespace, path: str, robot: Any) -> Any:
 
 
 def _tune(args: argparse.Namespace) -> int:
+    from reflexarm._cli.threshold_files import filter_gain
     from reflexarm.errors import ConfigError
     from reflexarm.tuning import ObserverSettings, ThresholdWarning, tune_thresholds
 
@@ -167,6 +173,7 @@ def _tune(args: argparse.Namespace) -> int:
         kappa_eps=args.kappa_eps,
         observer_discretization=discretization,
         detection_friction_band=args.detection_friction_band,
+        detection_filter_gain=filter_gain(args.detection_filter_gain),
     )
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ThresholdWarning)

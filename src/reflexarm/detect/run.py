@@ -90,7 +90,7 @@ def detect_collisions(
     s = replace(settings, observer_discretization="exact")
     repaired, glitches = repair_glitches(log)
     replay = replay_residual(repaired, model, s)
-    gap = max(2, int(math.ceil(GAP_TIME_CONSTANTS / s.detection_gain / replay.dt - 1e-9)))
+    gap = max(2, int(math.ceil(GAP_TIME_CONSTANTS * s.detection_time_scale / replay.dt - 1e-9)))
     events = find_events(replay.t, replay.residual, zeta, gap)
     if isolate:
         share = SIGNIFICANCE_SHARE if significance_share is None else float(significance_share)

@@ -58,6 +58,13 @@ def _designed_displacement(robot: RobotModel, q: np.ndarray, jac: np.ndarray, f:
     return float(np.linalg.norm(jac @ (jac.T @ f) / k))
 
 
+#: The supervised push's detection: threshold, detection observer gain, reaction, the detection observer's friction
+#: band, the reaction settings, K_f of the detection residual's second stage (:func:`_supervised_controller`).
+_Supervision = tuple[
+    float | tuple[float, ...], float | None, str, float | None, ReactionSettings | None, float | None
+]
+
+
 def _supervised_controller(
     setup: CompensationSetup,
     kappa_eps: int,
@@ -68,6 +75,7 @@ def _supervised_controller(
     reaction: str,
     detection_friction_band: float | None = None,
     reaction_settings: ReactionSettings | None = None,
+    detection_filter_gain: float | None = None,
 ) -> Controller:
     """The controller of the supervised link push: :func:`make_controller`'s, with detection (threshold per
     joint or one, a second detecting observer if ``detection_observer_gain``)."""
@@ -78,6 +86,7 @@ def _supervised_controller(
         observer_gain=setup.observer_gain,
         detection_observer_gain=detection_observer_gain,
         **detection_friction(detection_friction_band),
+        detection_filter_gain=detection_filter_gain,
         threshold=threshold,
         reaction=reaction,
         reaction_settings=reaction_settings,
@@ -99,6 +108,7 @@ def mode_table(
     reaction: str = "compliant",
     detection_friction_band: float | None = None,
     reaction_settings: ReactionSettings | None = None,
+    detection_filter_gain: float | None = None,
 ) -> tuple[list[dict[str, Any]], dict[str, Trace]]:
     """Fig. 3 measured: for each mode, accuracy under model errors, end-effector and link compliance.
 
@@ -111,8 +121,8 @@ def mode_table(
       sensor; ratio = measured displacement of the link / prescribed;
     * link compliance with the supervisor: the same push with detection (``threshold``, default zeta = 11 Nm,
       the paper's; the observer of ``setup.observer_gain``, or a second detecting one of
-      ``detection_observer_gain``) and the reaction ``reaction`` (default "compliant": Fig. 3's automatic
-      switch).
+      ``detection_observer_gain``; its own friction band ``detection_friction_band``, its residual's second stage
+      ``detection_filter_gain``) and the reaction ``reaction`` (default "compliant": Fig. 3's automatic switch).
 
     Returns:
         (rows, traces): one row per mode with the measured values, the derived marks and the paper's.
@@ -127,7 +137,8 @@ def mode_table(
     traces: dict[str, Trace] = {}
     rows: list[dict[str, Any]] = []
     acc: dict[str, float] = {}
-    supervision = (threshold, detection_observer_gain, reaction, detection_friction_band, reaction_settings)
+    supervision = (threshold, detection_observer_gain, reaction, detection_friction_band, reaction_settings,
+                   detection_filter_gain)  # fmt: skip
     for name, mode in CONTROL_MODES.items():
         # accuracy: free motion
         plant, _ = build_plant(setup, [], noise_scale=setup.noise_scale, seed=noise_seed)
@@ -177,12 +188,12 @@ def _link_compliance(
     link: str,
     q0: np.ndarray,
     seeds: tuple[int, int],
-    supervision: tuple[float | tuple[float, ...], float | None, str, float | None, ReactionSettings | None] | None,
+    supervision: _Supervision | None,
     progress: bool,
 ) -> tuple[float, Trace]:
     """The link push held in ``q0`` in mode ``name``: (measured / prescribed displacement of the link, trace);
-    ``supervision`` (threshold, detection observer gain, reaction, its friction band, the reaction settings) runs it
-    under the ModeSupervisor."""
+    ``supervision`` (threshold, detection observer gain, reaction, its friction band, the reaction settings, K_f of
+    the second stage) runs it under the ModeSupervisor."""
     mode = CONTROL_MODES[name]
     model_seed, noise_seed = seeds
     push = LinkForce(body=link, magnitude=setup.force, t_on=setup.t_on, t_off=setup.t_off)

@@ -169,6 +169,7 @@ def _setting(
             threshold=tuned.levels,
             observer_discretization="exact",
             detection_friction_band=tuned.friction_band,
+            detection_filter_gain=tuned.filter_gain,
         )
     return replace(base, reaction=reaction, reaction_settings=settings)
 

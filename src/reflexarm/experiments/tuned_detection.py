@@ -32,7 +32,8 @@ class TunedDetection:
     """One arm's detection pair: the detection observer's gain [1/s], its per-joint levels [Nm] (model order),
     the model seed the levels were tuned on (None: tuned across models, any seed), where it came from, and what the
     study measured for it (held-out false alarms per hour, the analytic ramp lag [s]); ``friction_band``: the
-    detection observer's own friction band [rad/s] the levels were tuned with (None: the paper's kappa_f = 0)."""
+    detection observer's own friction band [rad/s] the levels were tuned with (None: the paper's kappa_f = 0);
+    ``filter_gain``: K_f [1/s] of the detection residual's second stage they were tuned with (None: none)."""
 
     arm: str
     gain: float
@@ -42,6 +43,7 @@ class TunedDetection:
     alarms_per_hour: float | None
     ramp_lag_s: float | None
     friction_band: float | None = None
+    filter_gain: float | None = None
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready (the study's conditions)."""
@@ -53,6 +55,7 @@ class TunedDetection:
             "heldout_alarms_per_hour": self.alarms_per_hour,
             "ramp_lag_max_s": self.ramp_lag_s,
             "detection_friction_band_rad_s": self.friction_band,
+            "detection_filter_gain_per_s": self.filter_gain,
         }
 
 
@@ -158,6 +161,10 @@ def load_tuned_detection(
         if band is not None and (_number(band) is None or not math.isfinite(band) or band <= 0.0):
             raise ConfigError(f"{where}: arm {arm!r}'s detection_friction_band must be a positive band [rad/s] or "
                               f"null; got {band!r}")  # fmt: skip
+        kf = a.get("detection_filter_gain")
+        if kf is not None and (_number(kf) is None or not math.isfinite(kf) or kf <= 0.0):
+            raise ConfigError(f"{where}: arm {arm!r}'s detection_filter_gain must be a positive gain [1/s] or null; "
+                              f"got {kf!r}")  # fmt: skip
         seeds = a.get("model_seeds")
         seed = seeds.get("arm_model_seed") if isinstance(seeds, dict) else None
         out[arm] = TunedDetection(
@@ -169,5 +176,6 @@ def load_tuned_detection(
             alarms_per_hour=_alarms(pair),
             ramp_lag_s=_number(pair.get("ramp_lag_max_s")),
             friction_band=_number(band),
+            filter_gain=_number(kf),
         )
     return out

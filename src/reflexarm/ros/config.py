@@ -42,6 +42,8 @@ MONITOR_PARAMETERS: tuple[tuple[str, Any, str], ...] = (
     ("detection_friction_band", 0.0,
      "the detecting observer subtracts the friction model in this velocity band [rad/s]; 0 = a thresholds.json's, "
      "else none"),
+    ("detection_filter_gain", 0.0,
+     "K_f of a second stage on the detecting residual [1/s]; 0 = a thresholds.json's, else none"),
     ("observer_discretization", "euler", "euler or exact"),
     ("reaction", "gravity", "reaction to a collision: " + ", ".join(REACTIONS)),
     ("stiffness", 300.0, "joint stiffness K [Nm/rad] (control mode)"),
@@ -102,6 +104,7 @@ class MonitorConfig:
     observer_gain: float
     detection_observer_gain: float
     detection_friction_band: float
+    detection_filter_gain: float
     observer_discretization: str
     reaction: str
     stiffness: float
@@ -127,12 +130,14 @@ class MonitorConfig:
         for name in ("observer_gain", "stiffness", "joint_state_timeout", "wrench_timeout", "max_stamp_gap",
                      "watchdog_period"):  # fmt: skip
             _positive(name, getattr(self, name))
-        nonneg = (self.detection_observer_gain, self.detection_friction_band, self.rearm_after)
-        if not all(v >= 0 for v in nonneg) or not 0 <= self.model_error < 1:
+        nonneg = (self.detection_observer_gain, self.detection_friction_band, self.detection_filter_gain,
+                  self.rearm_after)  # fmt: skip
+        if not all(math.isfinite(v) and v >= 0 for v in nonneg) or not 0 <= self.model_error < 1:
             raise ConfigError(
-                "detection_observer_gain, detection_friction_band and rearm_after must be >= 0 and model_error in "
-                f"[0, 1); got {self.detection_observer_gain!r}, {self.detection_friction_band!r}, "
-                f"{self.rearm_after!r}, {self.model_error!r}"
+                "detection_observer_gain, detection_friction_band, detection_filter_gain and rearm_after must be "
+                f">= 0 and model_error in [0, 1); got {self.detection_observer_gain!r}, "
+                f"{self.detection_friction_band!r}, {self.detection_filter_gain!r}, {self.rearm_after!r}, "
+                f"{self.model_error!r}"
             )
         if self.qos_depth < 1:
             raise ConfigError(f"parameter qos_depth must be >= 1; got {self.qos_depth!r}")

@@ -36,7 +36,7 @@ def build_controller(config: MonitorConfig, model: RobotModel) -> Controller:
     """The controller of ``config`` on ``model`` (thresholds as ``--threshold`` reads them), warmed up: a few ticks
     at rest, then :meth:`Controller.reset` (after which it runs as a fresh one, bitwise), so that the first real
     tick carries no first-use cost."""
-    from reflexarm._cli.common import read_threshold, tuned_friction_band
+    from reflexarm._cli.threshold_files import read_threshold, tuned_filter_gain, tuned_friction_band
 
     detecting = config.detection_observer_gain or None
     gain = detecting or config.observer_gain
@@ -50,12 +50,16 @@ def build_controller(config: MonitorConfig, model: RobotModel) -> Controller:
     band = config.detection_friction_band or None
     if band is None and source != "command line":  # levels tuned with the detecting observer's own friction
         band = tuned_friction_band(config.threshold)
+    kf = config.detection_filter_gain or None
+    if kf is None and source != "command line":  # levels tuned on the residual through the second stage
+        kf = tuned_filter_gain(config.threshold)
     controller = Controller(
         model,
         stiffness=config.stiffness,
         observer_gain=config.observer_gain,
         detection_observer_gain=detecting,
         **detection_friction(band),
+        detection_filter_gain=kf,
         threshold=zeta,
         reaction=config.reaction,
         observer_discretization=config.observer_discretization,
