@@ -82,7 +82,28 @@ def plot_tradeoff(study: _Study, path: str | Path) -> Path:
         axes[2].legend(fontsize=6, ncol=2)
     axes[0].legend(fontsize=7)
     axes[1].legend(fontsize=6, ncol=2)
+    detector = _detector_text(study)
+    if detector:
+        fig.suptitle(detector, fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return Path(path)
+
+
+def _detector_text(study: _Study) -> str:
+    """What the detector ran beyond the paper's first order (the same on every arm, else per arm), or ""."""
+    parts = {}
+    for name, a in study.arms.items():
+        band, kf = a.get("detection_friction_band"), a.get("detection_filter_gain")
+        text = ", ".join(
+            ([] if band is None else [f"detection observer's friction in a {band:g} rad/s band"])
+            + ([] if kf is None else [f"its residual through a second stage of K_f = {kf:g} 1/s"])
+        )
+        parts[name] = text
+    texts = set(parts.values())
+    if texts == {""}:
+        return ""
+    if len(texts) == 1:
+        return texts.pop()
+    return "; ".join(f"{name}: {t or 'first order'}" for name, t in parts.items())
