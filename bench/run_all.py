@@ -17,6 +17,7 @@ BENCHES = (
     "bench_controller",
     "bench_cpp_core",
     "bench_collision_tick",
+    "bench_detection_stage",
     "bench_isolation",
     "bench_realtime_loop",
     "bench_closed_loop",
