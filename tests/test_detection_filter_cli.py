@@ -46,17 +46,20 @@ def test_the_collision_commands_take_the_stage_from_the_command_line_or_the_tune
     for bad in (-1.0, 0.0, float("nan")):
         with pytest.raises(ConfigError, match="--detection-filter-gain must be a positive gain"):
             _choice("11", bad)
+    for key, bad in (("detection_filter_gain", "fast"), ("detection_filter_gain", -200.0),
+                     ("detection_friction_band", True)):  # fmt: skip
+        broken = tmp_path / f"broken_{key}.json"  # a setting the levels were tuned with, unreadable: refused
+        broken.write_text(json.dumps({"collision_Nm": [9.0] * 7, "observer": {"detection_observer_gain": 100.0,
+                                                                                key: bad}}))  # fmt: skip
+        with pytest.raises(ConfigError, match=f"its observer setting {key} must be a positive number or null"):
+            _choice(str(broken), None)
 
 
 def test_a_detection_study_s_stage_reaches_the_tuned_pair_and_a_bad_one_is_refused(tmp_path):
+    from test_detection_friction import study_file
+
     def study(kf: object) -> str:
-        path = tmp_path / "detection_study.json"
-        pair = {"detection_observer_gain": 100.0, "collision_Nm": [9.0] * 7, "ramp_lag_max_s": 0.0096,
-                "heldout": {"alarms": 0, "alarms_per_hour": 0.0, "duration_s": 3600.0}}  # fmt: skip
-        arm = {"joints": list(PANDA.joint_names), "pairs": {"pairs": [pair]}, "detection_filter_gain": kf,
-               "model_seeds": {"mode": "same", "arm_model_seed": 7}}  # fmt: skip
-        path.write_text(json.dumps({"conditions": {}, "arms": {"panda": arm}}))
-        return str(path)
+        return study_file(tmp_path, detection_filter_gain=kf)
 
     joints = {"panda": PANDA.joint_names}
     tuned = load_tuned_detection(study(200.0), ["panda"], joints)["panda"]

@@ -73,15 +73,20 @@ def test_the_band_decides_how_much_of_a_slow_slide_s_coulomb_friction_is_subtrac
     assert abs(model.residual[-1, joint]) < 1e-3
 
 
+def study_file(tmp_path: Path, **arm_fields: object) -> str:
+    """A detection study's JSON with one Panda pair at 100 1/s, the arm's entry with ``arm_fields`` besides."""
+    path = tmp_path / "detection_study.json"
+    pair = {"detection_observer_gain": 100.0, "collision_Nm": [9.0] * 7, "ramp_lag_max_s": 0.0096,
+            "heldout": {"alarms": 0, "alarms_per_hour": 0.0, "duration_s": 3600.0}}  # fmt: skip
+    arm = {"joints": list(PANDA.joint_names), "pairs": {"pairs": [pair]},
+           "model_seeds": {"mode": "same", "arm_model_seed": 7}, **arm_fields}  # fmt: skip
+    path.write_text(json.dumps({"conditions": {}, "arms": {"panda": arm}}))
+    return str(path)
+
+
 def test_a_detection_study_s_band_reaches_the_tuned_pair_and_a_bad_one_is_refused(tmp_path):
     def study(band: object) -> str:
-        path = tmp_path / "detection_study.json"
-        pair = {"detection_observer_gain": 100.0, "collision_Nm": [9.0] * 7, "ramp_lag_max_s": 0.0096,
-                "heldout": {"alarms": 0, "alarms_per_hour": 0.0, "duration_s": 3600.0}}  # fmt: skip
-        arm = {"joints": list(PANDA.joint_names), "pairs": {"pairs": [pair]}, "detection_friction_band": band,
-               "model_seeds": {"mode": "same", "arm_model_seed": 7}}  # fmt: skip
-        path.write_text(json.dumps({"conditions": {}, "arms": {"panda": arm}}))
-        return str(path)
+        return study_file(tmp_path, detection_friction_band=band)
 
     joints = {"panda": PANDA.joint_names}
     tuned = load_tuned_detection(study(0.1), ["panda"], joints)["panda"]

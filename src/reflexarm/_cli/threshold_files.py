@@ -95,32 +95,35 @@ def _read_threshold_file(
     return tuple(float(v) for v in levels), label, None if tuned is None else float(tuned)
 
 
-def detection_band(value: object) -> float | None:
-    """``--detection-friction-band`` (or a file's) checked: None, or a positive finite velocity band [rad/s]."""
+def _positive_or_none(value: object, what: str) -> float | None:
+    """None, or ``value`` as a positive finite number; else a ConfigError saying it must be ``what``."""
     if value is None:
         return None
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-        raise ConfigError(f"--detection-friction-band must be a positive velocity band [rad/s]; got {value!r}")
+        raise ConfigError(f"{what}; got {value!r}")
     return float(value)
+
+
+def detection_band(value: object) -> float | None:
+    """``--detection-friction-band`` (or a file's) checked: None, or a positive finite velocity band [rad/s]."""
+    return _positive_or_none(value, "--detection-friction-band must be a positive velocity band [rad/s]")
 
 
 def filter_gain(value: object) -> float | None:
     """``--detection-filter-gain`` (or a file's) checked: None, or a positive finite K_f [1/s]."""
-    if value is None:
-        return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-        raise ConfigError(f"--detection-filter-gain must be a positive gain [1/s]; got {value!r}")
-    return float(value)
+    return _positive_or_none(value, "--detection-filter-gain must be a positive gain [1/s]")
 
 
 def _tuned_observer_value(value: str, key: str) -> float | None:
-    """The number ``key`` of a thresholds.json's observer settings (what its levels were tuned with), if any."""
+    """The number ``key`` of a thresholds.json's observer settings (what its levels were tuned with), if any: None
+    when the file has no such setting (or null); a ConfigError when it has one that is not a positive number (the
+    levels would be applied to another residual than the one they were tuned on)."""
     from reflexarm._validation import read_json_file
 
     doc = read_json_file(Path(str(value).strip()), f"--threshold {value!r}")
     observer = doc.get("observer") if isinstance(doc, dict) else None
     v = observer.get(key) if isinstance(observer, dict) else None
-    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else None
+    return _positive_or_none(v, f"--threshold {value!r}: its observer setting {key} must be a positive number or null")
 
 
 def tuned_friction_band(value: str) -> float | None:
