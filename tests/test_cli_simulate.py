@@ -209,6 +209,7 @@ def test_link_collision_runs_with_the_given_detection_and_reports_the_event(tmp_
         "detection_observer_gain_per_s": 40.0,
         "observer_discretization": "exact",  # the default with a detection observer
         "detection_friction_band_rad_s": None,
+        "detection_filter_gain_per_s": None,  # no second stage
         "reaction": "compliant",
         "reaction_settings": None,  # the defaults
     }
