@@ -105,6 +105,24 @@ def test_residual_only_replay_equals_the_tick_with_the_stage():
         np.testing.assert_allclose(rep.residual, by_tick, rtol=0, atol=REPLAY_ATOL)
 
 
+def test_the_controller_s_detection_residual_is_the_staged_one():
+    """``Controller.detection_residual`` is what the detector looks at: with the stage r_f (the Command's residual),
+    not the detection observer's own (it was the observer's before the stage existed)."""
+    t, q, dq, tau = _panda_log(seconds=0.15)
+    from reflexarm.signals import Measurement, Reference
+
+    z, w = np.zeros(PANDA.n), np.zeros(6)
+    for stage in (None, 50.0):
+        ctrl = Controller(PANDA, detection_observer_gain=100.0, detection_filter_gain=stage, threshold=None,
+                          reaction="none", observer_discretization="exact")  # fmt: skip
+        for tk, qk, vk, uk in zip(t, q, dq, tau, strict=True):
+            cmd = ctrl.step(Measurement(tk, qk, vk, uk, w, PANDA.gravity), Reference(qk, z, z))
+        np.testing.assert_array_equal(ctrl.detection_residual, cmd.residual)
+        assert ctrl.detection_observer is not None
+        same = np.array_equal(ctrl.detection_residual, ctrl.detection_observer.residual)
+        assert same == (stage is None)
+
+
 def test_reset_starts_the_stage_from_zero():
     """After reset() the staged residual of the same log is the same as a fresh controller's (the stage's state is
     zeroed with the observers'); without zeroing it the second run would start from the first run's last value."""

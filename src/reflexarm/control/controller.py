@@ -379,8 +379,9 @@ class Controller:
 
     @property
     def detection_residual(self) -> np.ndarray:
-        """The residual the detector looks at (a live view of the core's state; copy it to keep it)."""
-        return (self.detection_observer or self.observer).residual
+        """The residual the detector looks at: the detection observer's (else the observer's), through the second
+        stage when there is one (``detection_filter_gain``); a live view of the core's state (copy it to keep it)."""
+        return np.asarray(self._core.detection_residual)
 
     @property
     def damping(self) -> np.ndarray:
