@@ -10,12 +10,16 @@ online at a given threshold, so a proposal can be checked on a held-out run.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 
 from reflexarm.logs.robot_log import RobotLog
 from reflexarm.robots.robot_model import RobotModel
+
+if TYPE_CHECKING:
+    from reflexarm.tuning.replay import ObserverSettings
 
 __all__ = ["FreeMotionRun", "record_free_motion_log"]
 
@@ -65,6 +69,7 @@ def record_free_motion_log(
     observer_gain: float = 5.0,
     progress: bool = False,
     robot: RobotModel | None = None,
+    settings: ObserverSettings | None = None,
 ) -> FreeMotionRun:
     """Run free motion (default on the built-in Atlas arm) and record the controller's measurements.
 
@@ -77,21 +82,31 @@ def record_free_motion_log(
         seed: seed of the sensor noise (the paper's levels).
         threshold: zeta [Nm], scalar or per joint, the online detector counts false alarms with
             (reaction "none": detection does not change the motion).
-        observer_gain: k_o [1/s].
+        observer_gain: k_o [1/s] (without ``settings``).
         progress: show a progress bar.
         robot: the plant's arm (default the built-in Atlas arm).
+        settings: the observers the online detector runs (its k_o, detection observer, kappas, form, friction
+            band, second stage), so that its residual is the one a replay with these settings gives (None: the
+            first observer alone at ``observer_gain``, Euler, the paper's).
     """
-    from reflexarm.control import Controller
+    from reflexarm.control import Controller, detection_friction
     from reflexarm.experiments.collision import ROBOT, controller_model, free_motion_trajectory
     from reflexarm.robots import load_robot
     from reflexarm.sim import PAPER_NOISE, Plant
+    from reflexarm.tuning.replay import ObserverSettings
 
     robot = load_robot(ROBOT) if robot is None else robot
     ctrl_model, info = controller_model(robot, model_error, model_seed, model)
     traj = free_motion_trajectory(duration, motion, robot)
     plant = Plant(robot, noise=PAPER_NOISE, seed=seed)
     plant.reset(traj.sample(0.0).q_d)
-    ctrl = Controller(ctrl_model, stiffness=300.0, observer_gain=observer_gain, threshold=threshold, reaction="none")
+    s = ObserverSettings(observer_gain=observer_gain) if settings is None else settings
+    ctrl = Controller(
+        ctrl_model, stiffness=300.0, threshold=threshold, reaction="none", observer_gain=s.observer_gain,
+        detection_observer_gain=s.detection_observer_gain, kappa_f=s.kappa_f, kappa_ext=s.kappa_ext,
+        kappa_eps=s.kappa_eps, observer_discretization=s.observer_discretization,
+        detection_filter_gain=s.detection_filter_gain, **detection_friction(s.detection_friction_band),
+    )  # fmt: skip
     n = robot.n
     # the compiled loop keeps what the controller measured on every tick (the Python loop if it cannot)
     from reflexarm.sim.measurement_log import record_measurements

@@ -64,14 +64,14 @@ def heldout_free_motion(
     """A held-out free-motion run detected online at ``zeta``; offline alarm counts at ``zeta`` and at the
     levels of ``compare`` (name -> levels, e.g. ``{"11 Nm": 11.0, "contact": proposal.contact}``).
 
-    ``model`` is the controller's model of the run (the model the thresholds were tuned with); ``gap_s``: the
-    declustering gap [s] (default :data:`~reflexarm.tuning.study.GAP_TIME_CONSTANTS` x (1/k_o + 1/K_f), the
-    detector's time scale; 1/K_f with a second stage in ``settings`` only).
+    ``model`` is the controller's model of the run (the model the thresholds were tuned with), its observers those
+    of ``settings`` online and in the replay (the same residual: ``replay_vs_online_max_abs_residual_Nm``);
+    ``gap_s``: the declustering gap [s] (default :data:`~reflexarm.tuning.study.GAP_TIME_CONSTANTS` x
+    (1/k_o + 1/K_f), the detector's time scale; 1/K_f with a second stage in ``settings`` only).
     """
     s = settings or ObserverSettings()
     run = record_free_motion_log(
-        duration, motion=motion, model=model, seed=seed, threshold=zeta, observer_gain=s.observer_gain,
-        progress=progress,
+        duration, motion=motion, model=model, seed=seed, threshold=zeta, settings=s, progress=progress,
     )  # fmt: skip
     rep = replay_residual(run.log, model, s)
     gap = GAP_TIME_CONSTANTS * s.detection_time_scale if gap_s is None else gap_s
