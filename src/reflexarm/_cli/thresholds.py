@@ -39,29 +39,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         p, default_error=0.0, seed_help="seed of --model-error (to replay a simulated arm's perturbed model)"
     )
     add_log_options(p)
-    g = p.add_argument_group("observer (the settings you run)")
-    g.add_argument("--observer-gain", type=float, default=5.0, help="k_o [1/s] (default 5, the paper's)")
-    g.add_argument(
-        "--detection-observer-gain", type=float, default=None, help="k_o of a separate detection observer [1/s]"
-    )
-    g.add_argument(
-        "--observer-discretization", choices=("euler", "exact"), default=None,
-        help="euler (k_o dt < 1) or exact (stable at any gain, what 'detect' runs) (default: exact with "
-        "--detection-observer-gain, else euler)",
-    )  # fmt: skip
-    g.add_argument("--kappa-f", type=int, choices=_SWITCH, default=0, help="friction term in the observer (default 0)")
-    g.add_argument(
-        "--detection-friction-band", type=float, default=None, metavar="RAD_S",
-        help="the detection observer subtracts the friction model in this velocity band [rad/s] whatever --kappa-f "
-        "(Controller(detection_kappa_f=1); needs --detection-observer-gain or --detection-gains) (default: off)",
-    )  # fmt: skip
-    g.add_argument(
-        "--detection-filter-gain", type=float, default=None, metavar="K_F",
-        help="the detector looks at the residual filtered once more by a first-order stage of this gain [1/s] "
-        "(Controller(detection_filter_gain); --detection-gains then tunes pairs (k_o, K_F)) (default: none)",
-    )  # fmt: skip
-    g.add_argument("--kappa-ext", type=int, choices=_SWITCH, default=0, help="EFC: wrist wrench in the observer")
-    g.add_argument("--kappa-eps", type=int, choices=_SWITCH, default=0, help="disturbance compensation (recorded only)")
+    _add_observer_options(p)
     t = p.add_argument_group("levels")
     t.add_argument(
         "--rate", type=float, default=DEFAULT_RATE, metavar="PER_HOUR",
@@ -104,6 +82,33 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, default=Path("results/thresholds"), help="output folder")
     p.add_argument("--no-figure", action="store_true", help="skip the figures")
     p.set_defaults(func=_tune)
+
+
+def _add_observer_options(p: argparse.ArgumentParser) -> None:
+    """The observer settings the levels are for (the ones the user runs)."""
+    g = p.add_argument_group("observer (the settings you run)")
+    g.add_argument("--observer-gain", type=float, default=5.0, help="k_o [1/s] (default 5, the paper's)")
+    g.add_argument(
+        "--detection-observer-gain", type=float, default=None, help="k_o of a separate detection observer [1/s]"
+    )
+    g.add_argument(
+        "--observer-discretization", choices=("euler", "exact"), default=None,
+        help="euler (k_o dt < 1) or exact (stable at any gain, what 'detect' runs) (default: exact with "
+        "--detection-observer-gain, else euler)",
+    )  # fmt: skip
+    g.add_argument("--kappa-f", type=int, choices=_SWITCH, default=0, help="friction term in the observer (default 0)")
+    g.add_argument(
+        "--detection-friction-band", type=float, default=None, metavar="RAD_S",
+        help="the detection observer subtracts the friction model in this velocity band [rad/s] whatever --kappa-f "
+        "(Controller(detection_kappa_f=1); needs --detection-observer-gain or --detection-gains) (default: off)",
+    )  # fmt: skip
+    g.add_argument(
+        "--detection-filter-gain", type=float, default=None, metavar="K_F",
+        help="the detector looks at the residual filtered once more by a first-order stage of this gain [1/s] "
+        "(Controller(detection_filter_gain); --detection-gains then tunes pairs (k_o, K_F)) (default: none)",
+    )  # fmt: skip
+    g.add_argument("--kappa-ext", type=int, choices=_SWITCH, default=0, help="EFC: wrist wrench in the observer")
+    g.add_argument("--kappa-eps", type=int, choices=_SWITCH, default=0, help="disturbance compensation (recorded only)")
 
 
 def _add_pair_options(p: argparse.ArgumentParser) -> None:

@@ -119,10 +119,9 @@ def mode_table(
     * link compliance: 50 N on the forearm link at the elbow (:class:`LinkForce`; on another arm the
       mid-chain link, :func:`~reflexarm.experiments.any_arm.default_link`), not seen by the wrist
       sensor; ratio = measured displacement of the link / prescribed;
-    * link compliance with the supervisor: the same push with detection (``threshold``, default zeta = 11 Nm,
-      the paper's; the observer of ``setup.observer_gain``, or a second detecting one of
-      ``detection_observer_gain``; its own friction band ``detection_friction_band``, its residual's second stage
-      ``detection_filter_gain``) and the reaction ``reaction`` (default "compliant": Fig. 3's automatic switch).
+    * link compliance with the supervisor: the same push with detection (``threshold``, default the paper's 11 Nm;
+      the observer of ``setup.observer_gain``, or a second one of ``detection_observer_gain`` with its friction band
+      and second stage as ``Controller``'s) and ``reaction`` (default "compliant": Fig. 3's automatic switch).
 
     Returns:
         (rows, traces): one row per mode with the measured values, the derived marks and the paper's.
@@ -132,11 +131,10 @@ def mode_table(
     derived_seed, noise_seed = trial_seeds(seed, 0)
     model_seed = derived_seed if model_seed is None else model_seed
     q0 = held_posture(setup, robot)
-    k = setup.stiffness
     link = link_body(robot, default_link(robot))[1]  # Atlas: l_larm
     traces: dict[str, Trace] = {}
     rows: list[dict[str, Any]] = []
-    acc: dict[str, float] = {}
+    acc: dict[str, float] = {}  # the modes' tracking RMS [rad]
     supervision = (threshold, detection_observer_gain, reaction, detection_friction_band, reaction_settings,
                    detection_filter_gain)  # fmt: skip
     for name, mode in CONTROL_MODES.items():
@@ -154,7 +152,7 @@ def mode_table(
         dx = window_mean(tr_ee.t, P, *setup.load_window) - window_mean(tr_ee.t, P, *setup.pre_window)
         f_ee = window_mean(tr_ee.t, tr_ee.extras["ee_force_force"], *setup.load_window)
         J_ee = robot.compute_frame_jacobian(q0, robot.ee_frame, world_aligned=True)[:3]
-        ee_ratio = float(np.linalg.norm(dx)) / _designed_displacement(robot, q0, J_ee, f_ee, k)
+        ee_ratio = float(np.linalg.norm(dx)) / _designed_displacement(robot, q0, J_ee, f_ee, setup.stiffness)
         # link compliance, without and with the supervisor's automatic switch
         link_ratio: dict[bool, float] = {}
         for supervised in (False, True):
