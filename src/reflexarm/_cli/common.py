@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from reflexarm._cli.threshold_files import (
+    add_detector_options,
     detection_band,
     filter_gain,
     read_threshold,
@@ -222,22 +223,8 @@ def add_detection_options(
         "filter's exact form, stable at any gain; what 'tune-thresholds --detection-gains' tunes) (default: exact "
         "with --detection-observer-gain, else euler)",
     )
-    g.add_argument(
-        "--detection-friction-band",
-        type=float,
-        default=None,
-        metavar="RAD_S",
-        help="the detection observer subtracts the friction model in this velocity band [rad/s] (detection_kappa_f"
-        " = 1; needs --detection-observer-gain) (default: a thresholds.json's, tuned with it; else off)",
-    )
-    g.add_argument(
-        "--detection-filter-gain",
-        type=float,
-        default=None,
-        metavar="K_F",
-        help="the detector looks at the detection residual filtered once more by a first-order stage of this gain "
-        "[1/s] (a second-order observer; Controller(detection_filter_gain)) (default: a thresholds.json's, tuned "
-        "with it; else none)",
+    add_detector_options(
+        g, default="default: a thresholds.json's, tuned with it; else {what}", needs="; needs --detection-observer-gain"
     )
     g.add_argument(
         "--reaction",

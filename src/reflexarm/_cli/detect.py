@@ -15,6 +15,7 @@ from typing import Any
 from reflexarm._cli.common import add_model_options, detection_band, filter_gain, format_table, model_choice
 from reflexarm._cli.log_options import add_log_options, load_log_from_args
 from reflexarm._cli.robot_options import DEFAULT_ROBOT, add_robot_options
+from reflexarm._cli.threshold_files import add_detector_options
 from reflexarm.errors import ConfigError
 
 _SWITCH = (0, 1)
@@ -53,16 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="k_o of the compensation observer [1/s] (default: the file's, else 5)")  # fmt: skip
     g.add_argument("--kappa-f", type=int, choices=_SWITCH, default=None, help="friction term in the observer")
     g.add_argument("--kappa-ext", type=int, choices=_SWITCH, default=None, help="EFC: wrist wrench in the observer")
-    g.add_argument(
-        "--detection-friction-band", type=float, default=None, metavar="RAD_S",
-        help="the detecting observer subtracts the friction model in this velocity band [rad/s] (default: the "
-        "thresholds file's, tuned with it; else off)",
-    )  # fmt: skip
-    g.add_argument(
-        "--detection-filter-gain", type=float, default=None, metavar="K_F",
-        help="the detector looks at the residual filtered once more by a first-order stage of this gain [1/s] "
-        "(default: the thresholds file's, tuned with it; else none)",
-    )  # fmt: skip
+    add_detector_options(g, default="default: the thresholds file's, tuned with it; else {what}")
     p.add_argument("--no-isolation", action="store_true", help="skip the isolation of each event (link, force)")
     p.add_argument("--out", type=Path, default=Path("results/detect"), help="output folder (default results/detect)")
     p.add_argument("--no-figure", action="store_true", help="skip the figures")

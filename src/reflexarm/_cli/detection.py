@@ -10,6 +10,8 @@ import json
 from pathlib import Path
 from typing import Any
 
+from reflexarm._cli.threshold_files import add_detector_options
+
 _ARMS = ("atlas_v5_left_arm", "panda", "iiwa14", "ur_like", "iiwa14_frictionless")
 
 
@@ -39,14 +41,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--contact-seeds", type=int, default=10,
                    help="noise seeds of each pair's demo contact and link collision (default 10)")  # fmt: skip
     p.add_argument("--rate", type=float, default=0.1, help="false alarms per hour the levels are tuned for (0.1)")
-    p.add_argument("--detection-friction-band", type=float, default=None, metavar="RAD_S",
-                   help="the detection observer subtracts the friction model in this velocity band (detection_kappa_f"
-                   " = 1), levels tuned on that residual; e.g. 0.1, wider than the velocity noise (default: off, the "
-                   "paper's kappa_f = 0)")  # fmt: skip
-    p.add_argument("--detection-filter-gain", type=float, default=None, metavar="K_F",
-                   help="each pair's detector looks at its residual filtered once more by a first-order stage of "
-                   "this gain [1/s] (a second-order observer with poles k_o and K_F; Controller(detection_filter_gain"
-                   "=)), levels tuned on that residual; e.g. 200 (default: none, the paper's first order)")  # fmt: skip
+    add_detector_options(p, default="default: {what}, the paper's; with it every run and pair, levels tuned on it")
     p.add_argument("--merge", nargs="+", default=None, metavar="JSON",
                    help="merge detection_study.json files (arms run in parallel) into --out")  # fmt: skip
     p.add_argument("--out", type=Path, default=Path("results/detection-study"), help="output folder")

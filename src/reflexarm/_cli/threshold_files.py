@@ -4,6 +4,7 @@ friction band, the detection residual's second stage), each checked."""
 
 from __future__ import annotations
 
+import argparse
 import math
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -13,7 +14,31 @@ from reflexarm.errors import ConfigError
 if TYPE_CHECKING:
     from reflexarm.robots import RobotModel
 
-__all__ = ["detection_band", "filter_gain", "read_threshold", "tuned_filter_gain", "tuned_friction_band"]
+__all__ = [
+    "add_detector_options",
+    "detection_band",
+    "filter_gain",
+    "read_threshold",
+    "tuned_filter_gain",
+    "tuned_friction_band",
+]
+
+
+def add_detector_options(g: argparse._ActionsContainer, *, default: str, needs: str = "") -> None:
+    """``--detection-friction-band RAD_S`` and ``--detection-filter-gain K_F``: what the detector's residual is made
+    of besides the observer's gain (the detection observer's own friction model, the residual's second stage);
+    ``default``: what each is when not given (``{what}``: "off" or "none"), ``needs``: what the band needs."""
+    g.add_argument(
+        "--detection-friction-band", type=float, default=None, metavar="RAD_S",
+        help="the detection observer subtracts the friction model in this velocity band [rad/s] (detection_kappa_f"
+        f" = 1; e.g. 0.1, wider than the velocity noise{needs}) ({default.format(what='off')})",
+    )  # fmt: skip
+    g.add_argument(
+        "--detection-filter-gain", type=float, default=None, metavar="K_F",
+        help="the detector looks at the detection residual filtered once more by a first-order stage of this gain "
+        "[1/s] (a second-order observer with poles k_o and K_F; Controller(detection_filter_gain); e.g. 200) "
+        f"({default.format(what='none')})",
+    )  # fmt: skip
 
 
 def read_threshold(

@@ -15,6 +15,7 @@ from reflexarm._cli.common import add_model_options
 from reflexarm._cli.detect import _robot_default_from_model, load_robot_and_model
 from reflexarm._cli.log_options import add_log_options, load_log_from_args
 from reflexarm._cli.robot_options import DEFAULT_ROBOT, add_robot_options, load_robot_from_args
+from reflexarm._cli.threshold_files import add_detector_options
 
 _SWITCH = (0, 1)
 
@@ -97,15 +98,9 @@ def _add_observer_options(p: argparse.ArgumentParser) -> None:
         "--detection-observer-gain, else euler)",
     )  # fmt: skip
     g.add_argument("--kappa-f", type=int, choices=_SWITCH, default=0, help="friction term in the observer (default 0)")
-    g.add_argument(
-        "--detection-friction-band", type=float, default=None, metavar="RAD_S",
-        help="the detection observer subtracts the friction model in this velocity band [rad/s] whatever --kappa-f "
-        "(Controller(detection_kappa_f=1); needs --detection-observer-gain or --detection-gains) (default: off)",
-    )  # fmt: skip
-    g.add_argument(
-        "--detection-filter-gain", type=float, default=None, metavar="K_F",
-        help="the detector looks at the residual filtered once more by a first-order stage of this gain [1/s] "
-        "(Controller(detection_filter_gain); --detection-gains then tunes pairs (k_o, K_F)) (default: none)",
+    add_detector_options(
+        g, default="default: {what}; with --detection-gains, every pair's", needs="; whatever --kappa-f; needs "
+        "--detection-observer-gain"
     )  # fmt: skip
     g.add_argument("--kappa-ext", type=int, choices=_SWITCH, default=0, help="EFC: wrist wrench in the observer")
     g.add_argument("--kappa-eps", type=int, choices=_SWITCH, default=0, help="disturbance compensation (recorded only)")
