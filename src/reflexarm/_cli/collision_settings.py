@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from reflexarm._cli.common import DetectionChoice, changed_settings
+from reflexarm._cli.common import DetectionChoice, changed_settings, detector_text
 
 
 def with_detection(setting: Any, detection: DetectionChoice) -> Any:
@@ -33,13 +33,9 @@ def setting_line(setting: Any) -> str:
         return f"[{setting.name}] k = {setting.stiffness:g} Nm/rad, detection off"
     zeta = setting.threshold
     zeta_text = ", ".join(f"{v:.3g}" for v in zeta) if isinstance(zeta, tuple) else f"{zeta:g}"
-    gains = f"k_o = {setting.observer_gain:g} 1/s"
-    if setting.detection_observer_gain is not None:
-        gains += f", detection k_o = {setting.detection_observer_gain:g} 1/s"
-    if setting.detection_friction_band is not None:
-        gains += f", its friction in a {setting.detection_friction_band:g} rad/s band"
-    if setting.detection_filter_gain is not None:
-        gains += f", a second stage of K_f = {setting.detection_filter_gain:g} 1/s"
+    gains = f"k_o = {setting.observer_gain:g} 1/s" + detector_text(
+        setting.detection_observer_gain, setting.detection_friction_band, setting.detection_filter_gain
+    )
     return (
         f"[{setting.name}] k = {setting.stiffness:g} Nm/rad, detection zeta = {zeta_text} Nm, {gains}, "
         f"reaction {setting.reaction}{changed_settings(setting.reaction_settings)}"

@@ -284,6 +284,21 @@ def reaction_settings_of(items: Sequence[str] | None) -> ReactionSettings | None
     return ReactionSettings(**values)  # type: ignore[arg-type]
 
 
+def detector_text(
+    gain: float | None, band: float | None, filter_gain: float | None, discretization: str = "euler"
+) -> str:
+    """The console words for what is set of a detection observer's gain, friction band and second stage (and the
+    observers' form when not Euler): ", detection k_o = 100 1/s (exact observers), its friction in a ..."."""
+    text = "" if gain is None else f", detection k_o = {gain:g} 1/s"
+    if discretization != "euler":
+        text += f" ({discretization} observers)"
+    if band is not None:
+        text += f", its friction in a {band:g} rad/s band"
+    if filter_gain is not None:
+        text += f", a second stage of K_f = {filter_gain:g} 1/s"
+    return text
+
+
 @dataclass(frozen=True)
 class DetectionChoice:
     """The detection settings the command line chose: zeta [Nm] (scalar or per joint), observer gains
@@ -307,14 +322,8 @@ class DetectionChoice:
         else:
             zeta = f"{self.threshold:g} Nm"
         gains = "" if self.observer_gain is None else f", k_o = {self.observer_gain:g} 1/s"
-        if self.detection_observer_gain is not None:
-            gains += f", detection k_o = {self.detection_observer_gain:g} 1/s"
-        if self.observer_discretization != "euler":
-            gains += f" ({self.observer_discretization} observers)"
-        if self.detection_friction_band is not None:
-            gains += f", its friction in a {self.detection_friction_band:g} rad/s band"
-        if self.detection_filter_gain is not None:
-            gains += f", a second stage of K_f = {self.detection_filter_gain:g} 1/s"
+        gains += detector_text(self.detection_observer_gain, self.detection_friction_band, self.detection_filter_gain,
+                               self.observer_discretization)  # fmt: skip
         src = "" if self.source == "command line" else f" (from {self.source})"
         return f"zeta = {zeta}{src}{gains}, reaction {self.reaction}{changed_settings(self.reaction_settings)}"
 

@@ -134,10 +134,10 @@ def _settings(args: argparse.Namespace, doc: dict[str, Any]) -> Any:
 
 
 def _print_log(d: Any, replay_how: str) -> None:
-    k_o, band = d.settings.detection_gain, d.settings.detection_friction_band
-    own = "" if band is None else f", its friction model in a {band:g} rad/s band"
-    kf = d.settings.detection_filter_gain
-    own += "" if kf is None else f", its residual through a second stage of K_f = {kf:g} 1/s"
+    from reflexarm.tuning.replay import detector_words
+
+    k_o = d.settings.detection_gain
+    own = detector_words(d.settings.detection_friction_band, d.settings.detection_filter_gain)
     print(f"\n{d.source}: {d.t.size} samples, {d.duration:.1f} s at {d.rate_hz:.4g} Hz: delay resolution "
           f"{1e3 * d.dt:.3g} ms (one period); detection observer k_o = {k_o:g} 1/s, exact (k_o dt = {k_o * d.dt:.3g})"
           f"{own}; replay: {replay_how}")  # fmt: skip

@@ -52,10 +52,9 @@ def _print(name: str, arm: dict[str, Any]) -> None:
     def ms(v: Any) -> str:
         return "    -" if v is None else f"{1e3 * v:5.1f}"
 
-    band = arm.get("detection_friction_band")
-    own = "" if band is None else f", the detection observer's friction in a {band:g} rad/s band"
-    kf = arm.get("detection_filter_gain")
-    own += "" if kf is None else f", its residual through a second stage of K_f = {kf:g} 1/s"
+    from reflexarm.tuning.replay import detector_words
+
+    own = detector_words(arm.get("detection_friction_band"), arm.get("detection_filter_gain"))
     print(f"\n{name} (plant friction {arm['plant_friction']}{own})")
     print(f"{'k_o':>5} {'zeta max':>8} {'ramp':>5} {'meas':>5} {'FA/h':>6} {'demo lag':>8} {'joint':>5} {'own':>5} "
           f"{'delay':>6} {'link lag':>8} {'joint':>5} {'own':>5} {'delay':>6} {'pulses':>7}")  # fmt: skip

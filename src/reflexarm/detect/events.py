@@ -2,7 +2,7 @@
 one record per event.
 
 **Detect.** A sample is over when some joint's |r_j| > zeta_j. Over-samples closer than the declustering gap
-(:data:`~reflexarm.tuning.study.GAP_TIME_CONSTANTS` / k_o, at least two samples: the gap the tuning counts one
+(:attr:`~reflexarm.tuning.ObserverSettings.declustering_gap`, at least two samples: the gap the tuning counts one
 false alarm in) form one event; its time is the first over-sample, its joints those over there.
 
 **Onset and delay.** The exact observer answers a contact from the first sample after it began. Going back from

@@ -30,9 +30,6 @@ from reflexarm.tuning.replay import ObserverSettings, replay_residual
 
 __all__ = ["DetectionReport", "LogDetection", "detect_collisions"]
 
-#: Events closer than this many detection time constants are one (the tuning's declustering gap, 5 / k_o).
-GAP_TIME_CONSTANTS = 5.0
-
 
 def _isolate(events: list[DetectedEvent], q: np.ndarray, t: np.ndarray, model: RobotModel, zeta: np.ndarray,
              share: float) -> list[DetectedEvent]:  # fmt: skip
@@ -90,7 +87,7 @@ def detect_collisions(
     s = replace(settings, observer_discretization="exact")
     repaired, glitches = repair_glitches(log)
     replay = replay_residual(repaired, model, s)
-    gap = max(2, int(math.ceil(GAP_TIME_CONSTANTS * s.detection_time_scale / replay.dt - 1e-9)))
+    gap = max(2, int(math.ceil(s.declustering_gap / replay.dt - 1e-9)))  # the tuning's, at least two samples
     events = find_events(replay.t, replay.residual, zeta, gap)
     if isolate:
         share = SIGNIFICANCE_SHARE if significance_share is None else float(significance_share)

@@ -93,14 +93,11 @@ def plot_tradeoff(study: _Study, path: str | Path) -> Path:
 
 def _detector_text(study: _Study) -> str:
     """What the detector ran beyond the paper's first order (the same on every arm, else per arm), or ""."""
-    parts = {}
-    for name, a in study.arms.items():
-        band, kf = a.get("detection_friction_band"), a.get("detection_filter_gain")
-        text = ", ".join(
-            ([] if band is None else [f"detection observer's friction in a {band:g} rad/s band"])
-            + ([] if kf is None else [f"its residual through a second stage of K_f = {kf:g} 1/s"])
-        )
-        parts[name] = text
+    from reflexarm.tuning.replay import detector_words
+
+    words = {name: detector_words(a.get("detection_friction_band"), a.get("detection_filter_gain"))
+             for name, a in study.arms.items()}  # fmt: skip
+    parts = {name: f"detection observer{w}" if w else "" for name, w in words.items()}
     texts = set(parts.values())
     if texts == {""}:
         return ""

@@ -404,12 +404,13 @@ def study_arm_detection(
     import warnings
 
     from reflexarm.tuning import ThresholdWarning, propose_detection_pairs
+    from reflexarm.tuning.replay import check_filter_gain
 
     if isinstance(contact_seeds, bool) or not isinstance(contact_seeds, int) or contact_seeds < 1:
         raise ConfigError(f"contact_seeds must be an integer >= 1; got {contact_seeds!r}")
     if model_seeds not in MODEL_SEEDS:
         raise ConfigError(f"model_seeds must be one of {', '.join(MODEL_SEEDS)}; got {model_seeds!r}")
-    ObserverSettings(detection_filter_gain=detection_filter_gain)  # a bad K_f refused before the minutes of runs
+    check_filter_gain(detection_filter_gain)  # a bad K_f refused before the minutes of runs
     same = model_seeds == "same"
 
     def model_of(seed: int) -> int:

@@ -175,14 +175,8 @@ def _setting(
 
 
 def _run_one(
-    arm: StudyArm,
-    scenario: str,
-    reaction: str,
-    kwargs: dict[str, Any],
-    tuned: TunedDetection | None = None,
-    settings: ReactionSettings | None = None,
+    arm: StudyArm, scenario: str, setting: CollisionSetting, kwargs: dict[str, Any]
 ) -> tuple[CollisionOutcome, Trace]:
-    setting = _setting(scenario, reaction, tuned, settings)
     if scenario == "demo":
         trace = run_ee_collision(setting, robot=arm.robot, plant_friction=arm.plant_friction, **kwargs)
     else:
@@ -193,24 +187,19 @@ def _run_one(
             stick="held" if scenario == "link_held" else "pushed",
             **kwargs,
         )
-    return collision_outcome(trace, arm.robot, name=f"{arm.name}/{scenario}/{reaction}"), trace
+    return collision_outcome(trace, arm.robot, name=f"{arm.name}/{scenario}/{setting.reaction}"), trace
 
 
 def _floor(
-    arm: StudyArm,
-    scenario: str,
-    outcome: CollisionOutcome,
-    trace: Trace,
-    kwargs: dict[str, Any],
-    tuned: TunedDetection | None = None,
-    settings: ReactionSettings | None = None,
+    arm: StudyArm, setting: CollisionSetting, outcome: CollisionOutcome, trace: Trace, kwargs: dict[str, Any]
 ) -> RestFloor | None:
-    """The rest floor at the run's posture at detection (None without a detection)."""
+    """The rest floor at the run's posture at detection (None without a detection), with the run's ``setting``
+    reacting to nothing."""
     if outcome.detected_s is None:
         return None
     i_d = int(np.searchsorted(trace.t, outcome.detected_s - 1e-9))
-    setting = _setting(scenario, "none", tuned, settings)
-    return rest_floor(arm.robot, setting, trace.q[i_d], plant_friction=arm.plant_friction, **kwargs)
+    quiet = replace(setting, reaction="none")
+    return rest_floor(arm.robot, quiet, trace.q[i_d], plant_friction=arm.plant_friction, **kwargs)
 
 
 def _study_row(
@@ -233,11 +222,12 @@ def _study_row(
         "error": None,
     }
     try:
-        outcome, trace = _run_one(arm, scenario, reaction, kwargs, tuned, settings)
+        setting = _setting(scenario, reaction, tuned, settings)
+        outcome, trace = _run_one(arm, scenario, setting, kwargs)
         row.update(outcome.as_dict())
         row.update(_guard(trace))
         if rest_floors and floor is None:
-            floor = _floor(arm, scenario, outcome, trace, kwargs, tuned, settings)
+            floor = _floor(arm, setting, outcome, trace, kwargs)
         if floor is not None:
             row.update(floor.as_dict())
             row["ke_floor_verdict"] = floor_verdict(row)

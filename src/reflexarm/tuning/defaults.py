@@ -3,7 +3,12 @@ registers ``tune-thresholds`` with them without loading the study)."""
 
 from __future__ import annotations
 
-__all__ = ["DEFAULT_CONTACT_RATE", "DEFAULT_METHOD", "DEFAULT_RATE"]
+__all__ = ["DEFAULT_CONTACT_RATE", "DEFAULT_METHOD", "DEFAULT_RATE", "GAP_TIME_CONSTANTS"]
+
+#: Declustering gap in the detector's time scale 1/k_o + 1/K_f (1/k_o without a second stage): excursions closer
+#: than 5 x that (1 s at k_o = 5 1/s, where the observer's step response has settled to 99.3 %; a cascade's step
+#: response is at least as settled at 5 x its sum of time constants) are one alarm, as a latched detector sees.
+GAP_TIME_CONSTANTS = 5.0
 
 #: Default false-alarm rate of the collision level for the whole arm [1/h].
 DEFAULT_RATE = 1.0

@@ -19,7 +19,6 @@ from reflexarm.errors import ConfigError
 from reflexarm.robots.robot_model import RobotModel
 from reflexarm.tuning.free_motion_log import record_free_motion_log
 from reflexarm.tuning.replay import ObserverSettings, replay_residual
-from reflexarm.tuning.study import GAP_TIME_CONSTANTS
 
 __all__ = ["count_alarms", "demo_collision_with", "heldout_free_motion"]
 
@@ -66,15 +65,15 @@ def heldout_free_motion(
 
     ``model`` is the controller's model of the run (the model the thresholds were tuned with), its observers those
     of ``settings`` online and in the replay (the same residual: ``replay_vs_online_max_abs_residual_Nm``);
-    ``gap_s``: the declustering gap [s] (default :data:`~reflexarm.tuning.study.GAP_TIME_CONSTANTS` x
-    (1/k_o + 1/K_f), the detector's time scale; 1/K_f with a second stage in ``settings`` only).
+    ``gap_s``: the declustering gap [s] (default ``settings.declustering_gap``: 5 x (1/k_o + 1/K_f), the
+    detector's time scale; 1/K_f with a second stage in ``settings`` only).
     """
     s = settings or ObserverSettings()
     run = record_free_motion_log(
         duration, motion=motion, model=model, seed=seed, threshold=zeta, settings=s, progress=progress,
     )  # fmt: skip
     rep = replay_residual(run.log, model, s)
-    gap = GAP_TIME_CONSTANTS * s.detection_time_scale if gap_s is None else gap_s
+    gap = s.declustering_gap if gap_s is None else gap_s
     out: dict[str, object] = {"online": run.as_dict(), "motion": motion, "noise_seed": seed, "gap_s": gap}
     levels: dict[str, npt.ArrayLike] = {"proposed": zeta, **(compare or {})}
     out["offline"] = {name: count_alarms(rep.residual, lv, rep.dt, gap) for name, lv in levels.items()}

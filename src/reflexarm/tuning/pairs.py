@@ -39,7 +39,7 @@ from reflexarm.tuning.delays import detection_delay, ramp_lag
 from reflexarm.tuning.gains import refilter, synthetic_lags, uniform_period
 from reflexarm.tuning.heldout import count_alarms
 from reflexarm.tuning.replay import ObserverSettings, ResidualReplay, load_free_motion_log, replay_residual
-from reflexarm.tuning.study import GAP_TIME_CONSTANTS, ThresholdProposal, tune_thresholds
+from reflexarm.tuning.study import ThresholdProposal, tune_thresholds
 
 __all__ = ["DEFAULT_DETECTION_GAINS", "DetectionPairs", "GainPair", "parse_gains", "propose_detection_pairs"]
 
@@ -267,7 +267,7 @@ def propose_detection_pairs(
         zeta = proposal.collision
         lag_on = held or reps
         draws = {"count": lag_draws, "seed": seed}
-        t_f, gap = s.filter_time_constant, GAP_TIME_CONSTANTS * s.detection_time_scale
+        t_f, gap = s.filter_time_constant, s.declustering_gap
         step_lag = detection_delay(1.0, step_size, 1.0 / gain, filter_time_constant=t_f)
         assert step_lag is not None  # a step of step_size > 1 times zeta always crosses it
         pairs.append(

@@ -22,12 +22,14 @@ import numpy as np
 from reflexarm.errors import ConfigError, DataError
 from reflexarm.logs.robot_log import RobotLog
 from reflexarm.robots.robot_model import RobotModel
+from reflexarm.tuning.defaults import GAP_TIME_CONSTANTS
 
 __all__ = [
     "RECORDED_RESIDUAL",
     "ObserverSettings",
     "ResidualReplay",
     "ThresholdWarning",
+    "detector_words",
     "is_trace_file",
     "load_free_motion_log",
     "recorded_residual",
@@ -44,6 +46,14 @@ RECORDED_RESIDUAL = "(recorded residual)"
 class ThresholdWarning(UserWarning):
     """Something the user should know about a threshold study (extrapolation, faults in the replay, a
     trace whose velocities are not the measured ones)."""
+
+
+def detector_words(band: float | None, filter_gain: float | None) -> str:
+    """", its friction model in a ... rad/s band, its residual through a second stage of K_f = ... 1/s" for what a
+    detection observer runs beyond the paper's first order (its friction band, its residual's second stage); ""
+    for neither."""
+    text = "" if band is None else f", its friction model in a {band:g} rad/s band"
+    return text + ("" if filter_gain is None else f", its residual through a second stage of K_f = {filter_gain:g} 1/s")
 
 
 def check_filter_gain(value: object) -> float | None:
@@ -127,6 +137,12 @@ class ObserverSettings:
         A slow ramp of external torque is trailed by this much (the ramp lag's asymptote; the cascade's
         k_eff = 1 / (1/k_o + 1/K_f)), and the declustering gaps count in it."""
         return 1.0 / self.detection_gain + (self.filter_time_constant or 0.0)
+
+    @property
+    def declustering_gap(self) -> float:
+        """Excursions of the residual closer than this [s] are one alarm (tail fit, held-out count, ``detect``):
+        :data:`~reflexarm.tuning.defaults.GAP_TIME_CONSTANTS` x :attr:`detection_time_scale`."""
+        return GAP_TIME_CONSTANTS * self.detection_time_scale
 
     def as_dict(self) -> dict[str, object]:
         """JSON-ready settings."""

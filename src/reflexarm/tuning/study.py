@@ -70,10 +70,6 @@ __all__ = [
 #: Largest return period of a level, in multiples of the logs' span: a tail fit is trusted to about an
 #: order of magnitude beyond the data (Coles 2001, Sec. 4.4: return-level intervals widen quickly past it).
 MAX_EXTRAPOLATION = 10.0
-#: Declustering gap in the detector's time scale 1/k_o + 1/K_f (1/k_o without a second stage): excursions closer
-#: than 5 x that (1 s at k_o = 5 1/s, where the observer's step response has settled to 99.3 %; a cascade's step
-#: response is at least as settled at 5 x its sum of time constants) are one alarm, as a latched detector sees.
-GAP_TIME_CONSTANTS = 5.0
 #: A level is flagged when the logs cross it more often than this quantile of the Poisson count its rate
 #: predicts over the logs' span (1 % false flags on a well-fitted tail).
 CONSISTENCY_QUANTILE = 0.99
@@ -387,7 +383,7 @@ def tune_thresholds(
         step_force: if given, the delay of a force step of this size [N] at the end effector along the base
             axes, mapped by J_v^T at the first log's median posture (:func:`~reflexarm.tuning.force_step_delays`).
         method: tail model, "exponential" (default, :data:`DEFAULT_METHOD`) or "gpd".
-        gap_s: declustering gap [s] (default :data:`GAP_TIME_CONSTANTS` x (1/k_o + 1/K_f), 1/K_f with a stage).
+        gap_s: declustering gap [s] (default ``settings.declustering_gap``, 5 x (1/k_o + 1/K_f), 1/K_f with a stage).
         allow_extrapolation: warn instead of raising when the logs are too short for a rate.
         n_boot, seed: bootstrap draws and their seed for the intervals.
         load: reads a log file given by path (default :func:`~reflexarm.tuning.load_free_motion_log`).
@@ -406,7 +402,7 @@ def tune_thresholds(
     replays, posture, coverage, notes = _replay_logs(log_list, robot, s, read)
     dt = _common_period(replays)
     time_constant = s.time_constant(dt)
-    gap = GAP_TIME_CONSTANTS * s.detection_time_scale if gap_s is None else float(gap_s)
+    gap = s.declustering_gap if gap_s is None else float(gap_s)
     duration = sum(r.duration for r in replays)
     arm_rates = {"collision": rate, "contact": contact_rate}
     _check_duration(duration, robot.n, arm_rates, allow_extrapolation, notes)
