@@ -106,9 +106,11 @@ def warm_unit_cost(robot, contact, threshold: float = 11.0, calls: int = 200) ->
     iso = CoreContactIsolator(robot, significance=SIGNIFICANCE_SHARE * threshold, geometry=controller_geometry(robot),
                               fit_tolerance=1e9)  # fmt: skip
     q, r = np.ascontiguousarray(contact.q, dtype=float), np.ascontiguousarray(contact.torque, dtype=float)
-    units = int(iso._core.isolate_in_steps(q, r, 1)["work"])
+    spread = iso._core.isolate_in_steps(q, r, 1)
+    units, examined = int(spread["work"]), int(spread["links_examined"])
     significant = np.flatnonzero(np.abs(r) > SIGNIFICANCE_SHARE * threshold)
-    fits = int(iso.geometry.point_counts()[significant[-1] :].sum())  # pass 2's constrained fits
+    # pass 2's constrained fits: the points of the links examined (the fit stops once they settle the choice)
+    fits = int(iso.geometry.point_counts()[significant[-1] :][:examined].sum())
     run, clock = iso._core.isolate_only, time.perf_counter
     ts = np.empty(calls)
     for i in range(calls):

@@ -7,6 +7,11 @@ interleaved round by round so that the load of the machine hits them alike:
 - ``core``: ``CoreContactIsolator.isolate`` (the same checks and ContactEstimate, the work in C++);
 - ``bare``: ``reflexarm._core.ContactIsolator.isolate_only`` (the C++ call alone, no result objects).
 
+And the early stop (the candidate links fitted until they settle the choice, ``isolate.settled``): the C++ work in
+units (``isolate_in_steps``' ``work``) over the work of fitting every candidate link (its formula: ceil(m / 16) + m
+per link with m points, 1 without geometry), summed over the contacts, beside the controller's 2 cm geometry's; and
+``python``'s time over the same isolator with the stop switched off (every candidate fitted, as before it).
+
     python bench/bench_isolation.py [--rounds 5] [--contacts 100]
 """
 
@@ -19,7 +24,9 @@ from collections.abc import Callable
 
 import numpy as np
 
+import reflexarm.control.collision.isolate as isolate_module
 from reflexarm import load_robot
+from reflexarm.control.collision.classify import controller_geometry
 from reflexarm.control.collision.isolate import ContactIsolator
 from reflexarm.control.collision.isolate_core import CoreContactIsolator
 from reflexarm.experiments.isolation_study import draw_contacts
@@ -42,9 +49,38 @@ def per_call(fn: Callable[[np.ndarray, np.ndarray], object], cases: list[tuple[n
     return float(np.median(ts))
 
 
+def work_share(robot, geometry, cases: list[tuple[np.ndarray, np.ndarray]]) -> float:
+    """The early stop's work over the work of fitting every candidate link, summed over the cases (units)."""
+    core = CoreContactIsolator(robot, significance=SIGNIFICANCE, geometry=geometry, fit_tolerance=FIT_TOLERANCE)
+    counts = geometry.point_counts()
+    done = every = 0
+    for q, r in cases:
+        significant = np.flatnonzero(np.abs(r) > SIGNIFICANCE)
+        if not significant.size:
+            continue
+        tail = counts[significant[-1] :]
+        every += int(np.sum(np.where(tail > 0, -(-tail // 16) + tail, 1)))
+        done += int(core._core.isolate_in_steps(np.ascontiguousarray(q, dtype=float), r, 10**8)["work"])
+    return done / max(every, 1)
+
+
+def without_stop(py: ContactIsolator) -> Callable[[np.ndarray, np.ndarray], object]:
+    """``py.isolate`` with the early stop switched off (every candidate link fitted)."""
+
+    def run(q: np.ndarray, r: np.ndarray) -> object:
+        rule, isolate_module.settled = isolate_module.settled, lambda fits, tol: False  # type: ignore[assignment]
+        try:
+            return py.isolate(q, r)
+        finally:
+            isolate_module.settled = rule  # type: ignore[assignment]
+
+    return run
+
+
 def main(rounds: int = 5, contacts: int = 100) -> dict[str, float]:
     print(f"{contacts} noisy contacts x {rounds} rounds per arm, 1 cm candidate spacing (medians of round medians)")
-    print(f"{'arm':<20}{'points':>8}{'python':>12}{'core':>12}{'bare':>12}{'python/core':>13}{'python/bare':>13}")
+    print(f"{'arm':<20}{'points':>8}{'python':>12}{'core':>12}{'bare':>12}{'python/core':>13}{'python/bare':>13}"
+          f"{'python/every':>14}{'work 1 cm':>11}{'work 2 cm':>11}")  # fmt: skip
     results: dict[str, float] = {}
     for name in ARMS:
         with warnings.catch_warnings():
@@ -62,18 +98,23 @@ def main(rounds: int = 5, contacts: int = 100) -> dict[str, float]:
             (c.q, np.ascontiguousarray(c.torque + rng.normal(0.0, NOISE, robot.n)))
             for c in draw_contacts(robot, truth, contacts, seed=1)
         ]
-        runs = {"python": py.isolate, "core": cc.isolate, "bare": cc._core.isolate_only}
+        runs = {"python": py.isolate, "core": cc.isolate, "bare": cc._core.isolate_only, "every": without_stop(py)}
         for fn in runs.values():  # warm-up
             per_call(fn, cases[:10])
         med: dict[str, list[float]] = {k: [] for k in runs}
         for _ in range(rounds):
             for key, fn in runs.items():
                 med[key].append(per_call(fn, cases))
-        p, c, b = (float(np.median(med[k])) * 1e6 for k in ("python", "core", "bare"))
+        p, c, b, e = (float(np.median(med[k])) * 1e6 for k in ("python", "core", "bare", "every"))
         points = int(geometry.point_counts().sum())
-        print(f"{name:<20}{points:>8}{p:>9.0f} us{c:>9.0f} us{b:>9.0f} us{p / c:>13.1f}{p / b:>13.1f}")
+        w1 = work_share(robot, geometry, cases)
+        g2 = controller_geometry(robot)
+        w2 = work_share(robot, g2, cases) if g2 is not None else float("nan")
+        print(f"{name:<20}{points:>8}{p:>9.0f} us{c:>9.0f} us{b:>9.0f} us{p / c:>13.1f}{p / b:>13.1f}"
+              f"{p / e:>14.2f}{w1:>11.2f}{w2:>11.2f}")  # fmt: skip
         results.update({f"python_us_{name}": p, f"core_us_{name}": c, f"bare_us_{name}": b,
-                        f"python_over_core_{name}": p / c})  # fmt: skip
+                        f"python_over_core_{name}": p / c, f"python_over_every_{name}": p / e,
+                        f"work_share_{name}": w1, f"work_share_2cm_{name}": w2})  # fmt: skip
     return results
 
 

@@ -71,6 +71,7 @@ namespace reflexarm_bindings
     d["candidate_count"] = e.candidate_count;
     d["consistent_points"] = e.consistent_points;
     d["point_spread"] = e.point_spread;
+    d["links_examined"] = e.links_examined;
     d["best_fit"] = e.best_fit;
     d["tolerance"] = e.tolerance;
     d["link_rank"] = e.link_rank;

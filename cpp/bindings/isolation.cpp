@@ -90,10 +90,10 @@ void bindIsolation(nb::module_ & m)
         if (point_budget < 1)
           throw nb::value_error(("point_budget must be >= 1; got " + std::to_string(point_budget)).c_str());
         s.iso.begin(view(q), view(residual));
-        const int work = s.iso.workTotal();
         int steps = 0;
-        for (bool done = work == 0; !done; ++steps)
+        for (bool done = s.iso.workTotal() == 0; !done; ++steps)
           done = s.iso.step(point_budget);
+        const int work = s.iso.workTotal(); // after an early stop: the work done
         if (!s.iso.finish(s.out))
           throw nb::value_error(
             ("q and residual must be finite vectors of size " + std::to_string(s.iso.nv())).c_str());
@@ -106,7 +106,7 @@ void bindIsolation(nb::module_ & m)
       "q"_a.noconvert(), "residual"_a.noconvert(), "point_budget"_a,
       "The same isolation spread over calls as the real-time tick does it (begin, step(point_budget) until done, "
       "finish): isolate()'s dict (bit for bit the same values) plus work (units: ceil(m / 16) + m per "
-      "candidate link with m points, pass 1 tracing 16 points a unit and pass 2 fitting one; 1 per candidate link "
-      "without geometry), steps (ceil(work / point_budget)) and pruned (pass-2 points whose constrained fit the lower "
+      "candidate link examined with m points, pass 1 tracing 16 points a unit and pass 2 fitting one; 1 per link "
+      "examined without geometry; links_examined: the fit stops once the links fitted settle the choice), steps (ceil(work / point_budget)) and pruned (pass-2 points whose constrained fit the lower "
       "bound skipped).");
 }

@@ -322,6 +322,8 @@ namespace reflexarm
         ++work_done_;
         --budget;
         ++cur_link_;
+        if (settled())
+          break;
         continue;
       }
       if (cur_pass_ == 1) // kTracePoints points a unit, the link's last unit the rest
@@ -354,9 +356,37 @@ namespace reflexarm
         L.best_error = L.errors[L.best];
         cur_pass_ = 1;
         ++cur_link_;
+        if (settled())
+          break;
       }
     }
     return work_done_ >= work_total_;
+  }
+
+  // After a candidate link's fit: the links examined so far, first_ .. cur_link_ - 1, with m the best of their fits.
+  // The choice is the first candidate within the tolerance of the best of ALL candidates, best <= m. The first examined
+  // link j within m + tol of m is the only one that can still be chosen among them (an earlier one is above
+  // m + tol >= best + tol), and if its fit is within tol itself it is chosen whatever the links after it hold (then
+  // b_j <= tol <= best + tol, as best >= 0), and the estimate is not NoSingleContact (best <= b_j <= tol). So the
+  // links after it need no fit: the work ends here (work_total_ becomes the work done) with the estimate the
+  // exhaustive fit gives; only best_fit is then the best over the links examined.
+  bool ContactIsolator::settled() noexcept
+  {
+    double m = kInf;
+    for (int link = first_; link < cur_link_; ++link)
+      m = std::min(m, links_[static_cast<size_t>(link)].best_error);
+    for (int link = first_; link < cur_link_; ++link)
+    {
+      const double b = links_[static_cast<size_t>(link)].best_error;
+      if (b <= m + tolerance_)
+      {
+        if (!(b <= tolerance_) || cur_link_ >= n_)
+          return false;
+        work_total_ = work_done_;
+        return true;
+      }
+    }
+    return false;
   }
 
   // finish()'s stage 1: the most proximal candidate link within the tolerance of the best fit, and the rank of its
@@ -371,6 +401,7 @@ namespace reflexarm
     const int last = first_;
     out.first_candidate = last;
     out.candidate_count = n_ - last;
+    out.links_examined = cur_link_ - last;
     const double tol = tolerance_;
     double best = kInf;
     for (int link = last; link < n_; ++link)

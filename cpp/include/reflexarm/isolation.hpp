@@ -78,7 +78,9 @@ namespace reflexarm
     int candidate_count = 0;
     int consistent_points = 0;       ///< points within the tolerance of the best on the chosen link
     double point_spread = 0.0;       ///< their largest distance from the best point [m]; NaN if not applicable
-    double best_fit = 0.0;           ///< best weighted fit error over all candidate links
+    int links_examined = 0;          ///< candidate links fitted, from the first on (the fit stops once the choice is
+                                     ///< settled: see ContactIsolator::step)
+    double best_fit = 0.0;           ///< best weighted fit error over the candidate links examined
     double tolerance = 0.0;          ///< fit_tolerance + relative_tolerance |W r|
     int link_rank = 0;               ///< rank of the chosen link's Jacobian (its first link+1 columns)
     int force_rank = 0;              ///< rank of J_p J_p^T at the best point
@@ -122,7 +124,11 @@ namespace reflexarm
     /// unit costs at most about one pass-2 point (see kTracePoints). A step may go on from one link to the next;
     /// pass 1's largest trace (the floor of the edges) is kept per link until its pass 2, the best point per link
     /// across the steps. So work_total() = sum over candidate links of ceil(m / kTracePoints) + m (m >= 1 points)
-    /// or 1 (no geometry), and the work is done after ceil(work_total() / point_budget) steps.
+    /// or 1 (no geometry), and the work is done after ceil(work_total() / point_budget) steps. The fit stops early,
+    /// with the same estimate, once the links fitted so far settle the choice (the first of them within the
+    /// tolerance of their best fit is within the tolerance itself: chosen whatever the later links hold, see
+    /// settled()): work_total() then becomes the work done, the sum over the links examined (the estimate's
+    /// links_examined), and best_fit is the best over them.
     /// begin + step... + finishStep... + finish gives bitwise the result of isolate(), which is begin + step(all) +
     /// finish. finishStep() before the fit is done does nothing and returns false; with nothing to fit (no
     /// significant joint, invalid input) it has no stage and returns true.
@@ -145,7 +151,7 @@ namespace reflexarm
     {
       return active_;
     }
-    /// Units of work of the isolation begun (0: nothing to fit) and units left.
+    /// Units of work of the isolation begun (0: nothing to fit; after an early stop the units done) and units left.
     int workTotal() const noexcept
     {
       return work_total_;
@@ -222,6 +228,8 @@ namespace reflexarm
     void estimateLink(int link, double tolerance, ContactEstimateData & out) noexcept;
     int linkRank(int link) noexcept;
     double wrenchError(int link) noexcept;
+    /// after a link's fit: true (and the work ends) when the links fitted so far settle the choice
+    bool settled() noexcept;
 
     pinocchio::Model model_;
     pinocchio::Data data_ = definedData(); // defined LLTs: a never-configured isolator copies cleanly (UBSan)
