@@ -9,6 +9,7 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <utility>
 
 #include "pinocchio/algorithm/jacobian.hpp"
 
@@ -73,6 +74,7 @@ namespace reflexarm
 
     const double mu = params.friction_coefficient;
     links_.assign(static_cast<size_t>(n), LinkBuffers());
+    auto geometry = std::make_shared<std::vector<LinkGeometry>>(static_cast<size_t>(n));
     for (int link = 0; link < n; ++link)
     {
       const LinkSurfaceData & s = surfaces[static_cast<size_t>(link)];
@@ -86,9 +88,10 @@ namespace reflexarm
       if (m > 0 && (s.normals.rowwise().norm().array() - 1.0).abs().maxCoeff() > 1e-6)
         throw ConfigError("surface of joint " + std::to_string(link) + ": normals must be unit vectors");
       LinkBuffers & L = links_[static_cast<size_t>(link)];
-      L.points_local = s.points;
-      L.generators.resize(m * K_, 3);
-      L.facet_normals.resize(m * K_, 3);
+      LinkGeometry & G = (*geometry)[static_cast<size_t>(link)];
+      G.points_local = s.points;
+      G.generators.resize(m * K_, 3);
+      G.facet_normals.resize(m * K_, 3);
       L.forces.resize(m, 3);
       L.errors.resize(m);
       L.jacobian = Jac::Zero(6, n);
@@ -109,18 +112,19 @@ namespace reflexarm
           for (int j = 0; j < 3; ++j)
             d[j] = -nout[j] + mu * (ca * t1[j] + sa * t2[j]);
           d /= d.norm();
-          L.generators.row(i * K_ + k) = d.transpose();
+          G.generators.row(i * K_ + k) = d.transpose();
         }
         for (int k = 0; k < K_; ++k)
         {
-          const Eigen::Vector3d dk = L.generators.row(i * K_ + k).transpose();
-          const Eigen::Vector3d dl = L.generators.row(i * K_ + (k + 1) % K_).transpose();
+          const Eigen::Vector3d dk = G.generators.row(i * K_ + k).transpose();
+          const Eigen::Vector3d dl = G.generators.row(i * K_ + (k + 1) % K_).transpose();
           Eigen::Vector3d c = dk.cross(dl); // normal of the facet spanned by edges k, k+1
           c *= sign(c.dot(-nout));          // oriented into the pyramid
-          L.facet_normals.row(i * K_ + k) = c.transpose();
+          G.facet_normals.row(i * K_ + k) = c.transpose();
         }
       }
     }
+    geometry_ = std::move(geometry);
   }
 
   void ContactIsolator::estimateLink(int link, double tolerance, ContactEstimateData & out) noexcept
@@ -142,7 +146,8 @@ namespace reflexarm
     }
     const int best = L.best;
     // the fit is in the link's joint frame (isolation_fit.cpp): the best point and force rotated into the world
-    const Eigen::Vector3d pl = L.points_local.row(best).transpose(), fl = L.forces.row(best).transpose();
+    const Rows3 & points = geometry(link).points_local;
+    const Eigen::Vector3d pl = points.row(best).transpose(), fl = L.forces.row(best).transpose();
     const Eigen::Vector3d d = L.rotation * pl; // p - o
     const Eigen::Vector3d pb = d + L.origin;
     const Eigen::Vector3d fb = L.rotation * fl;
@@ -174,11 +179,11 @@ namespace reflexarm
       if (!(L.errors[i] <= limit))
         continue;
       ++count;
-      const double d2 = (L.points_local.row(i).transpose() - pl).squaredNorm();
+      const double d2 = (points.row(i).transpose() - pl).squaredNorm();
       if (d2 >= far2 * (1.0 - kSpreadTies))
       {
         far2 = std::max(far2, d2);
-        const Eigen::Vector3d pi = L.rotation * L.points_local.row(i).transpose() + L.origin;
+        const Eigen::Vector3d pi = L.rotation * points.row(i).transpose() + L.origin;
         spread2 = std::max(spread2, (pi - pb).squaredNorm());
       }
       const Eigen::Vector3d fi = L.forces.row(i).transpose();
@@ -300,7 +305,7 @@ namespace reflexarm
       L.floor = 0.0;
       L.best = 0;
       L.best_error = kInf;
-      const Eigen::Index m = L.points_local.rows();
+      const Eigen::Index m = geometry(link).points_local.rows();
       work_total_ += m > 0 ? static_cast<int>((m + kTracePoints - 1) / kTracePoints + m) : 1;
     }
     cur_link_ = last;
@@ -314,7 +319,7 @@ namespace reflexarm
     {
       const int link = cur_link_;
       LinkBuffers & L = links_[static_cast<size_t>(link)];
-      const Eigen::Index m = L.points_local.rows();
+      const Eigen::Index m = geometry(link).points_local.rows();
       if (m == 0) // no geometry: the best wrench at the link origin (one unit)
       {
         L.best = -1;

@@ -74,6 +74,7 @@ namespace reflexarm
   void ContactIsolator::traceRange(int link, Eigen::Index begin, Eigen::Index end) noexcept
   {
     LinkBuffers & L = links_[static_cast<size_t>(link)];
+    const LinkGeometry & G = geometry(link);
     if (begin == 0)
       linkTerms(link);
     // trace A(p) = tr P + 2 tr(Q [p]x) + |p|^2 tr S - p^T S p, tr(Q [p]x) = t . p
@@ -82,7 +83,7 @@ namespace reflexarm
     double max_trace = L.max_trace;
     for (Eigen::Index i = begin; i < end; ++i)
     {
-      const Eigen::Vector3d p = row3(L.points_local.row(i));
+      const Eigen::Vector3d p = row3(G.points_local.row(i));
       max_trace = std::max(max_trace, trP + 2.0 * t.dot(p) + p.squaredNorm() * trS - p.dot(S_ * p));
     }
     L.max_trace = max_trace;
@@ -113,6 +114,7 @@ namespace reflexarm
     double * const tk = KC > 0 ? t_local : t_.data();
     Eigen::Map<Rows3> ad(KC > 0 ? ad_local.data() : ad_.data(), KC > 0 ? KC : K_, 3);
     LinkBuffers & L = links_[static_cast<size_t>(link)];
+    const LinkGeometry & G = geometry(link);
     const Eigen::VectorXd & r = weighted_residual_;
     const int K = KC > 0 ? KC : K_;
     const double floor = L.floor;
@@ -120,7 +122,7 @@ namespace reflexarm
     double best_error = L.best_error;
     for (Eigen::Index i = begin; i < end; ++i)
     {
-      const Eigen::Vector3d p = row3(L.points_local.row(i));
+      const Eigen::Vector3d p = row3(G.points_local.row(i));
       // A = P + M + M^T + [p]x S [p]x^T (M = Q [p]x), b = ur + vr x p
       Eigen::Matrix3d M, N;
       for (int a = 0; a < 3; ++a)
@@ -163,7 +165,7 @@ namespace reflexarm
           continue;
         }
       }
-      const auto D = L.generators.middleRows(i * K, K);
+      const auto D = G.generators.middleRows(i * K, K);
       for (int k = 0; k < K; ++k)
       {
         const Eigen::Vector3d dk = row3(D.row(k));
@@ -183,7 +185,7 @@ namespace reflexarm
       if (well)
       {
         bool inside = true;
-        const auto C = L.facet_normals.middleRows(i * K, K);
+        const auto C = G.facet_normals.middleRows(i * K, K);
         for (int k = 0; k < K; ++k)
           inside = inside && (C.row(k).dot(f_int.transpose()) >= 0.0);
         if (inside)

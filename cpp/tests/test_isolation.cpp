@@ -209,16 +209,17 @@ namespace
           stepped.step(budget);
         }
         stepped.begin(q, r);
-        const int total = stepped.workTotal();
         int steps = 0;
         bool within = true;
-        for (bool done = total == 0; !done;)
+        const auto done_so_far = [&stepped] { return stepped.workTotal() - stepped.workLeft(); };
+        for (bool done = stepped.workTotal() == 0; !done;)
         {
-          const int before = stepped.workLeft();
+          const int before = done_so_far();
           done = stepped.step(budget);
-          within = within && before - stepped.workLeft() <= budget && before - stepped.workLeft() > 0;
+          within = within && done_so_far() - before <= budget && done_so_far() - before > 0;
           ++steps;
         }
+        const int total = stepped.workTotal(); // the work done (less than planned after an early stop)
         const bool ok = stepped.finish(spread);
         g_counting = false;
         allocations += g_allocations.exchange(0);
@@ -240,6 +241,47 @@ namespace
     CHECK(!stepped.begin(q, bad) && !stepped.finish(spread) && spread.determined == reflexarm::Determined::None,
           "a NaN residual refused by begin and finish");
     CHECK(!stepped.finish(spread), "finish without begin refuses");
+  }
+
+  /// A copy of a configured isolator shares its geometry (immutable after configure): it isolates as the original
+  /// does, and configuring the original anew (other surfaces) leaves the copy's results as they were.
+  void testCopiesShareTheGeometry()
+  {
+    pinocchio::Model model;
+    pinocchio::buildModels::manipulator(model);
+    const int n = static_cast<int>(model.nv);
+    auto p = params();
+    p.significance = Eigen::VectorXd::Constant(1, 0.5);
+    reflexarm::ContactIsolator original;
+    original.configure(model, spheres(n, 61), p);
+    const reflexarm::ContactIsolator copy = original;
+    reflexarm::ContactIsolator reference;
+    reference.configure(model, spheres(n, 61), p);
+    std::mt19937 rng(9);
+    std::uniform_real_distribution<double> u(-1.5, 1.5), f(-30.0, 30.0);
+    Eigen::VectorXd q(n), r(n);
+    reflexarm::ContactEstimateData a, b, c;
+    long same = 0, differs = 0;
+    for (int k = 0; k < 20; ++k)
+    {
+      for (int j = 0; j < n; ++j)
+      {
+        q[j] = u(rng);
+        r[j] = f(rng);
+      }
+      reflexarm::ContactIsolator before = copy; // the copy, while the original still has the same surfaces
+      before.isolate(q, r, a);
+      original.configure(model, spheres(n, 23 + k), p); // other surfaces for the original
+      reflexarm::ContactIsolator after = copy;
+      after.isolate(q, r, b);
+      reference.isolate(q, r, c);
+      same += sameEstimate(a, b) && sameEstimate(a, c);
+      reflexarm::ContactEstimateData d;
+      original.isolate(q, r, d);
+      differs += !sameEstimate(a, d);
+    }
+    CHECK(same == 20, "%ld of 20 isolations of a copy unchanged by configuring its original anew", same);
+    CHECK(differs > 0, "the original's new surfaces changed none of its estimates: the test would see nothing");
   }
 
   /// begin(q, r, kin) from the caller's kinematics at q (computeJointJacobians' or computeCoriolisMatrix's Data, as
@@ -408,6 +450,7 @@ int main()
   CHECK(g_allocations.exchange(0) > 0, "the allocation counter counted nothing");
   testExactContactAndNoAllocation();
   testSteppedEqualsOneShot();
+  testCopiesShareTheGeometry();
   testCallerKinematics();
   testBadInput();
   std::mt19937 rng(4);

@@ -9,6 +9,7 @@
 // same computation over calls (bounded work per call), with the same result bit for bit.
 #pragma once
 
+#include <memory>
 #include <vector>
 
 #include <Eigen/Core>
@@ -192,11 +193,17 @@ namespace reflexarm
     using Rows3 = LinkSurfaceData::Rows3;
     using Jac = Eigen::Matrix<double, 6, Eigen::Dynamic>;
 
-    struct LinkBuffers
+    /// A link's candidate points and their friction pyramids, fixed by configure(): shared by the copies of an
+    /// isolator (a copy, e.g. of a controller, does not duplicate the megabytes of a fine geometry)
+    struct LinkGeometry
     {
       Rows3 points_local;  ///< (m, 3) candidate points, joint frame
       Rows3 generators;    ///< (m K, 3) unit edges of the pyramid, joint frame
       Rows3 facet_normals; ///< (m K, 3) inward facet normals, joint frame
+    };
+
+    struct LinkBuffers
+    {
       Rows3 forces;        ///< (m, 3) best force per point, joint frame (pruned points: not written)
       Eigen::VectorXd errors; ///< (m) weighted fit errors; +inf for a point pruned by its lower bound
       Jac jacobian;       ///< LOCAL_WORLD_ALIGNED joint Jacobian at the last call
@@ -252,6 +259,11 @@ namespace reflexarm
     Eigen::MatrixXd wrench_b_;
     Eigen::JacobiSVD<Eigen::MatrixXd> wrench_svd_;
     std::vector<LinkBuffers> links_;
+    std::shared_ptr<const std::vector<LinkGeometry>> geometry_; ///< per link, immutable after configure()
+    const LinkGeometry & geometry(int link) const noexcept
+    {
+      return (*geometry_)[static_cast<size_t>(link)];
+    }
     // the isolation under way (begin / step / finish)
     bool active_ = false, valid_ = false;
     int first_ = -1;          ///< most distal significant joint (-1: none)
