@@ -79,7 +79,7 @@ namespace reflexarm
     /// tick (ContactIsolator::step; a unit: one point's constrained fit, or kTracePoints points' traces of pass 1),
     /// then one tick chooses the link, one estimates, and the estimate is in on the next: ceil(units / this) + 3 ticks
     /// after the beginning; a retract waiting for it factorises M(q) on that tick and is planned on the next (values
-    /// below 1 count as 1). 32: 10 / 43 / 27 ticks on Atlas, Panda, iiwa14's 2 cm geometry; the tick costs per
+    /// below 1 count as 1). 32: 10 / 16 / 21 ticks on Atlas, Panda, iiwa14's 2 cm geometry; the tick costs per
     /// budget: ReactionSettings.isolation_points_per_tick (Python) and bench/bench_collision_tick.py
     int isolation_points_per_tick = 32;
   };

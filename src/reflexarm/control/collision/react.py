@@ -110,17 +110,19 @@ class ReactionSettings:
             ceil(units / this) + 3 ticks after it began (``CollisionEvent.t_estimated``), units = the sum over the
             candidate links of ceil(m / 16) + m (m points; 1 without geometry); a retract waiting for the estimate
             factorises M(q) on the tick it comes in and is planned (and retracts) from the next tick on,
-            ceil(units / this) + 4 ticks after the beginning; an integer >= 1. The default, 32, takes 10, 43 and
-            27 ticks on the 2 cm controller geometry of Atlas, Panda and iiwa14 (bench/bench_collision_tick.py), so
-            that a retract waiting for the estimate ends within the guard's 0.5 s. Inside C++, each isolation tick
-            against the same tick of the controller without geometry (paired, warm caches; noise floor <= 1.03;
-            ``python bench/bench_collision_tick.py --points-per-tick 4 8 16 32``): at 32 the largest is a fit step,
-            1.62-1.70 x; at 4 the largest is 1.18-1.21 x (a fit step, or the Panda's estimate), 1.14-1.30 x as run
-            (cold caches), with the estimate 55, 317 and 188 ms after it began; over 4-32 the choice 1.11-1.15 x,
-            the estimate 1.12-1.25 x, the estimate in (M(q)'s factor) 1.15-1.20 x, the plan 1.11-1.15 x. A budget
-            of 4 keeps every tick within issue 15's 1.2 x (warm, no margin), but the link collisions' retracts of the
-            reaction study then still move at the guard's 0.5 s on Atlas, Panda and iiwa14 (kinetic energy 2.2-260 x
-            its value at detection; at 32: 0.015-3 %), so the default stays 32.
+            ceil(units / this) + 4 ticks after the beginning; an integer >= 1. The candidate links are fitted
+            from the most proximal on until they settle the choice (``isolate.settled``; the same estimate as
+            fitting every one): units are then summed over the links examined. The default, 32, takes 10, 16 and
+            21 ticks on the 2 cm controller geometry of Atlas, Panda and iiwa14 (bench/bench_collision_tick.py).
+            Inside C++, each isolation tick against the same tick of the controller without geometry (paired, warm
+            caches; noise floor <= 1.05; ``python bench/bench_collision_tick.py --points-per-tick 4 6 8 12 16
+            32``): at 32 the largest is a fit step, 1.50-1.66 x; at 4 it is 1.16-1.17 x (a fit step), 1.19-1.32 x
+            as run (cold caches), with the estimate 55, 101 and 147 ms after it began; at 6 1.19-1.20 x; over 4-32
+            the choice 1.08-1.10 x, the estimate 1.09-1.16 x, the estimate in (M(q)'s factor) 1.11-1.17 x, the plan
+            1.08-1.13 x. A budget of 4 keeps every tick within issue 15's 1.2 x (warm), but the reaction study's
+            link-push retracts of both iiwa14s then keep 3.4 % of their kinetic energy at the guard's 0.5 s (0.5-0.7
+            % at 32) and 8 instead of 10 of the 15 held-stick runs end below 1 % (``reflexarm reaction-study
+            --reaction-setting isolation_points_per_tick=4``), so the default stays 32.
     """
 
     brake_time: float = 0.05
