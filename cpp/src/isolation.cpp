@@ -53,7 +53,7 @@ namespace reflexarm
 
     model_ = model;
     constructData(data_, model_); // in place, its LLTs defined (defined_data.hpp)
-    n_ = n;
+    n_ = 0; // until the surfaces are in: an isolator whose configure() threw isolates nothing (begin() refuses)
     K_ = params.cone_edges;
     params_ = params;
     significance_ = ns == 1 ? Eigen::VectorXd::Constant(n, params.significance[0]) : params.significance;
@@ -125,6 +125,7 @@ namespace reflexarm
       }
     }
     geometry_ = std::move(geometry);
+    n_ = n;
   }
 
   void ContactIsolator::estimateLink(int link, double tolerance, ContactEstimateData & out) noexcept

@@ -387,6 +387,24 @@ namespace
     auto s = spheres(n, 20);
     s[1].normals(0, 0) = 2.0;
     CHECK(throws(s, params(), "surface of joint 1: normals must be unit vectors"), "non-unit normal");
+    // an isolator whose configure() threw on its surfaces half-way (after it was configured before): it refuses to
+    // isolate (no access to the surfaces it did not finish), and a copy of it too
+    reflexarm::ContactIsolator half;
+    half.configure(model, spheres(n, 20), params());
+    bool threw = false;
+    try
+    {
+      half.configure(model, s, params());
+    }
+    catch (const reflexarm::ConfigError &)
+    {
+      threw = true;
+    }
+    Eigen::VectorXd q0 = Eigen::VectorXd::Zero(n), r0 = Eigen::VectorXd::Constant(n, 5.0);
+    const reflexarm::ContactIsolator half_copy = half;
+    reflexarm::ContactIsolator copied = half_copy;
+    CHECK(threw && !half.isolate(q0, r0, out) && !copied.isolate(q0, r0, out) && !half.begin(q0, r0),
+          "an isolator whose configure threw on a surface isolates nothing");
   }
 
   /// psdRank<N> (the choice's link rank, the estimate's force rank): the Householder tridiagonal form keeps the
