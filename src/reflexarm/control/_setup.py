@@ -108,3 +108,27 @@ def check_detection_friction(kappa_f: object, band: object, has_observer: bool) 
             "detection_kappa_f=1 with it"
         )
     return switch, as_positive_scalar(band, "detection_friction_velocity_band")
+
+
+#: A detector slower than this (its time scale 1/k_o + 1/K_f, per joint) gets a warning [s]: five times the paper's
+#: 5 1/s observer (0.2 s) and twice the reaction guard's 0.5 s. A contact shorter than the time scale reaches the
+#: detector at a fraction of its size, so a much slower detector is detection practically off for most contacts.
+SLOW_DETECTOR_S = 1.0
+
+
+def warn_slow_detector(observer_gain: np.ndarray, filter_gain: np.ndarray | None, names: Sequence[str]) -> None:
+    """A UserWarning when the detector's time scale ``1/k_o (+ 1/K_f)`` exceeds SLOW_DETECTOR_S on some joint
+    (``observer_gain``: the detecting observer's, per joint; ``filter_gain``: the second stage's, or None)."""
+    scale = 1.0 / np.asarray(observer_gain, dtype=float)
+    if filter_gain is not None:
+        scale = scale + 1.0 / np.asarray(filter_gain, dtype=float)
+    slow = np.flatnonzero(scale > SLOW_DETECTOR_S)
+    if slow.size:
+        warnings.warn(
+            f"the collision detector's time scale (1/k_o + 1/K_f) is {float(scale.max()):.3g} s on joint(s) "
+            f"{[names[i] for i in slow]} (more than {SLOW_DETECTOR_S:g} s): a contact shorter than that reaches the "
+            "detector at a fraction of its size, so most contacts go undetected; raise the detection observer's gain "
+            "or the second stage's (detection_observer_gain, detection_filter_gain)",
+            UserWarning,
+            stacklevel=3,  # the caller of Controller(...)
+        )

@@ -23,6 +23,7 @@ from reflexarm.control._setup import (
     check_period_band,
     load_core,
     resolve_torque_limit,
+    warn_slow_detector,
 )
 from reflexarm.control.collision.classify import SIGNIFICANCE_SHARE, contact_geometry_args, controller_geometry
 from reflexarm.control.collision.detect import CollisionDetector
@@ -230,6 +231,9 @@ class Controller:
             else as_vector(detection_filter_gain, n, "detection_filter_gain", positive=True)
         )
         self.detector = None if threshold is None else CollisionDetector(n, threshold)
+        if self.detector is not None:  # a detector so slow that it is practically off says so
+            detecting = self.detection_observer or self.observer
+            warn_slow_detector(detecting.observer_gain, self.detection_filter_gain, self.robot.joint_names)
         self.reaction, self.contact_reaction, self.reaction_settings = check_reactions(
             reaction, contact_reaction, reaction_settings
         )
