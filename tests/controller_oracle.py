@@ -106,7 +106,8 @@ class Oracle:
       geometry: the candidate links are the most distal joint with |r_j| > significance_j and every later one;
       each candidate point is scored twice (pass 1, the trace of J_p W W J_p^T, TRACE_POINTS points a unit, the
       link's last unit the rest; pass 2, the constrained fit, one unit a point), a candidate link without geometry
-      is one unit (the wrench fit); the tick that begins
+      is one unit (the wrench fit), the links fitted from the first on until the first of them within the
+      tolerance of their best fit is within the tolerance itself (the later ones not fitted); the tick that begins
       does no unit, each following tick at most points_per_tick units, then one tick chooses the link (and its
       rank), one estimates its point and force, and the estimate is in on
       the tick after: ceil(units / points_per_tick) + 3 ticks after the beginning (on that tick if there are no
@@ -504,12 +505,20 @@ class Oracle:
             self.set_switches(0)
         self.reacted = reaction != "none"
 
-    def isolation_ticks(self, r: np.ndarray) -> int:
-        """Ticks after its beginning on which the isolation of residual r is in (the class docstring's rule)."""
+    def isolation_ticks(self, q: np.ndarray, r: np.ndarray) -> int:
+        """Ticks after its beginning on which the isolation of residual r at q is in (the class docstring's rule)."""
         significant = np.flatnonzero(np.abs(r) > self.isolation_share * self.threshold)
         if significant.size == 0:
             return 0
-        counts = self.geometry.point_counts()[significant[-1] :]  # type: ignore[attr-defined]
+        assert self.isolator is not None
+        best = [f.best_error for f in self.isolator.fit(q, r)]  # every candidate link's best fit, in order
+        tol, examined = self.isolator.tolerance(r), len(best)
+        for k in range(1, len(best) + 1):  # the links fitted until the first within tol of their best is within tol
+            first = next(e for e in best[:k] if e <= min(best[:k]) + tol)
+            if first <= tol:
+                examined = k
+                break
+        counts = self.geometry.point_counts()[significant[-1] :][:examined]  # type: ignore[attr-defined]
         units = int(np.sum(np.where(counts > 0, -(-counts // TRACE_POINTS) + counts, 1)))
         return -(-units // self.settings.isolation_points_per_tick) + FINISHING_TICKS
 
@@ -517,7 +526,7 @@ class Oracle:
         """Isolate (q, r) of this tick; the estimate is in after isolation_ticks. True if it is in now."""
         assert self.isolator is not None
         self.t_estimate = t
-        self.isolating = (self.isolator.isolate(q, r.copy()), self.isolation_ticks(r))
+        self.isolating = (self.isolator.isolate(q, r.copy()), self.isolation_ticks(q, r))
         return self.step_isolation(t, count=False)
 
     def step_isolation(self, t, count: bool = True) -> bool:

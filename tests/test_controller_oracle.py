@@ -349,9 +349,10 @@ def panda_contact():
 def test_tick_isolation_and_retract_equal_the_plain_isolator(panda_contact, reaction):
     """A static arm at the contact's posture; from tick 100 the contact's J_c^T f appears (tau_m = g - J_c^T f). The
     Controller isolates it in the ticks (C++ ContactIsolator, begun isolation_delay after detection, spread over
-    the ticks, in on the tick the oracle computes from the point counts): link, point and force equal the plain
-    Python ContactIsolator on the same residual and geometry (the oracle's), every tick equals the oracle (retract: the
-    estimated point moved along the estimated force), and the estimate is the truth's: same link, point within
+    the ticks, in on the tick the oracle computes from the point counts of the links examined: fewer than the
+    candidates here, so the early stop counts): link, point and force equal the plain Python ContactIsolator on
+    the same residual and geometry (the oracle's), every tick equals the oracle (retract: the estimated point moved
+    along the estimated force), and the estimate is the truth's: same link, point within
     the candidate spacing, force along the true one (a step through the exact first-order observer scales J_c^T f
     without turning it)."""
     from reflexarm.control.collision import ContactIsolator, Determined
@@ -377,8 +378,11 @@ def test_tick_isolation_and_retract_equal_the_plain_isolator(panda_contact, reac
     # isolated from the detection residual isolation_delay (20 ms) after detection, spread over the ticks: the
     # estimate in (the retract planned on the tick after) on the tick the oracle's rule gives from the point counts
     assert event.t_estimate == pytest.approx(event.t_detect + settings.isolation_delay, abs=0.5 * DT)
-    spread = o.isolation_ticks(residuals[event.t_estimate])
+    spread = o.isolation_ticks(c.q, residuals[event.t_estimate])
     assert spread > 1  # the default budget spreads the Panda's distal links over several ticks
+    counts = geometry.point_counts()[o.isolator.candidate_links(residuals[event.t_estimate])[0] :]
+    every = -(-int(np.sum(np.where(counts > 0, -(-counts // 16) + counts, 1))) // settings.isolation_points_per_tick)
+    assert spread < every + 3  # fewer ticks than fitting every candidate link would take (the early stop)
     assert event.t_estimated == pytest.approx(event.t_estimate + spread * DT, abs=0.5 * DT)
     assert (event.t_estimate, event.t_estimated) == (o.t_estimate, o.t_estimated)
     k_in = int(round(event.t_estimated / DT)) - 1
