@@ -21,11 +21,10 @@ from controller_oracle import (
     FINISHING_TICKS,
     N_TICKS,
     Oracle,
-    event_mismatches,
-    expected_text,
     ticks,
     with_springs,
 )
+from oracle_texts import event_mismatches, expected_text
 from reflexarm.control import Controller
 from reflexarm.control import contract as _k
 from reflexarm.control.collision.event import CollisionEvent

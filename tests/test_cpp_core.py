@@ -17,11 +17,10 @@ from controller_oracle import (
     N_TICKS,
     Oracle,
     core_controller,
-    event_mismatches,
-    expected_text,
     ticks,
     with_springs,
 )
+from oracle_texts import event_mismatches, expected_text
 from reflexarm.control import Controller
 from reflexarm.control import contract as _k
 from reflexarm.control.collision.react import ReactionSettings
