@@ -124,11 +124,12 @@ def warn_slow_detector(observer_gain: np.ndarray, filter_gain: np.ndarray | None
         scale = scale + 1.0 / np.asarray(filter_gain, dtype=float)
     slow = np.flatnonzero(scale > SLOW_DETECTOR_S)
     if slow.size:
+        joints = [names[int(i)] for i in slow]
         warnings.warn(
             f"the collision detector's time scale (1/k_o + 1/K_f) is {float(scale.max()):.3g} s on joint(s) "
-            f"{[names[i] for i in slow]} (more than {SLOW_DETECTOR_S:g} s): a contact shorter than that reaches the "
-            "detector at a fraction of its size, so most contacts go undetected; raise the detection observer's gain "
-            "or the second stage's (detection_observer_gain, detection_filter_gain)",
+            f"{joints} (more than {SLOW_DETECTOR_S:g} s): a contact shorter than that reaches the detector at a "
+            "fraction of its size, so most contacts go undetected; raise the detection observer's gain or the second "
+            "stage's (detection_observer_gain, detection_filter_gain)",
             UserWarning,
             stacklevel=3,  # the caller of Controller(...)
         )
