@@ -232,7 +232,7 @@ class Controller:
         )
         self.detector = None if threshold is None else CollisionDetector(n, threshold)
         if self.detector is not None:  # a detector so slow that it is practically off says so
-            detecting = self.detection_observer or self.observer
+            detecting = self.observer if self.detection_observer is None else self.detection_observer
             warn_slow_detector(detecting.observer_gain, self.detection_filter_gain, self.robot.joint_names)
         self.reaction, self.contact_reaction, self.reaction_settings = check_reactions(
             reaction, contact_reaction, reaction_settings
