@@ -329,7 +329,10 @@ namespace reflexarm
         --budget;
         ++cur_link_;
         if (settled())
+        {
+          work_total_ = work_done_; // the later links need no fit: the work ends here
           break;
+        }
         continue;
       }
       if (cur_pass_ == 1) // kTracePoints points a unit, the link's last unit the rest
@@ -363,7 +366,10 @@ namespace reflexarm
         cur_pass_ = 1;
         ++cur_link_;
         if (settled())
+        {
+          work_total_ = work_done_;
           break;
+        }
       }
     }
     return work_done_ >= work_total_;
@@ -374,9 +380,9 @@ namespace reflexarm
   // link j within m + tol of m is the only one that can still be chosen among them (an earlier one is above
   // m + tol >= best + tol), and if its fit is within tol itself it is chosen whatever the links after it hold (then
   // b_j <= tol <= best + tol, as best >= 0), and the estimate is not NoSingleContact (best <= b_j <= tol). So the
-  // links after it need no fit: the work ends here (work_total_ becomes the work done) with the estimate the
+  // links after it need no fit: step() ends the work there (work_total_ becomes the work done) with the estimate the
   // exhaustive fit gives; only best_fit is then the best over the links examined.
-  bool ContactIsolator::settled() noexcept
+  bool ContactIsolator::settled() const noexcept
   {
     double m = kInf;
     for (int link = first_; link < cur_link_; ++link)
@@ -385,12 +391,7 @@ namespace reflexarm
     {
       const double b = links_[static_cast<size_t>(link)].best_error;
       if (b <= m + tolerance_)
-      {
-        if (!(b <= tolerance_) || cur_link_ >= n_)
-          return false;
-        work_total_ = work_done_;
-        return true;
-      }
+        return b <= tolerance_;
     }
     return false;
   }

@@ -235,8 +235,8 @@ namespace reflexarm
     void estimateLink(int link, double tolerance, ContactEstimateData & out) noexcept;
     int linkRank(int link) noexcept;
     double wrenchError(int link) noexcept;
-    /// after a link's fit: true (and the work ends) when the links fitted so far settle the choice
-    bool settled() noexcept;
+    /// after a link's fit: true when the links fitted so far settle the choice (step() then ends the work)
+    bool settled() const noexcept;
 
     pinocchio::Model model_;
     pinocchio::Data data_ = definedData(); // defined LLTs: a never-configured isolator copies cleanly (UBSan)
