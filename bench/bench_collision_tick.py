@@ -34,7 +34,12 @@ pruned, the worst case of a step), repeated back to back, over its constrained f
 them); and the points per tick that this gives: the most units whose warm cost stays within (BOUND - 1) x the plain
 tick. A summary table per arm at the end, with whether every isolation tick stays within issue 15's 1.2 x.
 
-    python bench/bench_collision_tick.py [--rounds 21] [--cpp-rounds 51] [--points-per-tick 4 8 16 32]
+The retract does not wait for the estimate by default (ReactionSettings.retract_waits_for_estimate): it retracts from
+detection, the baseline (no geometry) too, and the "in" and "plan" ticks are retract ticks of both; with
+--retract-waits the retract brakes until the estimate, factorises M(q) on the "in" tick and is planned on the "plan"
+tick, against the braking baseline (above).
+
+    python bench/bench_collision_tick.py [--rounds 21] [--cpp-rounds 51] [--points-per-tick 4 8 16 32] [--retract-waits]
 """
 
 from __future__ import annotations
@@ -87,17 +92,23 @@ def _run(ctrl: Controller, states: list[tuple]) -> np.ndarray:
     return ts
 
 
+#: The retract waits for the isolation's estimate (--retract-waits; the default reaction does not).
+RETRACT_WAITS = False
+
+
 def _controller(robot, geometry: object, points_per_tick: int = 24, reaction: str = "retract") -> Controller:
     # brake_duration: the brake baseline brakes through the isolation window (the retract does not use it)
-    settings = ReactionSettings(isolation_points_per_tick=points_per_tick, brake_duration=10.0)
+    settings = ReactionSettings(isolation_points_per_tick=points_per_tick, brake_duration=10.0,
+                                retract_waits_for_estimate=RETRACT_WAITS)  # fmt: skip
     return Controller(robot, threshold=11.0, reaction=reaction, detection_observer_gain=200.0,
                       observer_discretization="exact", reaction_settings=settings,
                       contact_geometry=geometry)  # fmt: skip
 
 
 def _baseline(robot) -> Controller:
-    """The C++ comparison's controller: no geometry, braking from detection through the isolation window."""
-    return _controller(robot, None, reaction="brake")
+    """The C++ comparison's controller: no geometry, and through the isolation window what the geometry controller's
+    arm does: braking (a retract that waits for the estimate) or retracting from detection (one that does not)."""
+    return _controller(robot, None, reaction="retract" if not RETRACT_WAITS else "brake")
 
 
 def warm_unit_cost(robot, contact, threshold: float = 11.0, calls: int = 200) -> tuple[float, int]:
@@ -265,5 +276,7 @@ if __name__ == "__main__":
     p.add_argument("--rounds", type=int, default=21, help="rounds from Python")
     p.add_argument("--cpp-rounds", type=int, default=51, help="rounds inside C++")
     p.add_argument("--points-per-tick", type=int, nargs="+", default=None)
+    p.add_argument("--retract-waits", action="store_true", help="the retract waits for the estimate (default: not)")
     args = p.parse_args()
+    RETRACT_WAITS = args.retract_waits
     main(args.rounds, args.points_per_tick, args.cpp_rounds)

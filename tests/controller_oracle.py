@@ -409,7 +409,8 @@ def core_controller(core: Any, robot: RobotModel, o: Oracle, dt: float = DT, **c
     rp = core.ReactionParams()
     for f in fields(o.settings):
         value = changes.get(f.name, getattr(o.settings, f.name))
-        setattr(rp, f.name, int(value) if f.name == "isolation_points_per_tick" else float(value))
+        exact = {"isolation_points_per_tick": int, "retract_waits_for_estimate": bool}.get(f.name, float)
+        setattr(rp, f.name, exact(value))
     p.reaction_params = rp
     p.kappa_f, p.kappa_eps, p.kappa_ext = o.kappa_f, o.kappa_eps, o.kappa_ext
     p.residual_limit, p.switch_time, p.dt = o.residual_limit, o.switch_time, dt

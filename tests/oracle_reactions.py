@@ -120,7 +120,7 @@ class OracleReactions:
             ev["phase"] = "gravity"
         elif reaction == "brake":
             ev["phase"] = "braking"
-        elif reaction == "retract" and self.awaiting:  # brake until isolated, then retract from the estimate
+        elif reaction == "retract" and self.awaiting and rs.retract_waits_for_estimate:  # brake until isolated
             ev["phase"] = "braking"
         elif reaction == "retract":
             self.plan_retract(q, wrench, measured, self.retract_mass_matrix(q))
@@ -185,7 +185,11 @@ class OracleReactions:
         sensor = pin.computeFrameJacobian(self.model, self.data, q, self.robot.sensor_frame_id, pin.LOCAL)[:3]
         if measured:  # the sensor frame (LOCAL: the wrench is measured in it); J d = J J^T f along the force
             return sensor.T @ wrench[:3], [sensor], n - 1
-        last = est.link if est is not None and est.link >= 0 else ev["distal_joint"]
+        last = ev["distal_joint"]
+        if self.isolator is not None:  # the most distal significant joint at detection, at least the crossing one
+            significant = np.flatnonzero(np.abs(ev["residual"]) > self.isolation_share * self.threshold)
+            last = max(last, int(significant[-1])) if significant.size else last
+        last = est.link if est is not None and est.link >= 0 else last
         last = n - 1 if last < 0 else last
         d = np.zeros(n)
         d[: last + 1] = ev["residual"][: last + 1]  # r = J_c^T f on the joints a force on that link reaches
@@ -241,7 +245,7 @@ class OracleReactions:
         elif self.awaiting and t - ev["t_detect"] >= rs.isolation_delay - 1e-12:
             isolated = self.begin_isolation(t, q, self.r_det())
         if isolated:
-            if self.reacted and ev["reaction"] == "retract":  # its M chosen now, the plan on the next tick
+            if self.reacted and ev["reaction"] == "retract" and rs.retract_waits_for_estimate:  # M now, plan next
                 self.retract_due = self.retract_mass_matrix(q)
         elif self.retract_due is not None:  # the retract from the estimate, on this tick's q
             self.plan_retract(q, np.zeros(6), False, self.retract_due)

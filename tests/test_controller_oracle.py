@@ -344,20 +344,22 @@ def panda_contact():
     return robot, controller_geometry(robot), contact
 
 
-@pytest.mark.parametrize("reaction", ["retract", "brake"])
-def test_tick_isolation_and_retract_equal_the_plain_isolator(panda_contact, reaction):
+@pytest.mark.parametrize(("reaction", "waits"), [("retract", True), ("retract", False), ("brake", False)])
+def test_tick_isolation_and_retract_equal_the_plain_isolator(panda_contact, reaction, waits):
     """A static arm at the contact's posture; from tick 100 the contact's J_c^T f appears (tau_m = g - J_c^T f). The
     Controller isolates it in the ticks (C++ ContactIsolator, begun isolation_delay after detection, spread over
     the ticks, in on the tick the oracle computes from the point counts of the links examined: fewer than the
     candidates here, so the early stop counts): link, point and force equal the plain Python ContactIsolator on
-    the same residual and geometry (the oracle's), every tick equals the oracle (retract: the estimated point moved
-    along the estimated force), and the estimate is the truth's: same link, point within
-    the candidate spacing, force along the true one (a step through the exact first-order observer scales J_c^T f
-    without turning it)."""
+    the same residual and geometry (the oracle's), every tick equals the oracle (a retract that waits: the estimated
+    point moved along the estimated force; one that does not: retracting from the detecting tick on, planned from the
+    detection residual, while the isolation runs as with the brake), and the estimate is the truth's: same link,
+    point within the candidate spacing, force along the true one (a step through the exact first-order observer
+    scales J_c^T f without turning it)."""
     from reflexarm.control.collision import ContactIsolator, Determined
 
     robot, geometry, c = panda_contact
-    settings = ReactionSettings(brake_duration=0.04, retract_speed=0.5, rest_time=0.1)
+    settings = ReactionSettings(brake_duration=0.04, retract_speed=0.5, rest_time=0.1,
+                                retract_waits_for_estimate=waits)  # fmt: skip
     o = Oracle(robot, threshold=11.0, reaction=reaction, detection_observer_gain=200.0, discretization="exact",
                settings=settings, geometry=geometry)  # fmt: skip
     ctrl = controller_like(robot, o)
@@ -385,8 +387,12 @@ def test_tick_isolation_and_retract_equal_the_plain_isolator(panda_contact, reac
     assert event.t_estimated == pytest.approx(event.t_estimate + spread * DT, abs=0.5 * DT)
     assert (event.t_estimate, event.t_estimated) == (o.t_estimate, o.t_estimated)
     k_in = int(round(event.t_estimated / DT)) - 1
-    if reaction == "retract":  # M(q) factorised on the tick the estimate is in, the plan (retracting) on the next
+    k_det = int(round(event.t_detect / DT)) - 1
+    if reaction == "retract" and waits:  # M(q) factorised on the tick the estimate is in, the plan on the next
+        assert modes[k_det : k_det + 2] == ["braking", "braking"]
         assert modes[k_in - 1 : k_in + 2] == ["braking", "braking", "retracting"]
+    elif reaction == "retract":  # from the detecting tick on, the isolation running beside it
+        assert modes[k_det : k_det + 2] == ["retracting", "retracting"] and modes[k_det - 1] != "retracting"
     plain = ContactIsolator(robot, significance=0.25 * 11.0, geometry=geometry).isolate(
         c.q, residuals[event.t_estimate]
     )
@@ -405,7 +411,10 @@ def test_tick_isolation_and_retract_equal_the_plain_isolator(panda_contact, reac
         Jp = J[:3] + np.cross(J[3:].T, c.point - kin.origins[c.link]).T
         moved = Jp @ (event.q_target - event.q_detect)
         assert moved @ c.force > 0.8 * np.linalg.norm(moved) * np.linalg.norm(c.force)
-        assert abs(np.linalg.norm(moved) - event.retract_planned) < 0.2 * event.retract_planned
+        if waits:  # the estimated point is the one scaled to retract_distance
+            assert abs(np.linalg.norm(moved) - event.retract_planned) < 0.2 * event.retract_planned
+        else:  # the link's far end and the later joints' origins are scaled (not the point): >= 2 cm (issue 15)
+            assert np.linalg.norm(moved) > 0.02 and event.retract_planned <= settings.retract_distance + 1e-12
 
 
 @pytest.mark.parametrize(("period", "mass"), [(10, "damping"), (41, "own")])
@@ -418,7 +427,7 @@ def test_retract_after_isolation_factorises_the_dampings_m_while_it_is_recent(pa
     tick is compared with the oracle (q_target to 1e-9; the other M moves it by 4e-5 rad at period 10, 1.1e-3 rad at
     41)."""
     robot, geometry, c = panda_contact
-    settings = ReactionSettings(brake_duration=0.04, retract_speed=0.5, rest_time=0.1)
+    settings = ReactionSettings(brake_duration=0.04, retract_speed=0.5, rest_time=0.1, retract_waits_for_estimate=True)
     o = Oracle(robot, threshold=11.0, reaction="retract", detection_observer_gain=200.0, discretization="exact",
                settings=settings, geometry=geometry, damping_update_period=period)  # fmt: skip
     ctrl = controller_like(robot, o)

@@ -464,6 +464,11 @@ def test_reaction_params_defaults_equal_reaction_settings():
     for bad in (0, 2.5, True):
         with pytest.raises(ConfigError, match=f"isolation_points_per_tick must be an integer >= 1; got {bad!r}"):
             ReactionSettings(isolation_points_per_tick=bad)
+    assert params.retract_waits_for_estimate is False  # the C++ default is Python's: the retract does not wait
+    assert ReactionSettings(retract_waits_for_estimate=True).to_core(core).retract_waits_for_estimate is True
+    for bad in (1, 0.0, "yes", None):
+        with pytest.raises(ConfigError, match=f"retract_waits_for_estimate must be True or False; got {bad!r}"):
+            ReactionSettings(retract_waits_for_estimate=bad)
 
 
 def test_the_core_refuses_detection_friction_without_a_detection_observer_or_with_a_bad_band(atlas):

@@ -19,6 +19,10 @@ def test_key_value_pairs_become_reaction_settings_and_bad_ones_are_named():
     assert s == ReactionSettings(retract_distance=0.1, max_retract_time=0.4, isolation_points_per_tick=8)
     assert changed_settings(s) == " (retract_distance=0.1, max_retract_time=0.4, isolation_points_per_tick=8)"
     assert changed_settings(ReactionSettings()) == "" and changed_settings(None) == ""
+    for text, value in (("true", True), ("False", False), ("1", True), ("no", False)):
+        assert reaction_settings_of([f"retract_waits_for_estimate={text}"]) == ReactionSettings(
+            retract_waits_for_estimate=value
+        )
     for bad, message in (
         (["retract_distance"], "expects KEY=VALUE, KEY one of: brake_time, brake_duration"),
         (["retract_dist=0.1"], "got 'retract_dist=0.1'"),
@@ -26,6 +30,7 @@ def test_key_value_pairs_become_reaction_settings_and_bad_ones_are_named():
         (["isolation_points_per_tick=2.5"], "--reaction-setting isolation_points_per_tick must be an integer"),
         (["brake_time=-1"], "ReactionSettings.brake_time must be a positive number"),
         (["max_retract_time=nan"], "ReactionSettings.max_retract_time must be a positive number"),
+        (["retract_waits_for_estimate=maybe"], "--reaction-setting retract_waits_for_estimate must be true or false"),
     ):
         with pytest.raises(ConfigError, match=None) as err:
             reaction_settings_of(bad)

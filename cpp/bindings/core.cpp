@@ -183,7 +183,8 @@ NB_MODULE(_core, m)
     .def_rw("contact_level", &RP::contact_level)
     .def_rw("position_margin", &RP::position_margin)
     .def_rw("isolation_delay", &RP::isolation_delay)
-    .def_rw("isolation_points_per_tick", &RP::isolation_points_per_tick);
+    .def_rw("isolation_points_per_tick", &RP::isolation_points_per_tick)
+    .def_rw("retract_waits_for_estimate", &RP::retract_waits_for_estimate);
 
   nb::class_<reflexarm::InputBounds>(m, "InputBounds")
     .def(nb::init<>())

@@ -18,6 +18,11 @@ namespace reflexarm
     return has_isolator_ && !event_.estimated && event_.contact_class == ContactClass::Collision;
   }
 
+  bool Controller::retractWaits() const noexcept
+  {
+    return params_.reaction_params.retract_waits_for_estimate && awaitingIsolation();
+  }
+
   // The isolation of a collision, spread over the ticks (ContactIsolator::begin / step / finishStep / finish, the
   // same result bit for bit as one isolate()): begun on this tick from its residual and posture (kinematics and
   // candidate links only), then one part per following accepted tick (stepIsolation): the fit's units,

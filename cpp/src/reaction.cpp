@@ -107,7 +107,7 @@ namespace reflexarm
       e.phase = ReactionPhase::Braking;
       break;
     case Reaction::Retract:
-      if (awaitingIsolation()) // brake until the collision is isolated, then retract from the estimate
+      if (retractWaits()) // brake until the collision is isolated, then retract from the estimate
         e.phase = ReactionPhase::Braking;
       else
       {
@@ -225,7 +225,17 @@ namespace reflexarm
     const bool measured = e.contact_class == ContactClass::Contact;
     // the isolated link when isolation ran (it may be more distal than the most distal crossing joint)
     const int isolated = (!measured && e.estimated && e.estimate.link >= 0) ? e.estimate.link : -1;
-    const int last = measured ? n_ - 1 : isolated >= 0 ? isolated : e.distal_joint < 0 ? n_ - 1 : e.distal_joint;
+    // else the most distal joint whose residual at detection is significant (the isolation's first candidate link:
+    // a joint below its level still carries the contact's torque), at least the most distal crossing one
+    int distal = e.distal_joint;
+    if (has_isolator_)
+      for (int i = n_ - 1; i > distal; --i)
+        if (std::abs(e.residual[i]) > isolator_.significance()[i])
+        {
+          distal = i;
+          break;
+        }
+    const int last = measured ? n_ - 1 : isolated >= 0 ? isolated : distal < 0 ? n_ - 1 : distal;
     J_r_.setZero();
     dq_plan_.setZero();
     if (retractFromEstimate())
@@ -418,7 +428,7 @@ namespace reflexarm
     {
       // the brake so far; the retract from the estimate: M(q)'s factor now, the plan on the next accepted tick (no
       // tick runs both the estimate's last step and the plan)
-      if (reacted_ && e.reaction == Reaction::Retract)
+      if (reacted_ && e.reaction == Reaction::Retract && rp.retract_waits_for_estimate)
       {
         factorRetractMass(s);
         retract_due_ = true;

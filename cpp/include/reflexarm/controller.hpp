@@ -221,6 +221,8 @@ namespace reflexarm
     bool stepIsolation(double t) noexcept;
     void finishIsolation(double t) noexcept;
     bool awaitingIsolation() const noexcept;
+    /// a retract of this event brakes until the isolation's estimate is in (retract_waits_for_estimate)
+    bool retractWaits() const noexcept;
     bool retractFromEstimate() noexcept;
     void followEvent(double t, const State & s, int n_over, int n_sat) noexcept;
     void advanceReaction(double t, const State & s) noexcept;

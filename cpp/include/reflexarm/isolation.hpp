@@ -94,6 +94,9 @@ namespace reflexarm
   class ContactIsolator
   {
   public:
+    /// the per-joint significance levels [Nm] (size n once configured): a joint is significant above its level
+    const Eigen::VectorXd & significance() const noexcept { return significance_; }
+
     /// Allocates everything. Throws ConfigError on bad input (sizes, signs, non-finite values).
     void configure(
       const pinocchio::Model & model, const std::vector<LinkSurfaceData> & surfaces, const IsolationParams & params);

@@ -72,16 +72,21 @@ namespace reflexarm
     double position_margin = 0.05; ///< [rad] reaction references stay this far inside the joint limits
     /// [s] a collision (not measured by the wrist sensor) is isolated from the detection residual this long after
     /// detection, when the residual has grown from the threshold towards the contact's J^T f (0: at detection);
-    /// a retract brakes until then and is planned from the estimate
+    /// a retract that waits for the estimate (retract_waits_for_estimate) brakes until then
     double isolation_delay = 0.02;
     /// The isolation is spread over the ticks: it begins on the tick isolation_delay after detection (the
     /// residual and posture of that tick; kinematics only) and does at most this many units of its fit per following
     /// tick (ContactIsolator::step; a unit: one point's constrained fit, or kTracePoints points' traces of pass 1),
     /// then one tick chooses the link, one estimates, and the estimate is in on the next: ceil(units / this) + 3 ticks
     /// after the beginning; a retract waiting for it factorises M(q) on that tick and is planned on the next (values
-    /// below 1 count as 1). 32: 10 / 16 / 21 ticks on Atlas, Panda, iiwa14's 2 cm geometry; the tick costs per
+    /// below 1 count as 1). 4: every isolation tick within 1.2 x the tick without geometry, the estimate 55 / 101 /
+    /// 147 ticks after the beginning on Atlas, Panda, iiwa14's 2 cm geometry (32: 10 / 16 / 21); the tick costs per
     /// budget: ReactionSettings.isolation_points_per_tick (Python) and bench/bench_collision_tick.py
-    int isolation_points_per_tick = 32;
+    int isolation_points_per_tick = 4;
+    /// retract: true: brake until the isolation's estimate is in, then move the estimated point along the estimated
+    /// force; false: planned on the detecting tick from the detection residual on the joints up to the most distal
+    /// crossing link (the isolation still runs, for the event record)
+    bool retract_waits_for_estimate = false;
   };
 
   /// Plausibility bounds of the inputs (same fields and defaults as reflexarm.control.InputBounds).

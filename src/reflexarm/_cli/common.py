@@ -261,7 +261,8 @@ def reaction_settings_of(items: Sequence[str] | None) -> ReactionSettings | None
     """The ReactionSettings of ``--reaction-setting`` (None when not given); its own checks name a bad value.
 
     Raises:
-        ConfigError: not KEY=VALUE, an unknown key (the keys are listed), a value that is not a number.
+        ConfigError: not KEY=VALUE, an unknown key (the keys are listed), a value that is not a number (not true or
+            false for retract_waits_for_estimate).
     """
     from dataclasses import fields
 
@@ -270,11 +271,16 @@ def reaction_settings_of(items: Sequence[str] | None) -> ReactionSettings | None
     if not items:
         return None
     keys = [f.name for f in fields(ReactionSettings)]
-    values: dict[str, float | int] = {}
+    values: dict[str, float | int | bool] = {}
     for part in (p.strip() for item in items for p in item.split(",")):
         key, sep, text = (x.strip() for x in part.partition("="))
         if not sep or key not in keys:
             raise ConfigError(f"--reaction-setting expects KEY=VALUE, KEY one of: {', '.join(keys)}; got {part!r}")
+        if key == "retract_waits_for_estimate":
+            if text.lower() not in ("true", "false", "1", "0", "yes", "no"):
+                raise ConfigError(f"--reaction-setting {key} must be true or false; got {text!r}")
+            values[key] = text.lower() in ("true", "1", "yes")
+            continue
         integer = key == "isolation_points_per_tick"
         try:
             values[key] = int(text) if integer else float(text)

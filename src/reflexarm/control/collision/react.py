@@ -18,7 +18,15 @@ stay below ``velocity_fraction`` x the joints' velocity limits and ``position_ma
   gives them (the "torque reflex" direction of De Luca, Albu-Schaeffer, Haddadin, Hirzinger, IROS 2006): J^T f is the
   estimated point's J_p^T f, the wrist sensor's J_s^T f for a measured contact, or, when the isolation names the
   link but not the point (or did not run), the residual (a contact force f gives r = J_c^T f) on the joints up to
-  the isolated (else the most distal crossing) link. The contact then moves along J M11^-1 J^T f, which has a positive
+  the isolated (else the most distal significant, at least the most distal crossing) link. By default
+  (``retract_waits_for_estimate`` False) a collision's retract does not wait for the isolation: it is planned on the
+  detecting tick from the detection residual, and the isolation runs beside it for the event record. Waiting (True),
+  it brakes until the estimate is in (``isolation_delay`` plus the isolation's ticks) and moves the estimated point
+  along the estimated force. In ``reflexarm reaction-study --reactions retract --scenarios link,link_held`` (5 arms)
+  5 of the 10 retracts from the residual keep below 1 % of their kinetic energy at 0.5 s, 6 of 10 waiting with the
+  isolation at 32 units a tick (whose ticks exceed 1.2 x), 2 of 10 waiting at the default 4; the pushed stick,
+  which keeps coming, reaches the arm again after either on 4 of the 5 arms. The contact then moves along
+  J M11^-1 J^T f, which has a positive
   component along f (away from the obstacle), with the least kinetic energy for that displacement among motions of
   those joints: the light joints move more than the heavy ones (along J^T f itself, the reaction study's
   held-stick retracts peaked at 1.0-1.4 J; with the full M^-1 the later joints moved too, the wrist by up to 0.5 rad
@@ -100,8 +108,8 @@ class ReactionSettings:
             end-effector contact (with kappa_ext = 0) [N].
         position_margin: postures a reaction holds or moves to stay this far inside the joint limits [rad].
         isolation_delay: a collision is isolated from the detection residual this long after detection [s], when the
-            residual has grown from the threshold towards the contact's J^T f (0: at detection); a retract brakes
-            until then and is planned from the estimate.
+            residual has grown from the threshold towards the contact's J^T f (0: at detection); a retract that
+            waits for the estimate brakes until then.
         isolation_points_per_tick: the isolation is spread over the ticks: it begins on the tick
             ``isolation_delay`` after detection (that tick's residual and posture) and does at most this many
             units of its fit per following tick (a unit: one candidate point's constrained fit of pass 2, or 16
@@ -112,17 +120,22 @@ class ReactionSettings:
             factorises M(q) on the tick it comes in and is planned (and retracts) from the next tick on,
             ceil(units / this) + 4 ticks after the beginning; an integer >= 1. The candidate links are fitted
             from the most proximal on until they settle the choice (``isolate.settled``; the same estimate as
-            fitting every one): units are then summed over the links examined. The default, 32, takes 10, 16 and
-            21 ticks on the 2 cm controller geometry of Atlas, Panda and iiwa14 (bench/bench_collision_tick.py).
-            Inside C++, each isolation tick against the same tick of the controller without geometry (paired, warm
-            caches; noise floor <= 1.05; ``python bench/bench_collision_tick.py --points-per-tick 4 6 8 12 16
-            32``): at 32 the largest is a fit step, 1.50-1.66 x; at 4 it is 1.16-1.17 x (a fit step), 1.19-1.32 x
-            as run (cold caches), with the estimate 55, 101 and 147 ms after it began; at 6 1.19-1.20 x; over 4-32
-            the choice 1.08-1.10 x, the estimate 1.09-1.16 x, the estimate in (M(q)'s factor) 1.11-1.17 x, the plan
-            1.08-1.13 x. A budget of 4 keeps every tick within issue 15's 1.2 x (warm), but the reaction study's
-            link-push retracts of both iiwa14s then keep 3.4 % of their kinetic energy at the guard's 0.5 s (0.5-0.7
-            % at 32) and 8 instead of 10 of the 15 held-stick runs end below 1 % (``reflexarm reaction-study
-            --reaction-setting isolation_points_per_tick=4``), so the default stays 32.
+            fitting every one): units are then summed over the links examined. The default, 4, keeps every tick
+            of the isolation within issue 15's 1.2 x of the same tick without geometry (inside C++, paired, warm
+            caches: 1.16-1.17 x on Atlas, Panda and iiwa14's 2 cm controller geometry, 1.19-1.32 x as run with cold
+            caches; ``python bench/bench_collision_tick.py --points-per-tick 4 6 8 12 16 32``); the estimate is
+            then in 55, 101 and 147 ms after the isolation began (10, 16 and 21 ms at 32, whose largest tick is
+            1.50-1.66 x). No reaction waits for it by default (``retract_waits_for_estimate``): the budget sets
+            only when the event record has the contact. A retract that waits for it brakes that long: at 4 its
+            link-push and held-stick runs end with several times their kinetic energy at detection on the iiwa14s
+            and the UR5-like arm (``reflexarm reaction-study --reactions retract --reaction-setting
+            retract_waits_for_estimate=true,isolation_points_per_tick=4``); give it 32.
+        retract_waits_for_estimate: retract, for a collision the wrist sensor does not measure: False (default)
+            planned on the detecting tick from the detection residual on the joints up to the most distal
+            significant one (the isolation's first candidate link; at least the most distal crossing one), the
+            link's far end and every later joint origin moving ``retract_distance`` at most, while the isolation
+            runs for the record; True: brakes until the isolation's estimate is in, then moves the estimated point
+            by ``retract_distance`` along the estimated force.
     """
 
     brake_time: float = 0.05
@@ -140,11 +153,16 @@ class ReactionSettings:
     contact_level: float = 10.0
     position_margin: float = 0.05
     isolation_delay: float = 0.02
-    isolation_points_per_tick: int = 32
+    isolation_points_per_tick: int = 4
+    retract_waits_for_estimate: bool = False
 
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
+            if f.name == "retract_waits_for_estimate":
+                if not isinstance(value, bool):
+                    raise ConfigError(f"ReactionSettings.{f.name} must be True or False; got {value!r}")
+                continue
             if f.name == "isolation_points_per_tick":
                 if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                     raise ConfigError(f"ReactionSettings.{f.name} must be an integer >= 1; got {value!r}")
@@ -161,5 +179,6 @@ class ReactionSettings:
         p = core.ReactionParams()
         for f in fields(self):
             value = getattr(self, f.name)
-            setattr(p, f.name, value if f.name == "isolation_points_per_tick" else float(value))
+            exact = f.name in ("isolation_points_per_tick", "retract_waits_for_estimate")
+            setattr(p, f.name, value if exact else float(value))
         return p
