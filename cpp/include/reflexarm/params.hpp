@@ -85,7 +85,7 @@ namespace reflexarm
     int isolation_points_per_tick = 4;
     /// retract: true: brake until the isolation's estimate is in, then move the estimated point along the estimated
     /// force; false: planned on the detecting tick from the detection residual on the joints up to the most distal
-    /// crossing link (the isolation still runs, for the event record)
+    /// significant one (at least the most distal crossing one; the isolation still runs, for the event record)
     bool retract_waits_for_estimate = false;
   };
 

@@ -127,9 +127,9 @@ class ReactionSettings:
             then in 55, 101 and 147 ms after the isolation began (10, 16 and 21 ms at 32, whose largest tick is
             1.50-1.66 x). No reaction waits for it by default (``retract_waits_for_estimate``): the budget sets
             only when the event record has the contact. A retract that waits for it brakes that long: at 4 its
-            link-push and held-stick runs end with several times their kinetic energy at detection on the iiwa14s
-            and the UR5-like arm (``reflexarm reaction-study --reactions retract --reaction-setting
-            retract_waits_for_estimate=true,isolation_points_per_tick=4``); give it 32.
+            held-stick runs on the iiwa14s and the UR5-like arm end with 2.3-9.6 times their kinetic energy at
+            detection, its link-push runs there with 3.4-44 % (``reflexarm reaction-study --reactions retract
+            --reaction-setting retract_waits_for_estimate=true,isolation_points_per_tick=4``); give it 32.
         retract_waits_for_estimate: retract, for a collision the wrist sensor does not measure: False (default)
             planned on the detecting tick from the detection residual on the joints up to the most distal
             significant one (the isolation's first candidate link; at least the most distal crossing one), the
