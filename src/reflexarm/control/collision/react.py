@@ -120,12 +120,14 @@ class ReactionSettings:
             factorises M(q) on the tick it comes in and is planned (and retracts) from the next tick on,
             ceil(units / this) + 4 ticks after the beginning; an integer >= 1. The candidate links are fitted
             from the most proximal on until they settle the choice (``isolate.settled``; the same estimate as
-            fitting every one): units are then summed over the links examined. The default, 4, keeps every tick
-            of the isolation within issue 15's 1.2 x of the same tick without geometry (inside C++, paired, warm
-            caches: 1.16-1.17 x on Atlas, Panda and iiwa14's 2 cm controller geometry, 1.19-1.32 x as run with cold
-            caches; ``python bench/bench_collision_tick.py --points-per-tick 4 6 8 12 16 32``); the estimate is
-            then in 55, 101 and 147 ms after the isolation began (10, 16 and 21 ms at 32, whose largest tick is
-            1.50-1.66 x). No reaction waits for it by default (``retract_waits_for_estimate``): the budget sets
+            fitting every one): units are then summed over the links examined. The default, 4, puts every tick
+            of the isolation at about issue 15's 1.2 x of the same tick without geometry (inside C++, paired, on
+            Atlas, Panda and iiwa14's 2 cm controller geometry, ``python bench/bench_collision_tick.py
+            --points-per-tick 4 32 --cpp-rounds 201``: warm 1.20-1.26 x, of which the warm copies' own bias on plain
+            ticks is 1.04-1.09 x, as run 1.13-1.24 x; 1.16-1.17 x warm on the machine of 2026-12-06; at 32
+            1.5-1.8 x); the estimate is then in 55, 101 and 147 ms after the isolation began (10, 16 and 21 ms at
+            32). The ticks that begin the isolation, choose the link and estimate cost 1.1-1.2 x at any budget. No
+            reaction waits for it by default (``retract_waits_for_estimate``): the budget sets
             only when the event record has the contact. A retract that waits for it brakes that long: at 4 its
             held-stick runs on the iiwa14s and the UR5-like arm end with 2.3-9.6 times their kinetic energy at
             detection, its link-push runs there with 3.4-44 % (``reflexarm reaction-study --reactions retract
