@@ -323,27 +323,6 @@ def test_mode_follows_a_phase_change_without_a_threshold_crossing(atlas):
     assert not wrong, f"{len(wrong)} ticks with a wrong mode (tick, Command.mode, Controller.mode, oracle): {wrong[:3]}"
 
 
-@pytest.fixture(scope="module")
-def panda_contact():
-    """A seeded contact on a distal Panda link (where point and force are determined), strong enough to detect, whose
-    own joint carries more than the isolation's significance (0.25 x 11 Nm: a contact whose distal joints carry
-    less is isolated to a more proximal link, "link or later", by design)."""
-    import warnings
-
-    from reflexarm import load_robot
-    from reflexarm.control.collision.classify import controller_geometry
-    from reflexarm.experiments.isolation_study import draw_contacts
-    from reflexarm.robots import link_collision_geometry
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        robot = load_robot("panda")
-    truth = link_collision_geometry(robot, spacing=0.01, seed=3)
-    contact = next(c for c in draw_contacts(robot, truth, 1000, seed=1) if c.link >= 4 and np.abs(c.torque).max() > 25
-                   and abs(c.torque[c.link]) > 3.5)  # fmt: skip
-    return robot, controller_geometry(robot), contact
-
-
 @pytest.mark.parametrize(("reaction", "waits"), [("retract", True), ("retract", False), ("brake", False)])
 def test_tick_isolation_and_retract_equal_the_plain_isolator(panda_contact, reaction, waits):
     """A static arm at the contact's posture; from tick 100 the contact's J_c^T f appears (tau_m = g - J_c^T f). The

@@ -9,32 +9,14 @@ Fails on the retract that waits for the estimate (the code before this change): 
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import pytest
 
-from reflexarm import load_robot
 from reflexarm.control import Controller, ReactionSettings
-from reflexarm.control.collision.classify import controller_geometry
-from reflexarm.experiments.isolation_study import draw_contacts
-from reflexarm.robots import link_collision_geometry
 from reflexarm.signals import Measurement, Reference
 
 DT = 1e-3
 ONSET = 100
-
-
-@pytest.fixture(scope="module")
-def panda_contact():
-    """A seeded contact on a distal Panda link, strong enough to detect (as in tests/test_controller_oracle.py)."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        robot = load_robot("panda")
-    truth = link_collision_geometry(robot, spacing=0.01, seed=3)
-    contact = next(c for c in draw_contacts(robot, truth, 1000, seed=1) if c.link >= 4 and np.abs(c.torque).max() > 25
-                   and abs(c.torque[c.link]) > 3.5)  # fmt: skip
-    return robot, controller_geometry(robot), contact
 
 
 def _run(robot, geometry, contact, points_per_tick: int, waits: bool, ticks: int = 800):
