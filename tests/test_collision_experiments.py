@@ -174,6 +174,15 @@ def test_unknown_block_variant_names_the_choices():
         run_ee_collision(EE_SETTINGS[0], block="brick")
 
 
+def test_paper_comparison_of_a_detection_without_contact_beyond_the_sensor():
+    # a vendor UR5e's demo: the block touched the wrist links before the sensor only; the detection's "peak" was
+    # timed from t = 0 ("peak 0.0 N -5476 ms")
+    row = {"run": "Coll.Det", "peak_force_N": 0.0, "peak_force_s": 0.0, "detection_s": 5.476,
+           "detection_delay_s": None, "force_at_detection_N": 0.0, "first_contact_s": None}  # fmt: skip
+    table = {r["quantity"]: r for r in compare_with_paper([row])}
+    assert table["Coll.Det |f| at detection [N]"]["ours"] == "0.0 (no contact beyond the wrist sensor)"
+
+
 def test_paper_comparison_rows(ee_runs, link_run):
     _, rows = ee_runs
     table = {r["quantity"]: r for r in compare_with_paper(list(rows.values()), link_run[1])}

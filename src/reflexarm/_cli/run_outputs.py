@@ -35,7 +35,16 @@ if TYPE_CHECKING:
     from reflexarm.sim.run_observers import CompiledStill
     from reflexarm.sim.video import StillCapture, VideoRecorder
 
-__all__ = ["SceneCapture", "add_output_options", "frame_size", "number_joints", "slug", "write_json", "write_traces"]
+__all__ = [
+    "SceneCapture",
+    "add_output_options",
+    "fault_record",
+    "frame_size",
+    "number_joints",
+    "slug",
+    "write_json",
+    "write_traces",
+]
 
 DEFAULT_FRAME_SIZE = "640x480"
 
@@ -105,6 +114,27 @@ def write_traces(out: Path, prefix: str, traces: Mapping[str, Trace]) -> list[Pa
         tr.save(path)
         paths.append(path)
     return paths
+
+
+def fault_record(trace: Trace) -> dict[str, Any] | None:
+    """The controller's fault in a run: when it first faulted [s], the ticks in fault and the first fault's text;
+    None if it never did. A run whose controller faulted is the fault's safe command from then on, not the
+    experiment: the commands print it beside their table (and write it into their summary)."""
+    import numpy as np
+
+    faulted = np.flatnonzero(np.asarray(trace.fault) != "")
+    if faulted.size == 0:
+        return None
+    k = int(faulted[0])
+    return {"first_s": float(trace.t[k]), "ticks": int(faulted.size), "text": str(trace.fault[k])}
+
+
+def fault_line(run: str, fault: dict[str, Any]) -> str:
+    """One line for :func:`fault_record`'s record."""
+    return (
+        f"[{run}] the controller FAULTED at t = {fault['first_s']:.3f} s ({fault['ticks']} ticks in fault): "
+        f"{fault['text']}; the run after it is the fault's safe command, not the experiment"
+    )
 
 
 def number_joints(row: dict[str, Any], joint_names: Sequence[str], key: str = "detected_joints") -> dict[str, Any]:

@@ -22,7 +22,15 @@ from reflexarm._cli.common import (
     tuned_gain_note,
 )
 from reflexarm._cli.robot_options import add_robot_options, load_robot_from_args
-from reflexarm._cli.run_outputs import SceneCapture, add_output_options, number_joints, write_json, write_traces
+from reflexarm._cli.run_outputs import (
+    SceneCapture,
+    add_output_options,
+    fault_line,
+    fault_record,
+    number_joints,
+    write_json,
+    write_traces,
+)
 
 _PAPER_COLUMNS = [("quantity", "", "{}"), ("paper", "paper", "{}"), ("ours", "ours", "{}")]
 
@@ -242,6 +250,7 @@ def _demo(args: argparse.Namespace) -> int:
         tr.meta["controller_model"] = choice.describe()
         traces.append(tr)
         rows.append(_event_row(number_joints(summarize_ee_collision(tr), robot.joint_names), tr, robot))
+        rows[-1]["controller_fault"] = fault_record(tr)
         if setting.threshold is not None:
             rows[-1]["detection"] = tr.meta["detection"] = detection.describe()
     runs = [s.name for s in settings]  # one name per run for the traces and the videos (run_outputs.slug)
@@ -269,6 +278,8 @@ def _demo(args: argparse.Namespace) -> int:
         )
     )
     for r in rows:
+        if r["controller_fault"] is not None:
+            print(fault_line(r["run"], r["controller_fault"]))
         if r["first_contact_s"] is None and r.get("first_contact_any_s") is not None:
             print(
                 f"[{r['run']}] contact on links before the wrist sensor from t = {r['first_contact_any_s']:.3f} s "
@@ -341,6 +352,7 @@ def _link(args: argparse.Namespace) -> int:
     tr.meta["detection"] = detection.describe()
     row = _event_row(number_joints(summarize_link_collision(tr), robot.joint_names), tr, robot)
     row["detection"] = detection.describe()
+    row["controller_fault"] = fault_record(tr)
     write_traces(out, "link_collision", {"link collision": tr})
     write_json(out / "link_collision_summary.json", [row])
     _print_placement(tr.meta.get("placement"))
@@ -360,6 +372,8 @@ def _link(args: argparse.Namespace) -> int:
             ],
         )
     )
+    if row["controller_fault"] is not None:
+        print(fault_line("link collision", row["controller_fault"]))
     print("\nthe paper (Sec. III-B, Figs. 9-10) beside this run:")
     print(format_table(compare_with_paper([], row), _PAPER_COLUMNS))
     print(f"\nwrote {out}/ (trace, link_collision_summary.json, {fig.name})")
@@ -398,6 +412,11 @@ def _free(args: argparse.Namespace) -> int:
     fig = plot_free_motion(res, robot.joint_names, args.threshold, out / "free_motion.png", trace_path)
     pictures = scene.finish(["free motion"], summary=out / "free_motion.json")
     print(json.dumps(res, indent=2))
+    if res["fault_ticks"]:
+        print(
+            f"the controller FAULTED on {res['fault_ticks']} of the run's ticks (the trace's 'fault' column says why): "
+            "those ticks are the fault's safe command, not free motion"
+        )
     print(f"wrote {out}/ (free_motion.json, {fig.name}{', ' + Path(trace_path).name if trace_path else ''})")
     print(SceneCapture.describe(pictures))
     return 0

@@ -40,6 +40,7 @@ from reflexarm.control.contract import (
     timing_stats,
 )
 from reflexarm.control.impedance import JointImpedanceController
+from reflexarm.control.law_stability import warn_if_unstable
 from reflexarm.control.momentum_observer import MomentumObserver
 from reflexarm.errors import ConfigError
 from reflexarm.robots.collision_geometry import CollisionGeometry
@@ -114,7 +115,8 @@ class Controller:
     Args:
         robot: the controller's model (M_hat, C_hat, g_hat, tau_f_hat, Jacobian of the wrist sensor
             frame, joint/velocity/effort limits); a private copy is kept.
-        stiffness: K [Nm/rad], positive, scalar or (n,).
+        stiffness: K [Nm/rad], positive, scalar or (n,); one whose law is unstable at ``dt`` gives an
+            UnstableLawWarning naming the joint and a stiffness that would do (:mod:`reflexarm.control.law_stability`).
         damping_ratio: modal damping D_xi [-], scalar or (n,).
         observer_gain: K_o [1/s] of the observer used for compensation and detection.
         detection_observer_gain: if given, a second, usually faster observer with this gain runs in
@@ -201,8 +203,7 @@ class Controller:
         input_bounds: InputBounds | None = None,
         period_band: tuple[float, float] = (0.5, 2.0),
     ) -> None:
-        # the construction arguments, for copies (copy.copy / deepcopy build a controller of their own)
-        self._init_kwargs = {k: v for k, v in locals().items() if k not in ("self", "robot")}
+        self._init_kwargs = {k: v for k, v in locals().items() if k not in ("self", "robot")}  # for copies
         self.dt = as_positive_scalar(dt, "dt")
         self.impedance = JointImpedanceController(
             robot,
@@ -213,6 +214,7 @@ class Controller:
         )
         self.robot = self.impedance.robot  # the private copy
         n = self.robot.n
+        warn_if_unstable(self.robot, self.impedance.stiffness, self.impedance.damping_ratio, self.dt)
         self.n = n
         # the observers validate their gains here; below they are rebuilt on the core's state
         euler = check_discretization(observer_discretization, OBSERVER_DISCRETIZATIONS) == "euler"
@@ -333,8 +335,7 @@ class Controller:
         return twin
 
     def __deepcopy__(self, memo: dict[int, object]) -> Controller:
-        """As :meth:`__copy__` (the copy owns everything: its model, core and detector)."""
-        return self.__copy__()
+        return self.__copy__()  # as __copy__: the copy owns everything (its model, core and detector)
 
     # ------------------------------------------------------------------ run-time switches and facts
     def set_switches(

@@ -18,6 +18,7 @@ import numpy as np
 
 from reflexarm.control import Controller, detection_friction
 from reflexarm.control.collision.react import ReactionSettings
+from reflexarm.control.law_stability import experiment_stiffness
 from reflexarm.errors import ConfigError
 from reflexarm.experiments.any_arm import (
     ee_swing_plan,
@@ -135,7 +136,7 @@ class CollisionSetting:
         """This setting's controller on the model ``robot`` (the controller's model, not the plant's)."""
         return Controller(
             robot,
-            stiffness=self.stiffness,
+            stiffness=experiment_stiffness(robot, self.stiffness, self.damping_ratio),
             damping_ratio=self.damping_ratio,
             observer_gain=self.observer_gain,
             detection_observer_gain=self.detection_observer_gain,
@@ -447,7 +448,8 @@ def free_motion_false_alarms(
     traj = free_motion_trajectory(duration, motion, robot)
     plant = Plant(robot, noise=noise, seed=seed)
     plant.reset(traj.waypoints[0])
-    ctrl = Controller(ctrl_model, stiffness=300.0, observer_gain=5.0, threshold=threshold, reaction="none")
+    stiffness = experiment_stiffness(ctrl_model, 300.0)
+    ctrl = Controller(ctrl_model, stiffness=stiffness, observer_gain=5.0, threshold=threshold, reaction="none")
     # running statistics only (the trace streamed to ``trace_path`` block by block if given): the memory
     # does not grow with the duration, so hours of free motion fit; the compiled loop unless it cannot
     from reflexarm.sim import stream_fast

@@ -146,12 +146,15 @@ def compare_with_paper(
             "no" if t_det is None else f"t = {t_det:.3f} s, {num(det['detection_delay_s'], '{:.3f}')} s after contact",
         )
         # the paper: "at this point in time [the detection], the maximum contact force ... is already reached"
-        at_det = (
-            "-"
-            if t_det is None
-            else f"{det['force_at_detection_N']:.1f} (peak {det['peak_force_N']:.1f} N "
-            f"{1000.0 * (float(t_peak) - float(t_det)):+.0f} ms)"  # type: ignore[arg-type]
-        )
+        if t_det is None:
+            at_det = "-"
+        elif det.get("first_contact_s", 0.0) is None:  # nothing beyond the sensor touched: no peak to time
+            at_det = f"{det['force_at_detection_N']:.1f} (no contact beyond the wrist sensor)"
+        else:
+            at_det = (
+                f"{det['force_at_detection_N']:.1f} (peak {det['peak_force_N']:.1f} N "
+                f"{1000.0 * (float(t_peak) - float(t_det)):+.0f} ms)"  # type: ignore[arg-type]
+            )
         add("Coll.Det |f| at detection [N]", f"~{PAPER['colldet_peak_force_N']:g} (the peak)", at_det)
     stiff = by.get("Stiff")
     if stiff is not None:

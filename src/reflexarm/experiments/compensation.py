@@ -51,6 +51,7 @@ from typing import Any
 import numpy as np
 
 from reflexarm.control import Controller
+from reflexarm.control.law_stability import experiment_stiffness
 from reflexarm.errors import ConfigError
 from reflexarm.experiments.any_arm import start_posture
 from reflexarm.experiments.metrics import msie
@@ -297,7 +298,7 @@ def make_controller(
     model = controller_model(setup, model_error, model_seed)
     return Controller(
         model,
-        stiffness=setup.stiffness,
+        stiffness=experiment_stiffness(model, setup.stiffness, setup.damping_ratio),
         damping_ratio=setup.damping_ratio,
         observer_gain=setup.observer_gain,
         threshold=threshold,

@@ -24,6 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 from reflexarm.control import Controller
+from reflexarm.control.law_stability import experiment_stiffness
 from reflexarm.errors import ConfigError
 from reflexarm.ident import RobotLog
 from reflexarm.robots.friction import CoulombViscousFriction
@@ -148,9 +149,10 @@ def simulate_log(
     start = getattr(trajectory, "start", None)
     q0 = np.asarray(start if start is not None else trajectory.sample(0.0).q_d, dtype=float)
     plant.reset(q0)
+    model = controller_model if controller_model is not None else robot
     ctrl = Controller(
-        controller_model if controller_model is not None else robot,
-        stiffness=stiffness,
+        model,
+        stiffness=experiment_stiffness(model, np.asarray(stiffness, dtype=float)),
         damping_ratio=0.7,
         observer_gain=5.0,
         threshold=None,

@@ -7,6 +7,7 @@ from typing import Any
 import numpy as np
 
 from reflexarm.control import CONTROL_MODES, Controller, ModeSupervisor, ReactionSettings, detection_friction
+from reflexarm.control.law_stability import experiment_stiffness
 from reflexarm.experiments.any_arm import RANGE_MARGIN, is_paper_arm
 from reflexarm.experiments.compensation import (
     CompensationSetup,
@@ -79,9 +80,10 @@ def _supervised_controller(
 ) -> Controller:
     """The controller of the supervised link push: :func:`make_controller`'s, with detection (threshold per
     joint or one, a second detecting observer if ``detection_observer_gain``)."""
+    model = controller_model(setup, None, model_seed)
     return Controller(
-        controller_model(setup, None, model_seed),
-        stiffness=setup.stiffness,
+        model,
+        stiffness=experiment_stiffness(model, setup.stiffness, setup.damping_ratio),
         damping_ratio=setup.damping_ratio,
         observer_gain=setup.observer_gain,
         detection_observer_gain=detection_observer_gain,

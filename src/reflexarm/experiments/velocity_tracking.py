@@ -45,6 +45,7 @@ import numpy as np
 import numpy.typing as npt
 
 from reflexarm.control import Controller
+from reflexarm.control.law_stability import experiment_stiffness
 from reflexarm.errors import ConfigError
 from reflexarm.experiments.any_arm import RANGE_MARGIN, VELOCITY_SHARE, is_paper_arm, start_posture
 from reflexarm.experiments.collision import controller_model
@@ -300,7 +301,11 @@ def run_velocity_tracking(
     controllers: dict[str, Any] = {
         "PD": JointPDController(ctrl_model, setup.pd_kp, setup.pd_kd),
         "impedance": Controller(
-            ctrl_model, stiffness=setup.stiffness, damping_ratio=setup.damping_ratio, threshold=None, reaction="none"
+            ctrl_model,
+            stiffness=experiment_stiffness(ctrl_model, setup.stiffness, setup.damping_ratio),
+            damping_ratio=setup.damping_ratio,
+            threshold=None,
+            reaction="none",
         ),
     }
     traces: dict[str, Trace] = {}

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from reflexarm.control import Controller, detection_friction
+from reflexarm.control.law_stability import UnstableLawWarning, check_law_stability
 from reflexarm.robots.robot_model import RobotModel
 from reflexarm.ros.config import MonitorConfig
 from reflexarm.signals import Measurement, Reference
@@ -53,17 +54,22 @@ def build_controller(config: MonitorConfig, model: RobotModel) -> Controller:
     kf = config.detection_filter_gain or None
     if kf is None and source != "command line":  # levels tuned on the residual through the second stage
         kf = tuned_filter_gain(config.threshold)
-    controller = Controller(
-        model,
-        stiffness=config.stiffness,
-        observer_gain=config.observer_gain,
-        detection_observer_gain=detecting,
-        **detection_friction(band),
-        detection_filter_gain=kf,
-        threshold=zeta,
-        reaction=config.reaction,
-        observer_discretization=config.observer_discretization,
-    )
+    with warnings.catch_warnings():  # monitor: the law's torque is never applied; control: refused below
+        warnings.simplefilter("ignore", UnstableLawWarning)
+        controller = Controller(
+            model,
+            stiffness=config.stiffness,
+            observer_gain=config.observer_gain,
+            detection_observer_gain=detecting,
+            **detection_friction(band),
+            detection_filter_gain=kf,
+            threshold=zeta,
+            reaction=config.reaction,
+            observer_discretization=config.observer_discretization,
+        )
+    if config.mode == "control":  # the node commands this law's torque: an unstable one is refused
+        imp = controller.impedance
+        check_law_stability(model, imp.stiffness, imp.damping_ratio, controller.dt)
     q = np.clip(np.zeros(model.n), model.lower_limit, model.upper_limit)
     rest = Measurement(0.0, q, np.zeros(model.n), model.compute_gravity(q), np.zeros(6), np.asarray(model.gravity))
     for k in range(12):

@@ -90,6 +90,7 @@ def record_free_motion_log(
             first observer alone at ``observer_gain``, Euler, the paper's).
     """
     from reflexarm.control import Controller, detection_friction
+    from reflexarm.control.law_stability import experiment_stiffness
     from reflexarm.experiments.collision import ROBOT, controller_model, free_motion_trajectory
     from reflexarm.robots import load_robot
     from reflexarm.sim import PAPER_NOISE, Plant
@@ -101,8 +102,9 @@ def record_free_motion_log(
     plant = Plant(robot, noise=PAPER_NOISE, seed=seed)
     plant.reset(traj.sample(0.0).q_d)
     s = ObserverSettings(observer_gain=observer_gain) if settings is None else settings
+    stiffness = experiment_stiffness(ctrl_model, 300.0)
     ctrl = Controller(
-        ctrl_model, stiffness=300.0, threshold=threshold, reaction="none", observer_gain=s.observer_gain,
+        ctrl_model, stiffness=stiffness, threshold=threshold, reaction="none", observer_gain=s.observer_gain,
         detection_observer_gain=s.detection_observer_gain, kappa_f=s.kappa_f, kappa_ext=s.kappa_ext,
         kappa_eps=s.kappa_eps, observer_discretization=s.observer_discretization,
         detection_filter_gain=s.detection_filter_gain, **detection_friction(s.detection_friction_band),

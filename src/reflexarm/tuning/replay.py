@@ -195,8 +195,6 @@ def replay_residual(log: RobotLog, robot: RobotModel, settings: ObserverSettings
         ConfigError: the log has another joint count than ``robot``; EFC asked without a wrench in the log;
             the log's period makes the discrete observer unstable (k_o dt >= 1/2).
     """
-    from reflexarm.control import Controller, detection_friction
-
     s = settings or ObserverSettings()
     if log.n != robot.n:
         raise ConfigError(f"{log.source} has {log.n} joints; the robot {robot.name!r} has {robot.n}")
@@ -206,24 +204,11 @@ def replay_residual(log: RobotLog, robot: RobotModel, settings: ObserverSettings
     # the keyword only with a stage: a core without the second stage still replays the first-order residual
     kf = s.detection_filter_gain
     stage: dict[str, Any] = {} if kf is None else {"detection_filter_gain": kf}
-    ctrl = Controller(
-        robot,
-        observer_gain=s.observer_gain,
-        detection_observer_gain=s.detection_observer_gain,
-        threshold=None,
-        reaction="none",
-        kappa_f=s.kappa_f,
-        kappa_ext=s.kappa_ext,
-        kappa_eps=s.kappa_eps,
-        observer_discretization=s.observer_discretization,
-        **detection_friction(s.detection_friction_band),
-        **stage,
-        dt=dt,
-        torque_limit=None,
-        # the damping matrix shapes the command only, never the residual: computed once instead of every 10
-        # samples (~17 % of a replayed sample)
-        damping_update_period=_NO_DAMPING_UPDATE,
-    )
+    from reflexarm.control.law_stability import UnstableLawWarning
+
+    with warnings.catch_warnings():  # a replay never applies the law's torque (its stability at dt is moot)
+        warnings.simplefilter("ignore", UnstableLawWarning)
+        ctrl = _replay_controller(robot, s, stage, dt)
     # the whole log in one call of the C++ core: Controller.step on every sample, bit for bit
     from reflexarm.control import replay
 
@@ -362,3 +347,27 @@ def recorded_residual(path: str | os.PathLike[str], n: int) -> ResidualReplay:
     if t.size < 2:
         raise DataError(f"{p.name}: a trace needs at least 2 samples; got {t.size}")
     return ResidualReplay(f"{p.name} {RECORDED_RESIDUAL}", t, r, float(np.median(np.diff(t))), 0, ())
+
+
+def _replay_controller(robot: RobotModel, s: ObserverSettings, stage: dict[str, Any], dt: float) -> Any:
+    """The controller a replay steps (no detection, no reaction, no torque limit)."""
+    from reflexarm.control import Controller, detection_friction
+
+    return Controller(
+        robot,
+        observer_gain=s.observer_gain,
+        detection_observer_gain=s.detection_observer_gain,
+        threshold=None,
+        reaction="none",
+        kappa_f=s.kappa_f,
+        kappa_ext=s.kappa_ext,
+        kappa_eps=s.kappa_eps,
+        observer_discretization=s.observer_discretization,
+        **detection_friction(s.detection_friction_band),
+        **stage,
+        dt=dt,
+        torque_limit=None,
+        # the damping matrix shapes the command only, never the residual: computed once instead of every 10
+        # samples (~17 % of a replayed sample)
+        damping_update_period=_NO_DAMPING_UPDATE,
+    )
