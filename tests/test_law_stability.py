@@ -197,3 +197,21 @@ def test_the_ros_node_refuses_an_unstable_law_in_control_mode_only(light_wrist, 
     with warnings.catch_warnings():
         warnings.simplefilter("error", UnstableLawWarning)  # a monitor never applies the law: not even a warning
         build_controller(MonitorConfig.from_values("monitor", values), robot)
+
+
+def test_the_robots_command_prints_the_law_s_margin(light_wrist, tmp_path, capsys):
+    from reflexarm.cli import main
+
+    assert main(["robots", "atlas_v5_left_arm"]) == 0
+    line = capsys.readouterr().out.splitlines()[-1]
+    assert line.startswith("law (2) at 300 Nm/rad, 1 kHz: highest mode omega dt = 0.744, 0.52 of its stability limit")
+    # the six-DoF arm with its wrist's inertia scaled down 4x (2e-4 -> 5e-5 kg m^2): omega dt doubles, unstable
+    text = open(light_wrist.source).read().replace('iyy="0.0002"', 'iyy="5e-05"', 1)
+    assert text.count('iyy="5e-05"') == 1
+    lighter = tmp_path / "lighter.urdf"
+    lighter.write_text(text)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["robots", str(lighter), "--ee-frame", "tool"]) == 0
+    line = capsys.readouterr().out.splitlines()[-1]
+    assert "of its stability limit (joint 6 wrist_3_joint): UNSTABLE; the experiments lower the stiffness" in line

@@ -3,8 +3,12 @@
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from reflexarm.robots.robot_model import RobotModel
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -53,7 +57,25 @@ def _robots(args: argparse.Namespace) -> int:
     print(f"Coulomb [Nm]:  {r.friction.coulomb}")
     print(f"viscous:       {r.friction.viscous}")
     print(f"total mass:    {r.inertial_parameters()[0::10].sum():.4f} kg (moving links, incl. what they carry)")
+    print(_law_line(r))
     return 0
+
+
+def _law_line(r: RobotModel) -> str:
+    """The impedance law at the experiments' 300 Nm/rad, d_xi 0.7 and 1 kHz: its highest mode against its limit."""
+    from reflexarm.control.law_stability import law_modes, rate_limited_stiffness
+
+    k, d, dt = np.full(r.n, 300.0), np.full(r.n, 0.7), 1e-3
+    worst = max(law_modes(r, k, d, dt), key=lambda m: m.share)
+    line = (
+        f"law (2) at 300 Nm/rad, 1 kHz: highest mode omega dt = {worst.omega_dt:.3g}, {worst.share:.2f} of its "
+        f"stability limit (joint {worst.joint + 1} {r.joint_names[worst.joint]})"
+    )
+    if worst.share < 1.0:
+        return line
+    capped, lowered = rate_limited_stiffness(r, k, d, dt)
+    changes = ", ".join(f"{r.joint_names[j]} {capped[j]:.3g}" for j in lowered)
+    return f"{line}: UNSTABLE; the experiments lower the stiffness [Nm/rad] of {changes} (about: on their model)"
 
 
 def _print_frames(path: str) -> None:
