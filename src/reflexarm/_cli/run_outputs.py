@@ -38,6 +38,7 @@ if TYPE_CHECKING:
 __all__ = [
     "SceneCapture",
     "add_output_options",
+    "fault_line",
     "fault_record",
     "frame_size",
     "number_joints",

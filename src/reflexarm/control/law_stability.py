@@ -15,7 +15,7 @@ omega = 1.5e3 rad/s, x = 1.5 at 1 kHz, above 1/0.7 = 1.43, and the wrist's speed
 
 A simulator that integrates the period in semi-implicit Euler steps moves the position further under the held
 torque and is stricter (:func:`limit_omega_dt`'s ``position_gain``; reflexarm's Plant: 1.18 at d_xi = 0.7, against
-1.43 on a real arm); the Controller checks the real arm's limit, and a plant that diverges says so
+1.43 on a real arm); the Controller warns at the real arm's limit, and a plant that diverges says so
 (SimulationError). :data:`RATE_SHARE` of the real arm's limit is within the Plant's for every damping ratio (at
 most 0.95 of it, at d_xi = 0.5).
 
@@ -50,8 +50,8 @@ __all__ = [
 ]
 
 #: rate_limited_stiffness's target: each mode at most this share of its stability limit omega dt (0.7: a stiffness
-#: below half the limit's; the built-in arms' highest modes are at 0.52-0.56 of theirs at 1 kHz, so they keep
-#: their stiffness).
+#: below half the limit's; at 300 Nm/rad and 1 kHz the built-in arms' highest modes are at 0.19-0.52 of theirs,
+#: the example UR-like arm's at 0.56, so they keep their stiffness).
 RATE_SHARE = 0.7
 
 
@@ -188,8 +188,8 @@ def experiment_stiffness(
 ) -> np.ndarray:
     """The stiffness an experiment runs the law with on ``robot``: its setting (the paper's, e.g. 300 Nm/rad) where
     the law is stable at ``dt``, else :func:`rate_limited_stiffness`'s, with a UserWarning naming each joint lowered
-    (a Controller refuses an unstable law: the paper's gains on a vendor file without reflected motor inertia would
-    otherwise stop every experiment on that arm)."""
+    (the paper's gains on a vendor file without the motors' reflected inertia would otherwise make the plant
+    diverge, or the controller fault, a few ticks into every experiment on that arm)."""
     k = np.broadcast_to(np.asarray(stiffness, dtype=float), (robot.n,)).copy()
     d = np.broadcast_to(np.asarray(damping_ratio, dtype=float), (robot.n,))
     if unstable_law_message(robot, k, d, dt) is None:
