@@ -297,3 +297,53 @@ def test_write_outcomes_json_and_csv(ee_run, tmp_path: Path):
     assert len(text) == 3
     with pytest.raises(ConfigError, match=r"unknown outcome file type '.txt' for .*; use .json or .csv"):
         write_outcomes(rows, tmp_path / "o.txt")
+
+
+# ------------------------------------------------------------------------------------------ the obstacle's advance
+def _stick_tip(n: int, appear: int, push: int, speed_per_tick: float) -> np.ndarray:
+    """A stick tip parked 50 m below until tick ``appear``, then advancing along +x by ``speed_per_tick`` [m] a tick
+    for ``push`` ticks, back the same way, then parked again (as ElbowStick records it)."""
+    tip = np.tile([0.0, 0.0, -50.0], (n, 1))
+    for k in range(appear, n):
+        s = k - appear
+        if s <= push:
+            x = speed_per_tick * s
+        elif s <= 2 * push:
+            x = speed_per_tick * (2 * push - s)
+        else:
+            break
+        tip[k] = [x, 0.3, 0.5]
+    return tip
+
+
+@pytest.mark.parametrize(
+    "detect_at, expected",
+    [
+        (700, (900 - 700) * 1e-4),  # 200 ticks of the push left at 0.1 mm a tick: 2 cm further
+        (880, (900 - 880) * 1e-4),  # late: 2 mm further, not the 4 cm back to where it appeared
+        (1050, 0.0),  # on its way back: no further
+    ],
+)
+def test_the_obstacle_s_advance_after_detection(arm, detect_at, expected):
+    t = np.arange(1500) * DT
+    q = np.column_stack([np.zeros_like(t), 0.5 * t])
+    dq = np.column_stack([np.zeros_like(t), np.full_like(t, 0.5)])
+    tau = np.column_stack([np.zeros_like(t), np.where(t >= 0.5, 4.0, 0.0)])
+    tip = _stick_tip(t.size, appear=500, push=400, speed_per_tick=1e-4)
+    trace = make_trace(q, dq, np.zeros_like(t), tau, detect_at, crossed=(1,), extras={"stick_tip": tip})
+    o = collision_outcome(trace, arm)
+    assert o.obstacle_advance_after_detection_m == pytest.approx(expected, abs=TOL)
+
+
+def test_an_obstacle_that_stands_still_or_is_not_recorded(arm):
+    t = np.arange(1500) * DT
+    q = np.column_stack([np.zeros_like(t), 0.5 * t])
+    dq = np.column_stack([np.zeros_like(t), np.full_like(t, 0.5)])
+    tau = np.column_stack([np.zeros_like(t), np.where(t >= 0.5, 4.0, 0.0)])
+    held = np.tile([0.2, 0.3, 0.5], (t.size, 1))
+    held[:400] = [0.0, 0.0, -50.0]
+    o = collision_outcome(make_trace(q, dq, np.zeros_like(t), tau, 700, crossed=(1,), extras={"stick_tip": held}), arm)
+    assert o.obstacle_advance_after_detection_m == 0.0
+    o = collision_outcome(make_trace(q, dq, np.zeros_like(t), tau, 700, crossed=(1,)), arm)
+    assert o.obstacle_advance_after_detection_m is None
+    assert o.as_dict()["obstacle_advance_after_detection_m"] is None

@@ -114,6 +114,11 @@ class CollisionOutcome:
             one (the link push's stick tip, ``*_tip``: the end of the stick's centre line, within the stick's
             radius of the contact point); None otherwise (the cinderblock records only its pose).
         contact_point_source: which trace signal ``contact_point`` is.
+        obstacle_advance_after_detection_m: how much further the scene's recorded obstacle (``*_tip``, the link
+            push's stick) advanced after detection, along the way it had come since it appeared (the largest
+            forward displacement of the tip from its place at detection while not parked); 0 for one that stands
+            still (the held stick), None without a recorded tip. A reaction cannot keep away from an obstacle
+            that advances further than it retreats.
     """
 
     run: str
@@ -145,6 +150,7 @@ class CollisionOutcome:
     peak_after_recontact: float | None
     contact_point: tuple[float, ...] | None
     contact_point_source: str | None
+    obstacle_advance_after_detection_m: float | None
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready: tuples as lists."""
@@ -197,6 +203,27 @@ def _contact_point(trace: Trace, i: int) -> tuple[tuple[float, ...] | None, str 
         return None, None
     p = np.asarray(trace.extras[tips[0]][i], dtype=float)
     return tuple(float(x) for x in p), tips[0]
+
+
+#: A recorded tip below this height [m] is parked (ElbowStick waits 50 m below the scene), not in the scene.
+PARKED_BELOW_Z = -10.0
+
+
+def _obstacle_advance(trace: Trace, i_d: int) -> float | None:
+    """:attr:`CollisionOutcome.obstacle_advance_after_detection_m` (None without a recorded tip)."""
+    tips = sorted(k for k in trace.extras if k.endswith("_tip"))
+    if not tips:
+        return None
+    tip = np.asarray(trace.extras[tips[0]], dtype=float)
+    present = tip[:, 2] > PARKED_BELOW_Z
+    if not present[i_d]:
+        return None
+    came = tip[i_d] - tip[int(np.flatnonzero(present)[0])]  # from where it appeared to where it is at detection
+    norm = float(np.linalg.norm(came))
+    after = tip[i_d:][present[i_d:]] - tip[i_d]
+    if norm < 1e-9:  # it had not moved: any displacement after detection counts
+        return float(np.linalg.norm(after, axis=1).max())
+    return float(max(0.0, (after @ (came / norm)).max()))
 
 
 def _after_detection(
@@ -310,6 +337,7 @@ def collision_outcome(trace: Trace, robot: RobotModel, *, name: str | None = Non
     values.update(_after_detection(trace, robot, cls, link, force, torque, i_d))
     point, source = _contact_point(trace, i_d)
     values["contact_point"], values["contact_point_source"] = point, source
+    values["obstacle_advance_after_detection_m"] = _obstacle_advance(trace, i_d)
     return CollisionOutcome(**values)
 
 
