@@ -25,7 +25,7 @@ from reflexarm.control.law_stability import (
 )
 from reflexarm.errors import ConfigError, SimulationError
 from reflexarm.robots.friction import CoulombViscousFriction
-from reflexarm.signals import Reference
+from reflexarm.signals import Measurement, Reference
 from reflexarm.sim import Plant
 
 DT = 1e-3
@@ -215,3 +215,23 @@ def test_the_robots_command_prints_the_law_s_margin(light_wrist, tmp_path, capsy
         assert main(["robots", str(lighter), "--ee-frame", "tool"]) == 0
     line = capsys.readouterr().out.splitlines()[-1]
     assert "of its stability limit (joint 6 wrist_3_joint): UNSTABLE; the experiments lower the stiffness" in line
+
+
+@pytest.mark.parametrize("wrist_factor", [0.9, 1.1])
+def test_the_cores_share_at_the_posture_equals_the_modules(light_wrist, wrist_factor):
+    """The C++ core's lawModeShare (its Cholesky and Jacobi rotations of the damping in use) against law_modes
+    (scipy's generalized eigen-solver) at the same posture: two implementations of the same number."""
+    robot = light_wrist
+    k = np.full(robot.n, 300.0)
+    k[WRIST] = wrist_factor * _wrist_limit_stiffness(robot)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UnstableLawWarning)
+        ctrl = Controller(robot, stiffness=k, threshold=None)
+    assert np.isnan(ctrl._core.law_mode_share)  # no damping yet
+    q = np.clip(np.asarray(robot.home, dtype=float), robot.lower_limit, robot.upper_limit)
+    ctrl.step(Measurement(0.0, q, np.zeros(robot.n), robot.compute_gravity(q), np.zeros(6), robot.gravity),
+              Reference.hold(q))  # fmt: skip
+    share = max(m.share for m in law_modes(robot, k, np.full(robot.n, 0.7), DT) if m.posture == "home")
+    # eigenvalues of two solvers agree to ~1e-12 relative; the share is their square root
+    assert ctrl._core.law_mode_share == pytest.approx(share, rel=1e-9)
+    assert (ctrl._core.law_mode_share >= 1.0) == (wrist_factor > 1.0)

@@ -398,6 +398,10 @@ NB_MODULE(_core, m)
     .def_prop_ro(
       "damping_parts_run", [](const PyController & c) { return c.ctrl.dampingPartsRun(); },
       "Which parts of the modal damping computation the last tick ran, as bits (0: none); for benches.")
+    .def_prop_ro(
+      "law_mode_share", [](const PyController & c) { return c.ctrl.lawModeShare(); },
+      "The law sampled at dt: largest omega dt / its stability limit over the modes of the damping in use (>= 1 "
+      "unstable; NaN before the first damping)")
     .def_prop_ro("timing", [](const PyController & c) {
       const auto & s = c.ctrl.timing();
       return std::make_tuple(s.n_periods, s.sum_period, s.min_period, s.max_period, s.clipped, s.band_low, s.band_high);

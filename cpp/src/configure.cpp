@@ -213,6 +213,7 @@ namespace reflexarm
     damping_countdown_ = 0;
     damping_next_part_ = -1;
     damping_full_ = true;
+    law_share_ = std::numeric_limits<double>::quiet_NaN();
     modal_.has_basis = false; // the first damping after a reset starts cold, as after configure(): bitwise the same
     started_ = false;
     has_t_ = false;

@@ -10,11 +10,26 @@
 // new D used from the tick of the last part on. The first tick after configure() / reset() runs all parts at
 // once (there is no D for this posture yet). In gravity compensation (13) D is not used and nothing is computed.
 #include <algorithm>
+#include <cmath>
 
 #include "reflexarm/controller.hpp"
 
 namespace reflexarm
 {
+
+  namespace
+  {
+    // The largest omega dt / min(1/xi, 4 xi) over the modes (the Jury bound of the mode sampled with a hold; see
+    // reflexarm.control.law_stability), omega^2 = lambda; modes with xi <= 0 not counted.
+    double lawShare(const Eigen::VectorXd & lambda, const Eigen::VectorXd & xi, double dt) noexcept
+    {
+      double share = 0.0;
+      for (Eigen::Index i = 0; i < lambda.size(); ++i)
+        if (xi[i] > 0.0)
+          share = std::max(share, std::sqrt(std::max(lambda[i], 0.0)) * dt / std::min(1.0 / xi[i], 4.0 * xi[i]));
+      return share;
+    }
+  } // namespace
 
   Controller::DampingParts Controller::dampingParts() const noexcept
   {
@@ -93,6 +108,7 @@ namespace reflexarm
     {
       D_ = D_new_;
       damping_next_part_ = -1;
+      law_share_ = lawShare(modal_.lambda, xi_, params_.dt);
     }
     else if (parts.first >= 0)
       damping_next_part_ = parts.last + 1;

@@ -1,6 +1,7 @@
 // C++ tests of the reflexarm core: no heap allocation inside update(), bounded finite commands under bad
 // inputs, modal damping against Eigen's generalized eigensolver, Python-repr formatting of fault values.
 // Exit code 0 when every check passes; prints "N passed, M failed".
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -410,6 +411,35 @@ namespace
     CHECK(max_sweeps >= 1 && max_sweeps <= 6, "warm-started decompositions took up to %d sweeps", max_sweeps);
   }
 
+  void testLawModeShare()
+  {
+    // the law's margin at the posture of the damping in use, against Eigen's generalized eigen-solver on crba's M
+    // (the controller's comes from its own Cholesky + Jacobi rotations); NaN before the first damping and after reset
+    const pinocchio::Model model = makeArm();
+    reflexarm::ControllerParams p;
+    reflexarm::Controller ctrl;
+    ctrl.configure(model, p);
+    CHECK(std::isnan(ctrl.lawModeShare()), "before the first damping: %g", ctrl.lawModeShare());
+    reflexarm::Command cmd;
+    ctrl.initCommand(cmd);
+    const int n = ctrl.nv();
+    const Eigen::VectorXd q = Eigen::VectorXd::LinSpaced(n, -0.3, 0.4), z = Eigen::VectorXd::Zero(n);
+    const Eigen::Matrix<double, 6, 1> w = Eigen::Matrix<double, 6, 1>::Zero();
+    const Eigen::Vector3d g(0, 0, -9.81);
+    ctrl.update(1e-3, 1e-3, {q, z, z, w, g}, {q, z, z}, cmd);
+    pinocchio::Data data(model);
+    pinocchio::crba(model, data, q);
+    Eigen::MatrixXd M = data.M;
+    M.triangularView<Eigen::StrictlyLower>() = M.transpose();
+    const Eigen::MatrixXd K = Eigen::VectorXd::Constant(n, 300.0).asDiagonal();
+    const Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::MatrixXd> es(K, M, Eigen::EigenvaluesOnly);
+    const double want = std::sqrt(es.eigenvalues().maxCoeff()) * 1e-3 / std::min(1.0 / 0.7, 4.0 * 0.7);
+    const double got = ctrl.lawModeShare();
+    CHECK(std::abs(got - want) <= 1e-9 * want, "law mode share %.17g, Eigen's generalized solver %.17g", got, want);
+    ctrl.reset();
+    CHECK(std::isnan(ctrl.lawModeShare()), "after reset: %g", ctrl.lawModeShare());
+  }
+
   void testRepr()
   {
     const struct
@@ -469,6 +499,7 @@ int main()
   testReplayAndStatistics();
   testModalDamping();
   testModalDampingInParts();
+  testLawModeShare();
   testRepr();
   testModelText();
   std::printf("%d passed, %d failed\n", g_passed, g_failed);

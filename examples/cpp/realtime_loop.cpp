@@ -281,6 +281,13 @@ int main(int argc, char ** argv)
     by_parts[controller.dampingPartsRun()].push_back(t1 - t0);
     parts_of[static_cast<std::size_t>(k)] = static_cast<unsigned char>(controller.dampingPartsRun());
     faults += code != reflexarm::FaultCode::None;
+    if (k == 0 && !(controller.lawModeShare() < 1.0)) // the law's margin at this rate, before its torque is applied
+    {
+      std::fprintf(stderr, "the impedance law is unstable at dt = %g s (lawModeShare %.3g >= 1): a link too light for "
+                   "its stiffness; lower it (reflexarm robots FILE says which) or run faster\n", dt,
+                   controller.lawModeShare());
+      return 1;
+    }
     if (busy && k % 2 == 1)
       floor_calls();
     // actuate: the motors deliver the command (the measured motor torque of the next tick)

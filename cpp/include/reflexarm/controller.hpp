@@ -7,6 +7,7 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
@@ -117,6 +118,11 @@ namespace reflexarm
     /// Cholesky), 1 project on the previous eigenvectors + a Jacobi sweep, 2 a sweep, 3 the sweeps left, the
     /// eigenvectors and D; 0 if none.
     int dampingPartsRun() const noexcept { return damping_parts_run_; }
+    /// The impedance law sampled at the nominal dt: the largest omega_i dt / its limit min(1/xi_i, 4 xi_i) over the
+    /// modes of the damping in use (omega_i^2 the eigenvalues of L^-1 K L^-T at the M(q) it came from; a mode with
+    /// xi_i = 0 is not counted). >= 1: the held torque grows every tick (a link too light for its stiffness at this
+    /// rate; reflexarm.control.law_stability says which and what would do). NaN before the first damping.
+    double lawModeShare() const noexcept { return law_share_; }
     /// Parts of one computation of the modal damping, run on as many consecutive accepted ticks (at most).
     static constexpr int kDampingParts = 4;
     /// The retract plans with the modal damping's M(q) (crba of its part 0) when that is at most this many accepted
@@ -300,6 +306,7 @@ namespace reflexarm
     bool damping_full_ = true;   // the next computation runs whole in its first tick (after configure/reset)
     bool damping_updated_ = false;
     int damping_parts_run_ = 0;
+    double law_share_ = std::numeric_limits<double>::quiet_NaN(); ///< lawModeShare()
     Mode mode_ = Mode::Compliant;
     FaultInfo fault_;
 
