@@ -242,3 +242,13 @@ def test_noisy_isolation_names_the_link_when_its_own_joint_senses_it(arms):
     assert s["correct_link_rate_link_sensed"] >= 0.90, s
     hidden = [r for r in study.rows if r["sensed"] and r["own_joint_insignificant"]]
     assert all(r["true_link_in_candidates"] for r in hidden)
+
+
+def test_the_isolation_study_says_what_its_second_variant_holds(tmp_path, capsys):
+    # --model-error alone used to print its variant as "noisy" with nothing saying there was no sensor noise in it
+    from reflexarm.cli import main
+
+    assert main(["isolation-study", "--robot", "panda", "--contacts", "10", "--model-error", "10",
+                 "--out", str(tmp_path)]) == 0  # fmt: skip
+    out = capsys.readouterr().out
+    assert "  noisy: +-10 % model error\n" in out

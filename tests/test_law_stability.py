@@ -235,3 +235,4 @@ def test_the_cores_share_at_the_posture_equals_the_modules(light_wrist, wrist_fa
     # eigenvalues of two solvers agree to ~1e-12 relative; the share is their square root
     assert ctrl._core.law_mode_share == pytest.approx(share, rel=1e-9)
     assert (ctrl._core.law_mode_share >= 1.0) == (wrist_factor > 1.0)
+

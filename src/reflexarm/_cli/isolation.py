@@ -56,6 +56,11 @@ def _isolation_study(args: argparse.Namespace) -> int:
             )
         )
     print(f"isolation study: {robot.name}, {args.contacts} contacts per variant, seed {args.seed}")
+    if len(studies) > 1:  # what "noisy" holds: the noise, the model error or both
+        parts = (["the paper's sensor noise"] if args.noise else []) + (
+            [f"+-{args.model_error:g} % model error"] if args.model_error else []
+        )
+        print(f"  noisy: {' and '.join(parts)}")
     for s in studies:
         sm = s.summary
         rate = sm["correct_link_rate"]
