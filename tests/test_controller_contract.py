@@ -435,8 +435,7 @@ def test_every_input_form_gives_the_same_command_as_plain_float64_arrays(atlas, 
 
 
 def test_integer_time_stamps_give_the_same_command_as_float_ones(atlas):
-    # dt = 1 s (observer_gain * dt * period_band[1] = 0.4 * 1 * 2 < 1): every stamp is an integer; a stiffness
-    # whose law is stable at that period (the wrist's mode: omega dt < 1.43 below ~4e-4 Nm/rad)
+    # dt = 1 s (observer_gain * dt * period_band[1] = 0.8 < 1): integer stamps; a stiffness whose law is stable at 1 s
     make = lambda: Controller(atlas, dt=1.0, observer_gain=0.4, stiffness=1e-4)  # noqa: E731
     ctrl, plain = make(), make()
     ref = Reference.hold(atlas.home)
