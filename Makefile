@@ -64,7 +64,7 @@ sanitize:
 	cmake -S cpp -B cpp/build-sanitize -DCMAKE_BUILD_TYPE=RelWithDebInfo \
 	  -DCMAKE_PREFIX_PATH="$$($(BIN)/python -m cmeel cmake 2>/dev/null)" \
 	  -DREFLEXARM_BUILD_PYTHON=OFF -DREFLEXARM_BUILD_TESTS=ON -DREFLEXARM_SANITIZE=ON >/dev/null
-	cmake --build cpp/build-sanitize -j $(SAN_JOBS) --target test_controller test_isolation
+	cmake --build cpp/build-sanitize -j $(SAN_JOBS) --target test_controller test_isolation test_modal_damping
 	ASAN_OPTIONS=detect_leaks=1:strict_string_checks=1:detect_stack_use_after_return=1 \
 	UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1:suppressions=$(CURDIR)/cpp/sanitize/ubsan.supp \
 	  ctest --test-dir cpp/build-sanitize --output-on-failure

@@ -22,20 +22,7 @@
 
 #include "alloc_counter.hpp"
 
-static int g_passed = 0, g_failed = 0;
-#define CHECK(cond, ...)                                                                                     \
-  do                                                                                                         \
-  {                                                                                                          \
-    if (cond)                                                                                                \
-      ++g_passed;                                                                                            \
-    else                                                                                                     \
-    {                                                                                                        \
-      ++g_failed;                                                                                            \
-      std::printf("FAILED %s:%d: %s: ", __FILE__, __LINE__, #cond);                                          \
-      std::printf(__VA_ARGS__);                                                                              \
-      std::printf("\n");                                                                                     \
-    }                                                                                                        \
-  } while (0)
+#include "checks.hpp"
 
 namespace
 {
@@ -474,6 +461,5 @@ int main()
   std::mt19937 rng(4);
   testPsdRank<3>(rng);
   testPsdRank<6>(rng);
-  std::printf("%d passed, %d failed\n", g_passed, g_failed);
-  return g_failed == 0 ? 0 : 1;
+  return checksReport();
 }
