@@ -63,10 +63,10 @@ def _robots(args: argparse.Namespace) -> int:
 
 def _law_line(r: RobotModel) -> str:
     """The impedance law at the experiments' 300 Nm/rad, d_xi 0.7 and 1 kHz: its highest mode against its limit."""
-    from reflexarm.control.law_stability import law_modes, rate_limited_stiffness
+    from reflexarm.control.law_stability import rate_limited_stiffness, worst_mode
 
     k, d, dt = np.full(r.n, 300.0), np.full(r.n, 0.7), 1e-3
-    worst = max(law_modes(r, k, d, dt), key=lambda m: m.share)
+    worst = worst_mode(r, k, d, dt)
     line = (
         f"law (2) at 300 Nm/rad, 1 kHz: highest mode omega dt = {worst.omega_dt:.3g}, {worst.share:.2f} of its "
         f"stability limit (joint {worst.joint + 1} {r.joint_names[worst.joint]})"

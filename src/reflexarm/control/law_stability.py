@@ -45,6 +45,7 @@ __all__ = [
     "experiment_stiffness",
     "law_modes",
     "limit_omega_dt",
+    "worst_mode",
     "rate_limited_stiffness",
     "unstable_law_message",
 ]
@@ -118,23 +119,30 @@ def law_modes(
     return modes
 
 
+def worst_mode(robot: RobotModel, stiffness: np.ndarray, damping_ratio: np.ndarray, dt: float) -> LawMode:
+    """The mode of :func:`law_modes` nearest its limit (largest share) over the checked postures."""
+    return max(law_modes(robot, stiffness, damping_ratio, dt), key=lambda m: m.share)
+
+
+def _lowered(robot: RobotModel, k: np.ndarray, capped: np.ndarray, lowered: list[int], sep: str = ", ") -> str:
+    """"joint old -> new" for each joint lowered."""
+    return sep.join(f"{robot.joint_names[j]} {k[j]:.4g} -> {capped[j]:.3g}" for j in lowered)
+
+
 def unstable_law_message(robot: RobotModel, stiffness: np.ndarray, damping_ratio: np.ndarray, dt: float) -> str | None:
     """None if every mode of the law is stable at the period ``dt``, else what is unstable and what would do."""
-    bad = [m for m in law_modes(robot, stiffness, damping_ratio, dt) if m.share >= 1.0]
-    if not bad:
+    worst = worst_mode(robot, stiffness, damping_ratio, dt)
+    if worst.share < 1.0:
         return None
-    worst = max(bad, key=lambda m: m.share)
-    capped, _ = rate_limited_stiffness(robot, stiffness, damping_ratio, dt)
     k = np.asarray(stiffness, dtype=float)
-    lower = [
-        f"{robot.joint_names[j]} {k[j]:.4g} -> {capped[j]:.3g}" for j in np.flatnonzero(capped < k)
-    ]  # fmt: skip
+    capped, lowered = rate_limited_stiffness(robot, k, damping_ratio, dt)
+    changes = _lowered(robot, k, capped, lowered, "; ")
     return (
         f"the impedance law is unstable at dt = {dt:g} s: its mode dominated by joint {worst.joint + 1} "
         f"({robot.joint_names[worst.joint]}) has omega = {worst.omega:.4g} rad/s at the {worst.posture} posture, "
         f"omega dt = {worst.omega_dt:.3g} >= {worst.limit:.3g} (the limit for its damping ratio; the held torque "
         f"flips sign and grows every tick). The link is too light for this stiffness at this rate (a robot file "
-        f"without the motors' reflected inertia?): lower the stiffness [Nm/rad] ({'; '.join(lower)} keeps every "
+        f"without the motors' reflected inertia?): lower the stiffness [Nm/rad] ({changes} keeps every "
         f"mode within {RATE_SHARE:g} of its limit), or run faster"
     )
 
@@ -175,7 +183,7 @@ def rate_limited_stiffness(
     d = np.asarray(damping_ratio, dtype=float)
     lowered: set[int] = set()
     for _ in range(100):
-        worst = max(law_modes(robot, k, d, dt), key=lambda m: m.share)
+        worst = worst_mode(robot, k, d, dt)
         if worst.share <= share * (1.0 + 1e-9):
             break
         k[worst.joint] *= (share / worst.share) ** 2
@@ -192,10 +200,10 @@ def experiment_stiffness(
     diverge, or the controller fault, a few ticks into every experiment on that arm)."""
     k = np.broadcast_to(np.asarray(stiffness, dtype=float), (robot.n,)).copy()
     d = np.broadcast_to(np.asarray(damping_ratio, dtype=float), (robot.n,))
-    if unstable_law_message(robot, k, d, dt) is None:
+    if worst_mode(robot, k, d, dt).share < 1.0:
         return k
     capped, lowered = rate_limited_stiffness(robot, k, d, dt)
-    changes = ", ".join(f"{robot.joint_names[j]} {k[j]:.4g} -> {capped[j]:.3g}" for j in lowered)
+    changes = _lowered(robot, k, capped, lowered)
     warnings.warn(
         f"{robot.name}: the law at the experiment's stiffness is unstable at dt = {dt:g} s (a link too light for it; "
         f"reflexarm.control.law_stability); stiffness lowered [Nm/rad]: {changes}",
